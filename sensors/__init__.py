@@ -1,0 +1,1 @@
+"""Ego cameras, labels and dataset writers."""

@@ -1,0 +1,140 @@
+"""Benchmarks behind ``twin bench``: each returns a dict of figures (medians of repeats).
+
+The command line prints each as one JSON line with the commit, so results can be
+compared between commits. Targets live here, not in timed unit tests.
+"""
+
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from twin.data import synth
+from twin.data.traffic import EmpiricalTraffic
+
+
+def query(store, *, repeats: int = 5, calls: int = 2000) -> dict:
+    """Snapshot latency on a 400 m window in the densest traffic (scenario B's wave)."""
+    traffic = EmpiricalTraffic(store)
+    t0 = synth.SCENARIO_TIME
+    x_min, x_max = 500.0, 900.0
+    times = t0 + np.arange(calls) * 0.01
+    traffic.snapshot("westbound", t0, x_min, x_max)  # build the frame table once
+    medians = []
+    for _ in range(repeats):
+        latency = np.empty(calls)
+        for i, t in enumerate(times):
+            start = time.perf_counter()
+            traffic.snapshot("westbound", float(t), x_min, x_max)
+            latency[i] = time.perf_counter() - start
+        medians.append(float(np.median(latency)))
+    vehicles = len(traffic.snapshot("westbound", t0, x_min, x_max))
+    return {
+        "snapshot_median_us": round(1e6 * float(np.median(medians)), 2),
+        "target_us": 200,
+        "vehicles_in_window": vehicles,
+        "window_m": x_max - x_min,
+        "repeats": repeats,
+        "calls_per_repeat": calls,
+    }
+
+
+def synth_bench(*, minutes: float = 10.0, repeats: int = 3) -> dict:
+    """Time to simulate and write ``minutes`` of preset B (one direction) as I-24 JSON."""
+    seconds, sizes = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(repeats):
+            config = replace(synth.PRESET_B, minutes=minutes, seed=seed)
+            start = time.perf_counter()
+            result = synth.synthesize(config)
+            path = synth.write_i24_json(result, Path(tmp) / "day.json")
+            seconds.append(time.perf_counter() - start)
+            sizes.append(path.stat().st_size)
+    return {
+        "minutes": minutes,
+        "median_s": round(float(np.median(seconds)), 2),
+        "target_s": 60,
+        "file_mb": round(float(np.median(sizes)) / 1e6, 1),
+        "repeats": repeats,
+    }
+
+
+def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
+    """Ingest throughput and peak memory on a synthetic day of at least ``size_mb``.
+
+    Peak memory is the resident set of a fresh process running only the ingest; it is
+    measured on the full file and on a quarter of it, to show it does not grow with
+    file size.
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        files = {}
+        for label, mb in (("quarter", size_mb / 4), ("full", size_mb)):
+            minutes = math.ceil(mb / 10.5)  # preset B writes about 10.9 MB per minute
+            result = synth.synthesize(replace(synth.PRESET_B, minutes=minutes))
+            files[label] = synth.write_i24_json(result, tmp / f"{label}.json")
+        figures = {}
+        for label, path in files.items():
+            seconds, peaks = [], []
+            for _ in range(repeats if label == "full" else 1):
+                elapsed, peak = _ingest_in_child(path, tmp / f"store-{label}")
+                seconds.append(elapsed)
+                peaks.append(peak)
+            mb = path.stat().st_size / 1e6
+            figures[label] = {
+                "file_mb": round(mb, 1),
+                "median_s": round(float(np.median(seconds)), 2),
+                "throughput_mb_s": round(mb / float(np.median(seconds)), 1),
+                "peak_rss_mb": round(max(peaks), 1),
+            }
+    return {**figures["full"], "quarter_file": figures["quarter"], "repeats": repeats}
+
+
+def _ingest_in_child(path: Path, out: Path) -> tuple[float, float]:
+    code = (
+        "import sys, time, resource, json\n"
+        "from twin.data.ingest import ingest\n"
+        "start = time.perf_counter()\n"
+        "ingest([sys.argv[1]], sys.argv[2], progress=False)\n"
+        "print(json.dumps([time.perf_counter() - start,"
+        " resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024]))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(path), str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    elapsed, peak = json.loads(done.stdout.strip().splitlines()[-1])
+    return elapsed, peak
+
+
+def context() -> dict:
+    """Commit and machine, printed with every benchmark line."""
+    try:
+        commit = (
+            subprocess.run(
+                ["git", "rev-parse", "--short", "HEAD"],
+                capture_output=True,
+                text=True,
+                cwd=Path(__file__).parent,
+            ).stdout.strip()
+            or None
+        )
+    except OSError:
+        commit = None
+    return {
+        "commit": commit,
+        "python": platform.python_version(),
+        "cpus": len(os.sched_getaffinity(0)),
+        "maxrss_self_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+    }

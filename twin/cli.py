@@ -1,0 +1,185 @@
+"""The ``twin`` command line."""
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from twin import __version__
+from twin.errors import TwinError
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, "handler"):
+        parser.print_help()
+        return 2
+    try:
+        return args.handler(args) or 0
+    except (TwinError, ValueError, FileNotFoundError, KeyError) as error:
+        message = error.args[0] if isinstance(error, KeyError) and error.args else error
+        print(f"twin: error: {message}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("twin: interrupted; nothing partial was left behind", file=sys.stderr)
+        return 130
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="twin", description="i24-twin: a physics-based digital twin of I-24 (MM 60.6-61.6)."
+    )
+    parser.add_argument("--version", action="version", version=f"i24-twin {__version__}")
+    commands = parser.add_subparsers(title="commands")
+
+    data = commands.add_parser("data", help="I-24 MOTION data: ingest, inspect, synthesize, plot")
+    data_commands = data.add_subparsers(title="data commands")
+
+    p = data_commands.add_parser("ingest", help="ingest I-24 MOTION day files (JSON) into a store")
+    p.add_argument(
+        "files", nargs="+", type=Path, help="day files: JSON arrays of trajectory documents"
+    )
+    p.add_argument(
+        "--out", required=True, type=Path, help="store folder to write (replaced atomically)"
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        default=None,
+        help="metres kept beyond each end of the segment (>= 400; default: all)",
+    )
+    p.add_argument("--bucket", type=float, default=60.0, help="seconds per Parquet row group")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_ingest)
+
+    p = data_commands.add_parser("info", help="what a store holds")
+    p.add_argument("store", nargs="?", type=Path, help="store folder (default: the embedded data)")
+    p.set_defaults(handler=_info)
+
+    p = data_commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
+    p.add_argument(
+        "--preset",
+        choices=["A", "B"],
+        required=True,
+        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane",
+    )
+    p.add_argument("--out", required=True, type=Path, help="JSON file to write")
+    p.add_argument("--minutes", type=float, default=None, help="recorded minutes (default 16)")
+    p.add_argument(
+        "--start", default=None, help="first recorded time (unix or ISO 8601 with offset)"
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=_synth)
+
+    p = data_commands.add_parser("plot", help="time-space diagram per lane, coloured by speed")
+    p.add_argument("store", nargs="?", type=Path, help="store folder (default: the embedded data)")
+    p.add_argument("--road", default="westbound")
+    p.add_argument(
+        "--start", default=None, help="unix or ISO 8601 with offset (default: data start)"
+    )
+    p.add_argument("--minutes", type=float, default=10.0)
+    p.add_argument("--out", type=Path, default=Path("timespace.png"))
+    p.set_defaults(handler=_plot)
+
+    bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
+    bench_commands = bench.add_subparsers(title="benchmarks")
+    p = bench_commands.add_parser("query", help="snapshot latency of EmpiricalTraffic")
+    p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
+    p.add_argument("--repeats", type=int, default=5)
+    p.set_defaults(handler=_bench_query)
+    p = bench_commands.add_parser("synth", help="time to synthesize 10 minutes of one direction")
+    p.add_argument("--minutes", type=float, default=10.0)
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_synth)
+    p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
+    p.add_argument("--size-mb", type=float, default=300.0)
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_ingest)
+    return parser
+
+
+def _store(path: Path | None):
+    from twin.data.default import default_store
+    from twin.data.store import TrajectoryStore
+
+    return TrajectoryStore(path) if path is not None else default_store()
+
+
+def _ingest(args) -> int:
+    from twin.data.ingest import IngestOptions, ingest
+    from twin.data.store import TrajectoryStore
+
+    report = ingest(
+        args.files,
+        args.out,
+        IngestOptions(margin=args.margin, bucket=args.bucket),
+        progress=not args.quiet,
+    )
+    print(TrajectoryStore(args.out).describe())
+    if report.documents_kept == 0:
+        print("twin: warning: no document was kept", file=sys.stderr)
+    return 0
+
+
+def _info(args) -> int:
+    print(_store(args.store).describe())
+    return 0
+
+
+def _synth(args) -> int:
+    from twin.data import synth
+    from twin.timeutil import parse_time
+
+    config = synth.PRESETS[args.preset]
+    changes = {"seed": args.seed}
+    if args.minutes is not None:
+        changes["minutes"] = args.minutes
+    if args.start is not None:
+        changes["start"] = parse_time(args.start)
+    config = replace(config, **changes)
+    result = synth.synthesize(config, progress=not args.quiet)
+    path = synth.write_i24_json(result, args.out, progress=not args.quiet)
+    print(
+        f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(result.vid):,} trajectories, "
+        f"{result.lane_changes:,} lane changes, {config.road.value}"
+    )
+    return 0
+
+
+def _plot(args) -> int:
+    from twin.data.plot import time_space_plot
+    from twin.timeutil import parse_time
+
+    store = _store(args.store)
+    start = parse_time(args.start) if args.start is not None else store.time_range(args.road)[0]
+    out = time_space_plot(store, args.road, start, args.minutes, args.out)
+    print(f"wrote {out}")
+    return 0
+
+
+def _emit(name: str, figures: dict) -> int:
+    from twin.bench import context
+
+    print(json.dumps({"bench": name, **figures, **context()}))
+    return 0
+
+
+def _bench_query(args) -> int:
+    from twin.bench import query
+
+    return _emit("query", query(_store(args.data), repeats=args.repeats))
+
+
+def _bench_synth(args) -> int:
+    from twin.bench import synth_bench
+
+    return _emit("synth", synth_bench(minutes=args.minutes, repeats=args.repeats))
+
+
+def _bench_ingest(args) -> int:
+    from twin.bench import ingest_bench
+
+    return _emit("ingest", ingest_bench(size_mb=args.size_mb, repeats=args.repeats))

@@ -1,0 +1,86 @@
+"""Time-space diagrams of recorded traffic, one panel per lane, as in the paper's figures."""
+
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.dates as mdates
+import matplotlib.pyplot as plt
+import numpy as np
+
+from twin.data import i24
+from twin.data.i24 import Road
+from twin.data.store import TrajectoryStore
+from twin.timeutil import CST
+
+SPEED_RANGE = (0.0, 35.0)  # [m/s] colour scale
+MAX_POINTS_PER_LANE = 400_000
+
+
+def time_space_plot(
+    store: TrajectoryStore, road: Road | str, start: float, minutes: float, out: str | os.PathLike
+) -> Path:
+    """Plot every lane's trajectories as points coloured by speed; mile markers on the y axis.
+
+    Args:
+        store: the data.
+        road: the carriageway.
+        start: [s] unix time of the left edge.
+        minutes: [min] span plotted.
+        out: PNG path (written to a temporary file and renamed).
+
+    Raises:
+        ValueError: when the window holds no samples (naming what the store covers).
+    """
+    road = Road.parse(road)
+    end = start + 60.0 * minutes
+    samples = store.samples(road, start, end)
+    if len(samples["t"]) == 0:
+        t_min, t_max = store.time_range(road)
+        raise ValueError(
+            f"no {road.value} samples between unix {start:.0f} and {end:.0f}; "
+            f"the store covers {t_min:.0f} to {t_max:.0f}"
+        )
+    fig, axes = plt.subplots(
+        len(i24.LANES), 1, figsize=(12, 11), sharex=True, constrained_layout=True
+    )
+    points = None
+    for ax, lane in zip(axes, i24.LANES, strict=True):
+        rows = np.flatnonzero(samples["lane"] == lane)
+        step = max(1, len(rows) // MAX_POINTS_PER_LANE)
+        rows = rows[::step]
+        when = (samples["t"][rows] / 86400.0) + mdates.date2num(np.datetime64("1970-01-01"))
+        points = ax.scatter(
+            when,
+            i24.mile_marker(samples["x"][rows], road),
+            c=samples["speed"][rows],
+            s=0.4,
+            cmap="RdYlGn",
+            vmin=SPEED_RANGE[0],
+            vmax=SPEED_RANGE[1],
+            rasterized=True,
+            linewidths=0,
+        )
+        for mm in (i24.SEGMENT_START_MM, i24.SEGMENT_END_MM):
+            ax.axhline(mm, color="0.4", lw=0.6, ls="--")
+        ax.set_ylabel(f"lane {lane}{' (HOV)' if lane == i24.HOV_LANE else ''}\nmile marker")
+        if road is Road.WESTBOUND:
+            ax.invert_yaxis()  # travel goes up the page either way
+        ax.grid(alpha=0.2)
+    axes[-1].xaxis.set_major_locator(mdates.MinuteLocator(interval=max(1, round(minutes / 8))))
+    axes[-1].xaxis.set_major_formatter(mdates.DateFormatter("%H:%M", tz=CST))
+    axes[-1].set_xlabel("local time (CST)")
+    fig.colorbar(points, ax=axes, label="speed [m/s]", shrink=0.6)
+    fig.suptitle(f"I-24 {road.value}, {len(np.unique(samples['tid'])):,} trajectories")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, out)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+    return out

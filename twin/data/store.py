@@ -1,0 +1,309 @@
+"""The trajectory store: a folder of Parquet files written atomically, read by time window.
+
+Layout (every file opens in pandas, pyarrow, DuckDB or Polars)::
+
+    STORE/
+      metadata.json                 format, sources, options, counts, rejections
+      trajectories.parquet          one row per trajectory (tid, id, road, class, size, span)
+      samples_eastbound.parquet     one row per sample (tid, t, x, y, speed, lane),
+      samples_westbound.parquet     one row group per time bucket, sorted by (tid, t)
+
+Units: t unix seconds, x and y metres in the road frame (x of the vehicle's back
+centre), speed m/s, sizes metres. A time-window query reads only the row groups
+whose time statistics overlap the window.
+"""
+
+import json
+import os
+import shutil
+from contextlib import contextmanager
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from twin.data import i24
+from twin.data.i24 import Road
+from twin.errors import StoreError
+from twin.timeutil import format_local, local_days
+
+FORMAT = "i24-twin-store"
+FORMAT_VERSION = 1
+METADATA = "metadata.json"
+
+SAMPLE_SCHEMA = pa.schema(
+    [
+        ("tid", pa.int32()),
+        ("t", pa.float64()),  # [s] unix
+        ("x", pa.float64()),  # [m] road frame, back centre
+        ("y", pa.float32()),  # [m] from the median centre line
+        ("speed", pa.float32()),  # [m/s] smoothed
+        ("lane", pa.int8()),  # -1..-4
+    ]
+)
+
+TRAJECTORY_SCHEMA = pa.schema(
+    [
+        ("tid", pa.int32()),
+        ("id", pa.string()),  # I-24 MOTION _id
+        ("road", pa.string()),
+        ("vehicle_class", pa.int8()),  # coarse class, index into i24.VEHICLE_CLASSES
+        ("fine_class", pa.int8()),  # -1 when the document had none
+        ("length", pa.float32()),  # [m]
+        ("width", pa.float32()),  # [m]
+        ("height", pa.float32()),  # [m]
+        ("t_first", pa.float64()),  # [s] unix, first kept sample
+        ("t_last", pa.float64()),  # [s] unix, last kept sample
+        ("x_first", pa.float64()),  # [m]
+        ("x_last", pa.float64()),  # [m]
+        ("n_samples", pa.int32()),
+        ("lanes_seen", pa.int8()),  # bit k-1 set when the vehicle was recorded in lane -k
+        ("source", pa.int16()),  # index into metadata "sources"
+    ]
+)
+
+
+def is_store(path: Path) -> bool:
+    """True when ``path`` is a folder holding a store's metadata file."""
+    meta = Path(path) / METADATA
+    if not meta.is_file():
+        return False
+    try:
+        return json.loads(meta.read_text()).get("format") == FORMAT
+    except (OSError, ValueError):
+        return False
+
+
+def check_replaceable(out: Path) -> None:
+    """Raise StoreError when ``out`` exists and is not a store: user data is never overwritten."""
+    out = Path(out)
+    if out.exists() and not is_store(out):
+        raise StoreError(
+            f"{out} exists and is not an i24-twin store; refusing to overwrite it "
+            "(choose another --out or remove it yourself)"
+        )
+
+
+class StoreWriter:
+    """Writes a store under a temporary folder beside ``out`` and renames it into place.
+
+    On an exception (or KeyboardInterrupt) inside the ``with`` block the temporary
+    folder is removed and ``out`` is left as it was. Leftovers of a killed process are
+    removed by the next writer of the same store.
+    """
+
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self.tmp = self.out.parent / f".{self.out.name}.partial-{os.getpid()}"
+
+    def __enter__(self) -> "StoreWriter":
+        check_replaceable(self.out)
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        for stale in self.out.parent.glob(f".{self.out.name}.partial-*"):
+            if not _pid_alive(stale.name.rsplit("-", 1)[-1]):
+                shutil.rmtree(stale, ignore_errors=True)
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        self.tmp.mkdir()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            return
+        shutil.rmtree(self.tmp / "spill", ignore_errors=True)
+        check_replaceable(self.out)
+        if self.out.exists():
+            old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
+            os.rename(self.out, old)
+            os.rename(self.tmp, self.out)
+            shutil.rmtree(old)
+        else:
+            os.rename(self.tmp, self.out)
+
+    @contextmanager
+    def parquet(self, name: str, schema: pa.Schema):
+        """A Parquet writer for one file of the store (zstd, with statistics)."""
+        with pq.ParquetWriter(self.tmp / name, schema, compression="zstd") as writer:
+            yield writer
+
+    def write_table(self, name: str, table: pa.Table) -> None:
+        pq.write_table(table, self.tmp / name, compression="zstd")
+
+    def write_metadata(self, metadata: dict) -> None:
+        content = {"format": FORMAT, "version": FORMAT_VERSION, **metadata}
+        (self.tmp / METADATA).write_text(json.dumps(content, indent=2, sort_keys=True) + "\n")
+
+
+def _pid_alive(pid: str) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ValueError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class TrajectoryStore:
+    """Read access to a store folder.
+
+    Raises:
+        StoreError: when the folder is missing, is not a store, or lacks a file.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        meta = self.path / METADATA
+        if not self.path.is_dir():
+            raise StoreError(f"no trajectory store at {self.path} (run 'twin data ingest' first)")
+        if not meta.is_file():
+            raise StoreError(f"{self.path} is not an i24-twin store: {METADATA} is missing")
+        try:
+            self.metadata = json.loads(meta.read_text())
+        except ValueError as error:
+            raise StoreError(f"{meta} is not valid JSON: {error}") from None
+        if self.metadata.get("format") != FORMAT:
+            raise StoreError(
+                f"{self.path} is not an i24-twin store (format {self.metadata.get('format')!r})"
+            )
+        if self.metadata.get("version") != FORMAT_VERSION:
+            raise StoreError(
+                f"{self.path} has store version {self.metadata.get('version')}, this twin reads "
+                f"version {FORMAT_VERSION}: ingest the data again"
+            )
+        for name in ["trajectories.parquet"] + [
+            f"samples_{r}.parquet" for r in self.metadata["roads"]
+        ]:
+            if not (self.path / name).is_file():
+                raise StoreError(f"store {self.path} is incomplete: {name} is missing")
+        self._files: dict[Road, pq.ParquetFile] = {}
+
+    @property
+    def roads(self) -> list[Road]:
+        """The roads with data in this store."""
+        return [Road(r) for r in self.metadata["roads"]]
+
+    def time_range(self, road: Road | str) -> tuple[float, float]:
+        """[s] unix time of the first and last sample on ``road``."""
+        info = self._road_info(road)
+        return info["t_min"], info["t_max"]
+
+    @cached_property
+    def trajectories(self) -> pd.DataFrame:
+        """One row per trajectory, indexed by tid (columns as ``TRAJECTORY_SCHEMA``)."""
+        return pq.read_table(self.path / "trajectories.parquet").to_pandas().set_index("tid")
+
+    @cached_property
+    def trajectory_arrays(self) -> dict[str, np.ndarray]:
+        """The trajectory table as numpy arrays indexed by tid (for vectorised lookups)."""
+        table = pq.read_table(self.path / "trajectories.parquet")
+        arrays = {
+            name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names
+        }
+        if not np.array_equal(arrays["tid"], np.arange(len(arrays["tid"]))):
+            raise StoreError(
+                f"store {self.path} is corrupt: trajectory ids are not 0..n-1 in order"
+            )
+        return arrays
+
+    def samples(self, road: Road | str, t_min: float, t_max: float) -> dict[str, np.ndarray]:
+        """All samples on ``road`` with ``t_min <= t <= t_max``, sorted by (tid, t).
+
+        Returns:
+            dict of (n,) arrays: tid int32, t float64, x float64, y float32,
+            speed float32, lane int8.
+        """
+        road = Road.parse(road)
+        self._road_info(road)
+        file = self._file(road)
+        groups = [
+            i
+            for i, (lo, hi) in enumerate(self._row_group_spans(road))
+            if hi >= t_min and lo <= t_max
+        ]
+        if groups:
+            table = file.read_row_groups(groups)
+        else:
+            table = SAMPLE_SCHEMA.empty_table()
+        columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
+        keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
+        columns = {name: col[keep] for name, col in columns.items()}
+        order = np.lexsort((columns["t"], columns["tid"]))
+        return {name: col[order] for name, col in columns.items()}
+
+    def trajectory(self, tid: int) -> dict[str, np.ndarray]:
+        """All samples of one trajectory, in time order (same arrays as :meth:`samples`)."""
+        arrays = self.trajectory_arrays
+        if not 0 <= tid < len(arrays["tid"]):
+            raise KeyError(f"no trajectory with tid {tid} in {self.path}")
+        road = Road(arrays["road"][tid])
+        s = self.samples(road, arrays["t_first"][tid], arrays["t_last"][tid])
+        rows = s["tid"] == tid
+        return {name: col[rows] for name, col in s.items()}
+
+    def tid_of(self, oid: str) -> int:
+        """The tid of the trajectory whose I-24 MOTION ``_id`` is ``oid``."""
+        matches = np.flatnonzero(self.trajectory_arrays["id"] == oid)
+        if len(matches) == 0:
+            raise KeyError(f"no trajectory with id {oid!r} in {self.path}")
+        return int(matches[0])
+
+    def _road_info(self, road: Road | str) -> dict:
+        road = Road.parse(road)
+        if road.value not in self.metadata["roads"]:
+            have = ", ".join(self.metadata["roads"]) or "none"
+            raise StoreError(f"store {self.path} has no {road.value} data (roads: {have})")
+        return self.metadata["roads"][road.value]
+
+    def _file(self, road: Road) -> pq.ParquetFile:
+        if road not in self._files:
+            self._files[road] = pq.ParquetFile(self.path / f"samples_{road.value}.parquet")
+        return self._files[road]
+
+    def _row_group_spans(self, road: Road) -> list[tuple[float, float]]:
+        meta = self._file(road).metadata
+        column = SAMPLE_SCHEMA.get_field_index("t")
+        spans = []
+        for i in range(meta.num_row_groups):
+            stats = meta.row_group(i).column(column).statistics
+            spans.append((stats.min, stats.max))
+        return spans
+
+    def describe(self) -> str:
+        """A human-readable summary: sources, days, roads, per-lane counts, rejections."""
+        meta = self.metadata
+        arrays = self.trajectory_arrays
+        lines = [f"store    {self.path}  ({FORMAT} v{meta['version']})"]
+        for source in meta["sources"]:
+            lines.append(f"source   {source['name']}  ({source['bytes'] / 1e6:,.1f} MB)")
+        days = local_days(np.r_[arrays["t_first"], arrays["t_last"]])
+        lines.append(f"days     {', '.join(days) or 'none'} (local time, CST)")
+        margin = meta["options"]["margin_m"]
+        lines.append(
+            "margin   "
+            + ("whole recorded range" if margin is None else f"{margin:g} m beyond each end")
+        )
+        for road, info in meta["roads"].items():
+            rows = arrays["road"] == road
+            lines.append(
+                f"{road:<10}{info['trajectories']:,} trajectories, {info['samples']:,} samples, "
+                f"{format_local(info['t_min'])} to {format_local(info['t_max'])[11:]}, "
+                f"x {info['x_min']:.0f} to {info['x_max']:.0f} m"
+            )
+            for lane in i24.LANES:
+                seen = int(np.count_nonzero(arrays["lanes_seen"][rows] & (1 << (-lane - 1))))
+                samples = info["samples_per_lane"][str(lane)]
+                hov = "  (HOV)" if lane == i24.HOV_LANE else ""
+                lines.append(f"  lane {lane}: {seen:,} trajectories, {samples:,} samples{hov}")
+        ingest = meta["ingest"]
+        for kind in ("documents", "samples"):
+            part = ingest[kind]
+            rejected = ", ".join(f"{k} {v:,}" for k, v in part["rejected"].items()) or "none"
+            lines.append(
+                f"{kind:<10}read {part['read']:,}, kept {part['kept']:,}, "
+                f"outside margin {part['outside_margin']:,}; rejected: {rejected}"
+            )
+        return "\n".join(lines)

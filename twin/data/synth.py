@@ -1,0 +1,596 @@
+"""Synthetic I-24 MOTION days: a multi-lane microsimulation with real stop-and-go waves.
+
+The real I-24 MOTION files cannot be downloaded on the twin's machines, so the twin
+ships a stand-in in exactly their JSON layout. Heterogeneous IDM drivers
+(:mod:`twin.traffic.idm`, parameters per vehicle class from ``assets/``) with
+acceleration noise drive four lanes of a road longer than the recorded range;
+MOBIL-style lane changes take several seconds; the HOV lane (-1) is entered by
+nobody and left by nobody (the double line of this corridor). Waves are started
+the way they start on a freeway, by a driver braking hard downstream
+(:class:`Slowdown`); in dense traffic the braking propagates upstream as a
+stop-and-go wave at the congested wave speed of the drivers, about
+(s0 + length) / T, i.e. 4.5 to 5.5 m/s as measured on I-24.
+
+Vehicle positions are recorded at the simulation step and resampled to the
+camera rate (25 Hz) with a per-vehicle phase and small tracking noise.
+"""
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import orjson
+from tqdm import tqdm
+
+from twin.data import i24
+from twin.data.i24 import Road
+from twin.traffic.idm import IDMParams, idm_acceleration
+from twin.vehicle_classes import vehicle_classes
+
+SCENARIO_TIME = 1669812350.0  # [s] unix, 2022-11-30 06:45:50 CST: the paper's scenarios
+HOUR = 3600.0  # [s]
+MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
+COMFORT_DECEL = 1.7  # [m/s^2] IDM b
+MIN_GAP = 2.0  # [m] IDM s0 mean
+
+
+@dataclass(frozen=True)
+class Slowdown:
+    """A driver who brakes to ``speed`` and holds it for ``duration``: the seed of a wave.
+
+    Attributes:
+        t: [s] when, relative to the configuration's ``anchor``.
+        x: [m] road-frame position; the nearest vehicle upstream of it in each lane brakes.
+        lanes: the lanes in which a driver brakes.
+        speed: [m/s] speed held.
+        duration: [s] how long it is held after it is reached.
+        decel: [m/s^2] braking used to reach it.
+    """
+
+    t: float
+    x: float
+    lanes: tuple[int, ...]
+    speed: float
+    duration: float
+    decel: float = 3.0
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """A synthetic recording of one road.
+
+    Attributes:
+        road: the carriageway simulated.
+        anchor: [s] unix reference time of the scenario (slowdown times are relative to it).
+        start: [s] unix time of the first recorded sample.
+        minutes: [min] recorded duration.
+        flow: [veh/h] demand entering lanes -1, -2, -3, -4.
+        slowdowns: the braking events that seed waves.
+        x_record: [m] road-frame range recorded (the instrument's field of view).
+        upstream, downstream: [m] road simulated beyond the recorded range.
+        warmup: [s] simulated before ``start`` so the road is in steady traffic.
+        dt: [s] simulation step.
+        sample_rate: [Hz] recording rate.
+        position_noise: [m] sd of the tracking noise on x and y.
+        accel_noise: [m/s^2] sd of the drivers' acceleration noise per step.
+        lane_change_duration: [s] range of lane-change manoeuvre durations.
+        politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
+            ([-], [m/s^2], [m/s^2], [m/s^2]).
+        decision_interval: [s] mean time between a driver's lane-change decisions.
+        seed: random seed.
+    """
+
+    road: Road
+    anchor: float
+    start: float
+    flow: tuple[float, float, float, float]
+    slowdowns: tuple[Slowdown, ...] = ()
+    minutes: float = 16.0
+    x_record: tuple[float, float] = (-600.0, i24.SEGMENT_LENGTH + 600.0)
+    upstream: float = 800.0
+    downstream: float = 900.0
+    warmup: float = 200.0
+    dt: float = 0.1
+    sample_rate: float = 25.0
+    position_noise: float = 0.03
+    accel_noise: float = 0.15
+    lane_change_duration: tuple[float, float] = (3.0, 6.0)
+    politeness: float = 0.2
+    change_threshold: float = 0.3
+    keep_right: float = 0.1
+    safe_decel: float = 3.0
+    decision_interval: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "road", Road.parse(self.road))
+        checks = {
+            "minutes": self.minutes > 0,
+            "dt": 0 < self.dt <= 0.5,
+            "sample_rate": self.sample_rate > 0,
+            "warmup": self.warmup >= 0,
+            "upstream": self.upstream >= 0,
+            "downstream": self.downstream >= 0,
+            "x_record": self.x_record[0] < self.x_record[1],
+            "flow": len(self.flow) == 4 and all(0 <= q <= 3000 for q in self.flow),
+            "lane_change_duration": 0
+            < self.lane_change_duration[0]
+            <= self.lane_change_duration[1],
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(f"SynthConfig.{name} is invalid: {getattr(self, name)!r}")
+        for s in self.slowdowns:
+            if not (
+                set(s.lanes) <= set(i24.LANES) and s.speed >= 0 and s.duration >= 0 and s.decel > 0
+            ):
+                raise ValueError(f"invalid slowdown {s!r}")
+
+    @property
+    def end(self) -> float:
+        """[s] unix time of the last recorded sample."""
+        return self.start + 60.0 * self.minutes
+
+
+#: Scenario A of the paper: eastbound, light free-flowing traffic (I-24 eastbound is
+#: free-flowing in the morning, 59 to 80 mph).
+PRESET_A = SynthConfig(
+    road=Road.EASTBOUND,
+    anchor=SCENARIO_TIME,
+    start=SCENARIO_TIME - 380.0,
+    flow=(450.0, 900.0, 850.0, 650.0),
+)
+
+#: Scenario B of the paper: westbound (inbound), a stop-and-go wave reaching the HOV
+#: lane near x = 700 m at 06:45:50 while lanes -3 and -4 are only mildly disturbed.
+PRESET_B = SynthConfig(
+    road=Road.WESTBOUND,
+    anchor=SCENARIO_TIME,
+    start=SCENARIO_TIME - 380.0,
+    flow=(2300.0, 2100.0, 1600.0, 1300.0),
+    slowdowns=(
+        Slowdown(t=-560.0, x=2500.0, lanes=(-1, -2), speed=3.0, duration=15.0),
+        Slowdown(t=-370.0, x=2450.0, lanes=(-1,), speed=0.0, duration=20.0),
+        Slowdown(t=-370.0, x=2450.0, lanes=(-2,), speed=6.0, duration=10.0),
+        Slowdown(t=-370.0, x=2450.0, lanes=(-3, -4), speed=22.0, duration=8.0),
+        Slowdown(t=0.0, x=2500.0, lanes=(-1, -2), speed=2.0, duration=15.0),
+        Slowdown(t=200.0, x=2450.0, lanes=(-1,), speed=4.0, duration=12.0),
+    ),
+)
+
+PRESETS = {"A": PRESET_A, "B": PRESET_B}
+
+
+@dataclass
+class _Vehicles:
+    """The simulated vehicles, struct-of-arrays (n,) each."""
+
+    vid: np.ndarray
+    x: np.ndarray  # [m] back centre
+    v: np.ndarray  # [m/s]
+    lane: np.ndarray  # target lane
+    lane_from: np.ndarray  # origin lane while changing, else == lane
+    change_start: np.ndarray  # [s]
+    change_duration: np.ndarray  # [s]
+    next_decision: np.ndarray  # [s]
+    length: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    vehicle_class: np.ndarray
+    v0: np.ndarray
+    T: np.ndarray
+    s0: np.ndarray
+    a: np.ndarray
+    forced_speed: np.ndarray  # [m/s], nan when not braking for a slowdown
+    forced_until: np.ndarray  # [s]
+    forced_decel: np.ndarray  # [m/s^2]
+
+    def __len__(self) -> int:
+        return len(self.vid)
+
+    def keep(self, mask: np.ndarray) -> None:
+        for name, value in vars(self).items():
+            setattr(self, name, value[mask])
+
+    def extend(self, other: "_Vehicles") -> None:
+        for name, value in vars(self).items():
+            setattr(self, name, np.concatenate([value, getattr(other, name)]))
+
+    @property
+    def params(self) -> IDMParams:
+        return IDMParams(self.v0, self.T, self.s0, self.a, COMFORT_DECEL)
+
+
+@dataclass
+class SynthResult:
+    """Recorded trajectories (struct-of-arrays per vehicle) and counters."""
+
+    config: SynthConfig
+    vid: np.ndarray  # (m,) vehicle ids
+    tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
+    vehicle_class: np.ndarray
+    dimensions: np.ndarray  # (m, 3) [m]
+    lane_changes: int
+    collisions: int
+
+
+class _Simulation:
+    def __init__(self, config: SynthConfig, rng: np.random.Generator):
+        self.cfg = config
+        self.rng = rng
+        self.classes = vehicle_classes()
+        self.x_in = config.x_record[0] - config.upstream
+        self.x_out = config.x_record[1] + config.downstream
+        self.next_vid = 0
+        self.lane_changes = 0
+        self.collisions = 0
+        self.pending = np.zeros(4, dtype=int)
+        self.next_arrival = np.full(4, np.inf)
+        self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
+        self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
+        self.vehicles = self._new_vehicles(np.zeros(0, np.int8), np.zeros(0), np.zeros(0))
+
+    # -- creation ---------------------------------------------------------------------
+    def _class_weights(self, lane: int) -> np.ndarray:
+        share = self.classes.column("share").astype(float).copy()
+        heavy = self.classes.column("hov_allowed") == 0
+        if lane == i24.HOV_LANE:
+            share[heavy] = 0.0
+        elif lane == -2:
+            share[heavy] *= 0.3
+        elif lane == -4:
+            share[heavy] *= 1.6
+        return share / share.sum()
+
+    def _new_vehicles(self, lanes: np.ndarray, x: np.ndarray, v: np.ndarray) -> _Vehicles:
+        n = len(lanes)
+        rng = self.rng
+        cls = np.array(
+            [rng.choice(7, p=self._class_weights(int(lane))) for lane in lanes], dtype=np.int8
+        )
+        dims = self.classes.sample_dimensions(cls, rng)
+        c = self.classes
+        v0 = c.column("desired_speed_mps")[cls] + c.column("desired_speed_sd_mps")[cls] * np.clip(
+            rng.standard_normal(n), -2, 2
+        )
+        T = c.column("time_headway_s")[cls] * np.exp(0.12 * np.clip(rng.standard_normal(n), -2, 2))
+        vid = np.arange(self.next_vid, self.next_vid + n)
+        self.next_vid += n
+        self.registry_class.append(cls)
+        self.registry_dims.append(dims)
+        lanes = np.asarray(lanes, dtype=np.int8)
+        return _Vehicles(
+            vid=vid,
+            x=np.asarray(x, float),
+            v=np.minimum(np.asarray(v, float), v0),
+            lane=lanes,
+            lane_from=lanes.copy(),
+            change_start=np.zeros(n),
+            change_duration=np.ones(n),
+            next_decision=rng.uniform(0, self.cfg.decision_interval, n) + getattr(self, "t", 0.0),
+            length=dims[:, 0],
+            width=dims[:, 1],
+            height=dims[:, 2],
+            vehicle_class=cls,
+            v0=v0,
+            T=T,
+            s0=MIN_GAP + 0.3 * np.clip(rng.standard_normal(n), -2, 2),
+            a=c.column("max_accel_mps2")[cls]
+            * np.exp(0.15 * np.clip(rng.standard_normal(n), -2, 2)),
+            forced_speed=np.full(n, np.nan),
+            forced_until=np.zeros(n),
+            forced_decel=np.zeros(n),
+        )
+
+    def populate(self, t0: float) -> None:
+        """Fill the road with traffic at each lane's demand, at free-flow spacing."""
+        self.t = t0
+        lanes, xs = [], []
+        for k, lane in enumerate(i24.LANES):
+            q = self.cfg.flow[k] / HOUR
+            if q <= 0:
+                continue
+            spacing = 30.0 / q
+            x = np.arange(self.x_in, self.x_out, spacing) + self.rng.uniform(0, spacing)
+            x = x[x < self.x_out - 25]
+            lanes.append(np.full(len(x), lane))
+            xs.append(x)
+            self.next_arrival[k] = t0 + self._headway(q)
+        lanes, xs = np.concatenate(lanes), np.concatenate(xs)
+        new = self._new_vehicles(lanes, xs, np.full(len(xs), 30.0))
+        # Keep a safe spacing behind long vehicles: shift lanes so nobody overlaps.
+        order = np.lexsort((new.x, new.lane))
+        new.keep(order)
+        for lane in i24.LANES:
+            rows = np.flatnonzero(new.lane == lane)
+            for prev, cur in zip(rows[:-1], rows[1:], strict=True):
+                new.x[cur] = max(new.x[cur], new.x[prev] + new.length[prev] + 30.0)
+        new.keep(new.x < self.x_out)
+        self.vehicles = new
+
+    def _headway(self, q: float) -> float:
+        """[s] time to the next arrival: shifted exponential with a 1 s minimum."""
+        mean = 1.0 / q
+        return 1.0 + self.rng.exponential(max(mean - 1.0, 0.05))
+
+    def _insert(self) -> None:
+        veh = self.vehicles
+        for k, lane in enumerate(i24.LANES):
+            q = self.cfg.flow[k] / HOUR
+            while q > 0 and self.t >= self.next_arrival[k]:
+                self.pending[k] += 1
+                self.next_arrival[k] += self._headway(q)
+            if self.pending[k] == 0:
+                continue
+            in_lane = (veh.lane == lane) | (veh.lane_from == lane)
+            if in_lane.any():
+                last = np.flatnonzero(in_lane)[np.argmin(veh.x[in_lane])]
+                gap = veh.x[last] - self.x_in - 6.0
+                v_last = veh.v[last]
+            else:
+                gap, v_last = np.inf, 30.0
+            v_in = min(v_last, 30.0)
+            if gap < MIN_GAP + v_in * 1.2:
+                continue
+            new = self._new_vehicles(np.array([lane]), np.array([self.x_in]), np.array([v_in]))
+            if gap < MIN_GAP + v_in * new.T[0] + new.length[0]:
+                continue  # this vid stays unused: vids need not be contiguous
+            self.pending[k] -= 1
+            veh.extend(new)
+
+    # -- one step ---------------------------------------------------------------------
+    def _entries(self):
+        """Lane occupancy: every vehicle in its lane, plus changing vehicles in their origin lane."""
+        veh = self.vehicles
+        n = len(veh)
+        changing = np.flatnonzero(veh.lane_from != veh.lane)
+        owner = np.r_[np.arange(n), changing]
+        lane = np.r_[veh.lane, veh.lane_from[changing]].astype(np.int64)
+        x = veh.x[owner]
+        key = -lane * 1e5 + x
+        order = np.argsort(key, kind="stable")
+        return owner[order], lane[order], key[order]
+
+    def _leaders(self, owner, lane):
+        """Gap [m] and leader speed for each occupancy entry (inf gap when none)."""
+        veh = self.vehicles
+        same = np.r_[lane[1:] == lane[:-1], False]
+        lead = np.r_[owner[1:], 0]
+        gap = np.where(same, veh.x[lead] - veh.x[owner] - veh.length[owner], np.inf)
+        return gap, veh.v[lead]
+
+    def step(self) -> None:
+        cfg, veh, dt = self.cfg, self.vehicles, self.cfg.dt
+        owner, lane, key = self._entries()
+        gap, v_lead = self._leaders(owner, lane)
+        params = veh.params.take(owner)
+        acc_entry = idm_acceleration(veh.v[owner], v_lead, gap, params)
+        acc = np.full(len(veh), np.inf)
+        np.minimum.at(acc, owner, acc_entry)
+        self.collisions += int(np.count_nonzero(gap < 0))
+
+        forced = ~np.isnan(veh.forced_speed)
+        if forced.any():
+            release = forced & (self.t > veh.forced_until)
+            veh.forced_speed[release] = np.nan
+            forced &= ~release
+            track = np.clip(0.8 * (veh.forced_speed - veh.v), -veh.forced_decel, 0.5)
+            acc = np.where(forced, np.minimum(acc, track), acc)
+
+        acc += cfg.accel_noise * self.rng.standard_normal(len(veh))
+        acc = np.clip(acc, -MAX_DECEL, veh.a * 1.5)
+        self._change_lanes(owner, lane, key, gap, acc)
+
+        v_new = veh.v + acc * dt
+        stopping = v_new < 0
+        advance = np.where(
+            stopping, -(veh.v**2) / (2 * np.minimum(acc, -1e-9)), veh.v * dt + 0.5 * acc * dt**2
+        )
+        veh.x = veh.x + advance
+        veh.v = np.maximum(v_new, 0.0)
+        done = (veh.lane_from != veh.lane) & (self.t + dt >= veh.change_start + veh.change_duration)
+        veh.lane_from[done] = veh.lane[done]
+        self.t += dt
+        veh.keep(veh.x < self.x_out)
+        self._insert()
+
+    def _change_lanes(self, owner, lane, key, gap, acc) -> None:
+        """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres."""
+        cfg, veh = self.cfg, self.vehicles
+        due = np.flatnonzero(
+            (veh.next_decision <= self.t)
+            & (veh.lane == veh.lane_from)
+            & (veh.lane != i24.HOV_LANE)
+            & np.isnan(veh.forced_speed)
+        )
+        if len(due) == 0:
+            return
+        veh.next_decision[due] = self.t + self.rng.exponential(cfg.decision_interval, len(due))
+        best_gain = np.full(len(due), cfg.change_threshold)
+        best_lane = veh.lane[due].copy()
+        for step_dir, bias in ((+1, -cfg.keep_right), (-1, cfg.keep_right)):
+            target = veh.lane[due] + step_dir
+            allowed = (target <= -2) & (target >= -4)
+            cand = due[allowed]
+            if len(cand) == 0:
+                continue
+            tgt = target[allowed].astype(np.int64)
+            pos = np.searchsorted(key, -tgt * 1e5 + veh.x[cand])
+            has_lead = (pos < len(key)) & (lane[np.minimum(pos, len(key) - 1)] == tgt)
+            lead = owner[np.minimum(pos, len(key) - 1)]
+            has_fol = (pos > 0) & (lane[np.maximum(pos - 1, 0)] == tgt)
+            fol = owner[np.maximum(pos - 1, 0)]
+            gap_lead = np.where(has_lead, veh.x[lead] - veh.x[cand] - veh.length[cand], np.inf)
+            gap_fol = np.where(has_fol, veh.x[cand] - veh.x[fol] - veh.length[fol], np.inf)
+            a_new = idm_acceleration(veh.v[cand], veh.v[lead], gap_lead, veh.params.take(cand))
+            a_fol_new = idm_acceleration(veh.v[fol], veh.v[cand], gap_fol, veh.params.take(fol))
+            a_fol_old = np.where(has_fol, acc[fol], 0.0)
+            a_fol_new = np.where(has_fol, a_fol_new, 0.0)
+            safe = (a_fol_new >= -cfg.safe_decel) & (gap_lead > 1.0) & (gap_fol > 1.0)
+            gain = a_new - acc[cand] + cfg.politeness * (a_fol_new - a_fol_old) + bias
+            better = safe & (gain > best_gain[allowed])
+            idx = np.flatnonzero(allowed)[better]
+            best_gain[idx] = gain[better]
+            best_lane[idx] = tgt[better]
+        chosen = best_lane != veh.lane[due]
+        movers = due[chosen]
+        if len(movers) == 0:
+            return
+        low, high = cfg.lane_change_duration
+        veh.lane_from[movers] = veh.lane[movers]
+        veh.lane[movers] = best_lane[chosen]
+        veh.change_start[movers] = self.t
+        veh.change_duration[movers] = self.rng.uniform(low, high, len(movers))
+        self.lane_changes += len(movers)
+
+    def trigger(self, slowdown: Slowdown) -> None:
+        """Make the nearest driver upstream of ``slowdown.x`` brake, in each of its lanes."""
+        veh = self.vehicles
+        for lane in slowdown.lanes:
+            rows = np.flatnonzero(
+                (veh.lane == lane) & (veh.lane_from == lane) & (veh.x <= slowdown.x)
+            )
+            if len(rows) == 0:
+                continue
+            i = rows[np.argmax(veh.x[rows])]
+            veh.forced_speed[i] = slowdown.speed
+            veh.forced_decel[i] = slowdown.decel
+            time_to_reach = max(veh.v[i] - slowdown.speed, 0.0) / slowdown.decel
+            veh.forced_until[i] = self.t + time_to_reach + slowdown.duration
+
+    def lateral(self) -> np.ndarray:
+        """[m] road-frame y of every vehicle: lane centre, or a smooth path while changing."""
+        veh = self.vehicles
+        y_to = i24.lane_center(veh.lane)
+        y_from = i24.lane_center(veh.lane_from)
+        progress = np.clip((self.t - veh.change_start) / veh.change_duration, 0.0, 1.0)
+        blend = 0.5 - 0.5 * np.cos(np.pi * progress)
+        return np.where(veh.lane_from == veh.lane, y_to, y_from + (y_to - y_from) * blend)
+
+
+def synthesize(config: SynthConfig, *, progress: bool = False) -> SynthResult:
+    """Run the microsimulation and return the recorded tracks (deterministic by seed)."""
+    rng = np.random.default_rng(config.seed)
+    sim = _Simulation(config, rng)
+    t0 = config.start - config.warmup
+    sim.populate(t0)
+    n_steps = math.ceil((config.end - t0) / config.dt) + 1
+    events = sorted(config.slowdowns, key=lambda s: s.t)
+    lo, hi = config.x_record
+    rec_vid, rec_step, rec_x, rec_y = [], [], [], []
+    record_from = math.floor((config.start - t0) / config.dt) - 1
+    for k in tqdm(
+        range(n_steps),
+        desc=f"synth {config.road.value}",
+        disable=None if progress else True,
+        leave=False,
+    ):
+        sim.t = t0 + k * config.dt
+        while events and config.anchor + events[0].t <= sim.t:
+            sim.trigger(events.pop(0))
+        if k >= record_from:
+            veh = sim.vehicles
+            seen = (veh.x >= lo) & (veh.x <= hi)
+            rec_vid.append(veh.vid[seen])
+            rec_step.append(np.full(int(seen.sum()), k, np.int32))
+            rec_x.append(veh.x[seen])
+            rec_y.append(sim.lateral()[seen].astype(np.float32))
+        sim.step()
+    vid = np.concatenate(rec_vid)
+    order = np.argsort(vid, kind="stable")
+    vid, step = vid[order], np.concatenate(rec_step)[order]
+    x, y = np.concatenate(rec_x)[order], np.concatenate(rec_y)[order]
+    return _resample(config, sim, rng, t0, vid, step, x, y)
+
+
+def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
+    """Tracks at the recording rate with a per-vehicle phase and tracking noise."""
+    period = 1.0 / config.sample_rate
+    starts = np.flatnonzero(np.r_[True, vid[1:] != vid[:-1]])
+    ends = np.r_[starts[1:], len(vid)]
+    ids, tracks = [], []
+    for a, b in zip(starts, ends, strict=True):
+        v = int(vid[a])
+        t_steps = t0 + step[a:b] * config.dt
+        phase = rng.uniform(0, period)
+        first = math.ceil((max(t_steps[0], config.start) - config.start - phase) / period)
+        last = math.floor((min(t_steps[-1], config.end) - config.start - phase) / period)
+        if last - first < 1:
+            continue
+        t = config.start + phase + np.arange(first, last + 1) * period
+        xs = np.interp(t, t_steps, x[a:b]) + config.position_noise * rng.standard_normal(len(t))
+        ys = np.interp(t, t_steps, y[a:b]) + config.position_noise * rng.standard_normal(len(t))
+        ids.append(v)
+        tracks.append((t, xs, ys))
+    ids = np.array(ids, dtype=np.int64)
+    return SynthResult(
+        config=config,
+        vid=ids,
+        tracks=tracks,
+        vehicle_class=np.concatenate(sim.registry_class)[ids],
+        dimensions=np.concatenate(sim.registry_dims)[ids],
+        lane_changes=sim.lane_changes,
+        collisions=sim.collisions,
+    )
+
+
+def write_i24_json(result: SynthResult, path: str | os.PathLike, *, progress: bool = False) -> Path:
+    """Write the tracks as an I-24 MOTION day file (a JSON array of documents).
+
+    Written to a temporary file beside ``path`` and renamed, so an interrupted write
+    never leaves a truncated file under the final name.
+    """
+    cfg = result.config
+    road = cfg.road
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    order = np.argsort([track[0][0] for track in result.tracks], kind="stable")
+    prefix = f"{int(cfg.anchor) & 0xFFFFFFFF:08x}{road.code:02x}"
+    try:
+        with open(tmp, "wb") as out:
+            out.write(b"[\n")
+            for n, i in enumerate(
+                tqdm(order, desc="write", disable=None if progress else True, leave=False)
+            ):
+                t, x, y = result.tracks[i]
+                x_ft = np.round(i24.x_feet(x, road), 2)
+                y_ft = np.round(i24.y_feet(y, road), 2)
+                t = np.round(t, 3)
+                length, width, height = (result.dimensions[i] / i24.FT).round(3).tolist()
+                doc = {
+                    "_id": {"$oid": f"{prefix}{int(result.vid[i]):014x}"},
+                    "timestamp": t.tolist(),
+                    "first_timestamp": float(t[0]),
+                    "last_timestamp": float(t[-1]),
+                    "x_position": x_ft.tolist(),
+                    "y_position": y_ft.tolist(),
+                    "starting_x": float(x_ft[0]),
+                    "ending_x": float(x_ft[-1]),
+                    "length": length,
+                    "width": width,
+                    "height": height,
+                    "coarse_vehicle_class": int(result.vehicle_class[i]),
+                    "fine_vehicle_class": int(result.vehicle_class[i]),
+                    "direction": road.direction,
+                    "merged_ids": [],
+                    "fragment_ids": [],
+                    "compute_node_id": 0,
+                    "local_fragment_id": int(result.vid[i]),
+                    "road_segment_ids": [],
+                    "configuration_id": 0,
+                    "flags": ["synthetic"],
+                    "x_score": 0.0,
+                    "y_score": 0.0,
+                    "feasibility": 1.0,
+                }
+                if n:
+                    out.write(b",\n")
+                out.write(orjson.dumps(doc))
+            out.write(b"\n]\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path

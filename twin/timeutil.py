@@ -1,0 +1,55 @@
+"""Time at the boundary: unix seconds inside, ISO 8601 and I-24 local time (CST) outside."""
+
+import math
+from datetime import datetime, timedelta, timezone
+
+import numpy as np
+
+#: I-24 MOTION recordings (Nov-Dec 2022) are in US Central Standard Time.
+CST = timezone(timedelta(hours=-6), "CST")
+
+
+def parse_time(value: str | float) -> float:
+    """Unix seconds from a number or an ISO 8601 string with a UTC offset.
+
+    Args:
+        value: ``1669812350``, ``"1669812350.5"`` or ``"2022-11-30T06:45:50-06:00"``.
+
+    Raises:
+        ValueError: naming the value when it is neither, when it is not finite, or
+            when an ISO time lacks its offset (a bare local time is ambiguous).
+    """
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        t = float(value)
+    else:
+        text = str(value).strip()
+        try:
+            t = float(text)
+        except ValueError:
+            try:
+                parsed = datetime.fromisoformat(text.replace("Z", "+00:00"))
+            except ValueError:
+                raise ValueError(
+                    f"time {value!r} is neither unix seconds nor ISO 8601 "
+                    "(e.g. 2022-11-30T06:45:50-06:00)"
+                ) from None
+            if parsed.tzinfo is None:
+                raise ValueError(
+                    f"time {value!r} has no UTC offset; write e.g. {text}-06:00 for I-24 local time"
+                )
+            t = parsed.timestamp()
+    if not math.isfinite(t):
+        raise ValueError(f"time {value!r} is not a finite number")
+    return t
+
+
+def format_local(t: float) -> str:
+    """``YYYY-MM-DD HH:MM:SS`` in I-24 local time (CST) for unix seconds ``t``."""
+    return datetime.fromtimestamp(float(t), CST).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def local_days(t: np.ndarray) -> list[str]:
+    """The distinct local (CST) dates, ``YYYY-MM-DD``, of the unix times ``t``."""
+    offset = CST.utcoffset(None).total_seconds()
+    days = np.unique(np.floor((np.asarray(t, dtype=np.float64) + offset) / 86400.0))
+    return [format_local(day * 86400.0 - offset)[:10] for day in days]

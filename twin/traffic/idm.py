@@ -1,0 +1,83 @@
+"""The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000), vectorised."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class IDMParams:
+    """Per-vehicle IDM parameters as struct-of-arrays; each field (n,) float64 or a scalar.
+
+    Attributes:
+        desired_speed: v0 [m/s].
+        time_headway: T [s].
+        min_gap: s0 [m], bumper to bumper at standstill.
+        max_accel: a [m/s^2].
+        comfortable_decel: b [m/s^2], positive.
+        delta: acceleration exponent [-].
+    """
+
+    desired_speed: np.ndarray | float
+    time_headway: np.ndarray | float
+    min_gap: np.ndarray | float
+    max_accel: np.ndarray | float
+    comfortable_decel: np.ndarray | float
+    delta: np.ndarray | float = 4.0
+
+    def take(self, index: np.ndarray) -> "IDMParams":
+        """The parameters of the vehicles at ``index`` (scalars are kept as they are)."""
+        return IDMParams(
+            *(
+                value if np.ndim(value) == 0 else np.asarray(value)[index]
+                for value in (
+                    self.desired_speed,
+                    self.time_headway,
+                    self.min_gap,
+                    self.max_accel,
+                    self.comfortable_decel,
+                    self.delta,
+                )
+            )
+        )
+
+
+def desired_gap(v: np.ndarray, v_lead: np.ndarray, params: IDMParams) -> np.ndarray:
+    """IDM desired gap s* [m] = s0 + max(0, v T + v (v - v_lead) / (2 sqrt(a b)))."""
+    dynamic = v * params.time_headway + v * (v - v_lead) / (
+        2.0 * np.sqrt(params.max_accel * params.comfortable_decel)
+    )
+    return params.min_gap + np.maximum(dynamic, 0.0)
+
+
+def idm_acceleration(
+    v: np.ndarray, v_lead: np.ndarray, gap: np.ndarray, params: IDMParams
+) -> np.ndarray:
+    """IDM acceleration [m/s^2] of followers behind their leaders.
+
+    Args:
+        v: (n,) [m/s] follower speeds, >= 0.
+        v_lead: (n,) [m/s] leader speeds (ignored where ``gap`` is inf).
+        gap: (n,) [m] bumper-to-bumper gap to the leader; ``inf`` for a free road.
+            A gap <= 0 (overlap) gives a very large deceleration; callers clip.
+        params: per-vehicle parameters (see :class:`IDMParams`).
+
+    Returns:
+        (n,) float64 acceleration, unclipped.
+    """
+    v = np.asarray(v, dtype=np.float64)
+    free = 1.0 - (v / params.desired_speed) ** params.delta
+    gap = np.asarray(gap, dtype=np.float64)
+    finite = np.isfinite(gap)
+    v_lead = np.where(finite, v_lead, v)
+    s_star = desired_gap(v, v_lead, params)
+    ratio = np.divide(s_star, np.maximum(gap, 1e-3), out=np.zeros_like(v), where=finite)
+    return params.max_accel * (free - ratio**2)
+
+
+def equilibrium_gap(v: np.ndarray, params: IDMParams) -> np.ndarray:
+    """Steady-state gap s*(v) = (s0 + v T) / sqrt(1 - (v / v0)^delta) [m] for speed v < v0."""
+    v = np.asarray(v, dtype=np.float64)
+    return (params.min_gap + v * params.time_headway) / np.sqrt(
+        1.0 - (v / params.desired_speed) ** params.delta
+    )

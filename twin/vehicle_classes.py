@@ -1,0 +1,71 @@
+"""The vehicle class table shipped in ``assets/vehicle_classes.csv`` (one row per I-24 class)."""
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+import pandas as pd
+
+from twin.data.i24 import VEHICLE_CLASSES
+from twin.paths import asset
+
+COLUMNS = (
+    "class_id",
+    "name",
+    "share",
+    "length_m",
+    "length_sd_m",
+    "width_m",
+    "width_sd_m",
+    "height_m",
+    "height_sd_m",
+    "desired_speed_mps",
+    "desired_speed_sd_mps",
+    "max_accel_mps2",
+    "time_headway_s",
+    "hov_allowed",
+)
+
+
+@dataclass(frozen=True)
+class VehicleClassTable:
+    """Class properties as arrays indexed by I-24 class id (0 sedan ... 6 motorcycle)."""
+
+    frame: pd.DataFrame
+
+    def column(self, name: str) -> np.ndarray:
+        return self.frame[name].to_numpy()
+
+    def sample_dimensions(self, classes: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """(n, 3) [m] length, width, height drawn per class, clipped to +/- 2 sd."""
+        out = np.empty((len(classes), 3))
+        for k, name in enumerate(("length", "width", "height")):
+            mean = self.column(f"{name}_m")[classes]
+            sd = self.column(f"{name}_sd_m")[classes]
+            out[:, k] = mean + sd * np.clip(rng.standard_normal(len(classes)), -2.0, 2.0)
+        return out
+
+
+@cache
+def vehicle_classes() -> VehicleClassTable:
+    """Load and check ``assets/vehicle_classes.csv``.
+
+    Raises:
+        ValueError: naming the file and the problem (missing column, wrong classes,
+            non-positive sizes, shares that do not sum to 1).
+    """
+    path = asset("vehicle_classes.csv")
+    frame = pd.read_csv(path)
+    missing = [c for c in COLUMNS if c not in frame.columns]
+    if missing:
+        raise ValueError(f"{path}: missing columns {missing}")
+    if list(frame["class_id"]) != list(range(len(VEHICLE_CLASSES))) or list(frame["name"]) != list(
+        VEHICLE_CLASSES
+    ):
+        raise ValueError(f"{path}: rows must be the I-24 classes {VEHICLE_CLASSES} in id order")
+    numeric = frame[list(COLUMNS[2:])].to_numpy(dtype=float)
+    if not np.all(np.isfinite(numeric)) or np.any(numeric[:, :-1] < 0):
+        raise ValueError(f"{path}: values must be finite and non-negative")
+    if abs(frame["share"].sum() - 1.0) > 1e-6:
+        raise ValueError(f"{path}: shares sum to {frame['share'].sum()}, not 1")
+    return VehicleClassTable(frame.set_index("class_id", drop=False))
