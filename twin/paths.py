@@ -8,7 +8,10 @@ ASSETS_DIR = REPO_ROOT / "assets"
 
 
 def cache_dir() -> Path:
-    """The cache folder: ``$I24_TWIN_CACHE``, else ``$XDG_CACHE_HOME/i24-twin``, else ``~/.cache/i24-twin``."""
+    """The cache folder.
+
+    ``$I24_TWIN_CACHE``, else ``$XDG_CACHE_HOME/i24-twin``, else ``~/.cache/i24-twin``.
+    """
     if env := os.environ.get("I24_TWIN_CACHE"):
         return Path(env)
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"

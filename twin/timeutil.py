@@ -36,7 +36,7 @@ def parse_time(value: str | float) -> float:
             if parsed.tzinfo is None:
                 raise ValueError(
                     f"time {value!r} has no UTC offset; write e.g. {text}-06:00 for I-24 local time"
-                )
+                ) from None
             t = parsed.timestamp()
     if not math.isfinite(t):
         raise ValueError(f"time {value!r} is not a finite number")

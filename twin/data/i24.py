@@ -111,7 +111,7 @@ def road_y(y_ft: np.ndarray) -> np.ndarray:
 
 
 def y_feet(y_m: np.ndarray, road: Road) -> np.ndarray:
-    """Inverse of :func:`road_y`: I-24 ``y_position`` [ft], negative eastbound, positive westbound."""
+    """Inverse of :func:`road_y`: I-24 ``y_position`` [ft], < 0 eastbound, > 0 westbound."""
     return -road.direction * np.asarray(y_m, dtype=np.float64) / FT
 
 
@@ -121,7 +121,9 @@ def lane_of(y_m: np.ndarray) -> np.ndarray:
     Returns:
         (n,) int8.
     """
-    k = np.floor(np.asarray(y_m, dtype=np.float64) / LANE_WIDTH)
+    # A nanometre of tolerance so that band edges given in feet (e.g. 60 ft) land on
+    # the band they start, despite the ft -> m round-off.
+    k = np.floor(np.asarray(y_m, dtype=np.float64) / LANE_WIDTH + 1e-9)
     inside = (k >= 1) & (k <= N_LANES)
     return np.where(inside, -k, 0).astype(np.int8)
 

@@ -335,7 +335,7 @@ def smoothed_speed(t: np.ndarray, x: np.ndarray, sigma: float) -> np.ndarray:
     n = len(v)
     if sigma > 0 and n > 2:
         sigma_samples = sigma / float(np.median(np.diff(t)))
-        half = min(int(math.ceil(3 * sigma_samples)), (n - 1) // 2)
+        half = min(math.ceil(3 * sigma_samples), (n - 1) // 2)
         if half >= 1:
             kernel = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma_samples) ** 2)
             v = np.convolve(v, kernel, "same") / np.convolve(np.ones(n), kernel, "same")
@@ -356,10 +356,13 @@ def _number(doc: dict, name: str) -> float:
 
 
 def _array(doc: dict, name: str) -> np.ndarray:
+    """A numeric sample array; ``null`` entries become NaN (counted later as non-finite)."""
     value = doc[name]
     if not isinstance(value, list):
         raise _Rejected(f"wrong_type:{name}")
     array = np.array(value)
+    if array.dtype.kind == "O" and all(v is None or _is_number(v) for v in value):
+        array = np.array(value, dtype=np.float64)
     if array.ndim != 1 or (array.size and array.dtype.kind not in "iuf"):
         raise _Rejected(f"wrong_type:{name}")
     return array.astype(np.float64)
@@ -421,19 +424,41 @@ def _decompressed(file: BinaryIO):
 
 
 class _Prepend:
-    """A reader that returns ``head`` first, then the rest of ``raw``."""
+    """A reader that returns ``head`` first, then the rest of ``raw``.
+
+    Non-standard ``NaN``, ``Infinity`` and ``-Infinity`` tokens (Python's json module
+    writes them) are handed to the parser as ``null``, which the validation counts as
+    a non-finite sample. A few bytes are held back at each chunk's end so that a
+    token split between chunks is still replaced.
+    """
+
+    _HOLD = len(b"-Infinity")
 
     def __init__(self, head: bytes, raw: BinaryIO):
-        self.head = head
+        self.pending = head
         self.raw = raw
 
     def read(self, size: int = -1) -> bytes:
         if size == 0:  # ijson probes with read(0) to tell bytes from text
             return b""
-        if self.head:
-            data, self.head = self.head, b""
-            return data
-        return self.raw.read(size if size and size > 0 else _READ_CHUNK)
+        while True:
+            more = self.raw.read(size if size and size > 0 else _READ_CHUNK)
+            data = self.pending + more
+            if not more:
+                self.pending = b""
+                return _nonfinite_to_null(data)
+            cut = max(len(data) - self._HOLD, 0)
+            self.pending = data[cut:]
+            if cut:
+                return _nonfinite_to_null(data[:cut])
+
+
+def _nonfinite_to_null(data: bytes) -> bytes:
+    if b"N" not in data and b"I" not in data:
+        return data
+    return (
+        data.replace(b"-Infinity", b"null").replace(b"Infinity", b"null").replace(b"NaN", b"null")
+    )
 
 
 class _TrajectoryTable:

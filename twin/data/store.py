@@ -224,10 +224,7 @@ class TrajectoryStore:
             for i, (lo, hi) in enumerate(self._row_group_spans(road))
             if hi >= t_min and lo <= t_max
         ]
-        if groups:
-            table = file.read_row_groups(groups)
-        else:
-            table = SAMPLE_SCHEMA.empty_table()
+        table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
         columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
         keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
         columns = {name: col[keep] for name, col in columns.items()}

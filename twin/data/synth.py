@@ -227,6 +227,9 @@ class _Simulation:
         self.lane_changes = 0
         self.collisions = 0
         self.pending = np.zeros(4, dtype=int)
+        self.waiting: list[_Vehicles | None] = [
+            None
+        ] * 4  # drawn arrival per lane, waiting for a gap
         self.next_arrival = np.full(4, np.inf)
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
@@ -287,28 +290,23 @@ class _Simulation:
     def populate(self, t0: float) -> None:
         """Fill the road with traffic at each lane's demand, at free-flow spacing."""
         self.t = t0
-        lanes, xs = [], []
+        lanes = []
         for k, lane in enumerate(i24.LANES):
             q = self.cfg.flow[k] / HOUR
             if q <= 0:
                 continue
-            spacing = 30.0 / q
-            x = np.arange(self.x_in, self.x_out, spacing) + self.rng.uniform(0, spacing)
-            x = x[x < self.x_out - 25]
-            lanes.append(np.full(len(x), lane))
-            xs.append(x)
+            spacing = 30.0 / q  # [m] at 30 m/s
+            n = math.ceil((self.x_out - self.x_in) / spacing)
+            new = self._new_vehicles(np.full(n, lane), np.zeros(n), np.full(n, 30.0))
+            # Rear to rear: the demand's spacing, but never closer than 30 m behind a vehicle.
+            step = np.maximum(spacing, new.length[:-1] + 30.0)
+            new.x = self.x_in + self.rng.uniform(0, spacing) + np.r_[0.0, np.cumsum(step)]
+            new.keep(new.x < self.x_out - 25.0)
+            lanes.append(new)
             self.next_arrival[k] = t0 + self._headway(q)
-        lanes, xs = np.concatenate(lanes), np.concatenate(xs)
-        new = self._new_vehicles(lanes, xs, np.full(len(xs), 30.0))
-        # Keep a safe spacing behind long vehicles: shift lanes so nobody overlaps.
-        order = np.lexsort((new.x, new.lane))
-        new.keep(order)
-        for lane in i24.LANES:
-            rows = np.flatnonzero(new.lane == lane)
-            for prev, cur in zip(rows[:-1], rows[1:], strict=True):
-                new.x[cur] = max(new.x[cur], new.x[prev] + new.length[prev] + 30.0)
-        new.keep(new.x < self.x_out)
-        self.vehicles = new
+        self.vehicles = lanes[0]
+        for new in lanes[1:]:
+            self.vehicles.extend(new)
 
     def _headway(self, q: float) -> float:
         """[s] time to the next arrival: shifted exponential with a 1 s minimum."""
@@ -316,6 +314,11 @@ class _Simulation:
         return 1.0 + self.rng.exponential(max(mean - 1.0, 0.05))
 
     def _insert(self) -> None:
+        """Let waiting arrivals enter each lane where the gap behind its last vehicle allows.
+
+        An arrival keeps its drawn class and size while it waits, so long vehicles,
+        which need longer gaps, are not under-represented.
+        """
         veh = self.vehicles
         for k, lane in enumerate(i24.LANES):
             q = self.cfg.flow[k] / HOUR
@@ -327,22 +330,26 @@ class _Simulation:
             in_lane = (veh.lane == lane) | (veh.lane_from == lane)
             if in_lane.any():
                 last = np.flatnonzero(in_lane)[np.argmin(veh.x[in_lane])]
-                gap = veh.x[last] - self.x_in - 6.0
-                v_last = veh.v[last]
+                gap, v_last = veh.x[last] - self.x_in, veh.v[last]
             else:
                 gap, v_last = np.inf, 30.0
-            v_in = min(v_last, 30.0)
-            if gap < MIN_GAP + v_in * 1.2:
+            if self.waiting[k] is None:
+                self.waiting[k] = self._new_vehicles(
+                    np.array([lane]), np.array([self.x_in]), np.array([30.0])
+                )
+            new = self.waiting[k]
+            v_in = min(v_last, new.v0[0])
+            if gap < new.length[0] + MIN_GAP + v_in * new.T[0]:
                 continue
-            new = self._new_vehicles(np.array([lane]), np.array([self.x_in]), np.array([v_in]))
-            if gap < MIN_GAP + v_in * new.T[0] + new.length[0]:
-                continue  # this vid stays unused: vids need not be contiguous
+            new.v[:] = v_in
+            new.next_decision[:] = self.t + self.rng.uniform(0, self.cfg.decision_interval)
+            self.waiting[k] = None
             self.pending[k] -= 1
             veh.extend(new)
 
     # -- one step ---------------------------------------------------------------------
     def _entries(self):
-        """Lane occupancy: every vehicle in its lane, plus changing vehicles in their origin lane."""
+        """Lane occupancy: each vehicle in its lane, and a changing vehicle in its origin lane."""
         veh = self.vehicles
         n = len(veh)
         changing = np.flatnonzero(veh.lane_from != veh.lane)

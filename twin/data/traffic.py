@@ -25,7 +25,7 @@ from twin.data.store import TrajectoryStore
 from twin.errors import NoVehicleNearError
 from twin.timeutil import format_local
 
-_EPS = 1e-9  # [s] tolerance on validity interval ends
+_EPS = 1e-6  # [s] tolerance on validity ends; unix times near 1.7e9 s resolve 2.4e-7 s
 
 
 @dataclass(frozen=True)
@@ -164,7 +164,7 @@ class EmpiricalTraffic:
             raise ValueError(f"snapshot window is reversed: x_min {x_min} > x_max {x_max}")
         k = math.floor(t / self.chunk)
         chunk = self._chunk(road, k)
-        j = min(int((t - chunk.base) / self.grid_dt), self.n_frames - 1)
+        j = min(math.floor((t - chunk.base) / self.grid_dt + 1e-6), self.n_frames - 1)
         s = t - chunk.base - j * self.grid_dt
         a, b = chunk.offsets[j], chunk.offsets[j + 1]
         xs = chunk.x0[a:b]
@@ -283,7 +283,7 @@ class EmpiricalTraffic:
         n = len(s["t"])
         new_run = np.r_[True, s["tid"][1:] != s["tid"][:-1]] if n else np.zeros(0, bool)
         starts = np.flatnonzero(new_run)
-        ends = np.r_[starts[1:], n].astype(np.int64)
+        ends = np.append(starts[1:], n).astype(np.int64) if n else starts
         t_first, t_last = s["t"][starts], s["t"][ends - 1]
         j_start = np.clip(np.floor((t_first - base) / dt), 0, n_frames - 1).astype(np.int64)
         j_end = np.clip(np.floor((t_last - base) / dt), -1, n_frames - 1).astype(np.int64)

@@ -1,0 +1,83 @@
+"""Shared fixtures: hand-built I-24 documents and small synthetic stores."""
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twin.data import i24
+from twin.data.ingest import ingest
+from twin.data.store import TrajectoryStore
+from twin.data.synth import PRESET_A, PRESET_B, SCENARIO_TIME, synthesize, write_i24_json
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def make_doc(
+    oid="6386d89efb3ff533c12d0001",
+    *,
+    direction=-1,
+    mm=61.5,
+    y_ft=18.0,
+    speed=30.0,
+    t0=SCENARIO_TIME,
+    n=50,
+    rate=25.0,
+    vehicle_class=0,
+    length_ft=15.0,
+    width_ft=6.0,
+    height_ft=5.0,
+):
+    """A valid I-24 MOTION document: constant speed [m/s] from mile marker ``mm``."""
+    t = t0 + np.arange(n) / rate
+    x_ft = mm * 5280.0 + direction * (speed / i24.FT) * (t - t0)
+    return {
+        "_id": {"$oid": oid},
+        "timestamp": t.tolist(),
+        "x_position": x_ft.tolist(),
+        "y_position": np.full(n, y_ft).tolist(),
+        "first_timestamp": float(t[0]),
+        "last_timestamp": float(t[-1]),
+        "starting_x": float(x_ft[0]),
+        "ending_x": float(x_ft[-1]),
+        "length": length_ft,
+        "width": width_ft,
+        "height": height_ft,
+        "coarse_vehicle_class": vehicle_class,
+        "fine_vehicle_class": vehicle_class,
+        "direction": direction,
+        "merged_ids": [],
+        "flags": [],
+    }
+
+
+def write_day(path: Path, docs) -> Path:
+    path.write_text(json.dumps(docs))
+    return path
+
+
+@pytest.fixture
+def doc():
+    return make_doc
+
+
+@pytest.fixture(scope="session")
+def wave_config():
+    """Preset B from 4 min before to 3 min after 06:45:50: the wave crosses the segment."""
+    return replace(PRESET_B, start=SCENARIO_TIME - 240.0, minutes=7.0)
+
+
+@pytest.fixture(scope="session")
+def wave_store(tmp_path_factory, wave_config) -> TrajectoryStore:
+    folder = tmp_path_factory.mktemp("wave")
+    day = write_i24_json(synthesize(wave_config), folder / "wave.json")
+    ingest([day], folder / "store", progress=False)
+    return TrajectoryStore(folder / "store")
+
+
+@pytest.fixture(scope="session")
+def light_result():
+    """Preset A, two minutes around 06:45:50."""
+    return synthesize(replace(PRESET_A, start=SCENARIO_TIME - 60.0, minutes=2.0))

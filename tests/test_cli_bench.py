@@ -1,0 +1,35 @@
+import json
+
+from twin.cli import main
+
+
+def test_bench_query_prints_one_json_line(wave_store, capsys):
+    assert main(["bench", "query", "--data", str(wave_store.path), "--repeats", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["bench"] == "query" and line["snapshot_median_us"] > 0
+    assert line["vehicles_in_window"] > 20
+
+
+def test_synth_command_writes_a_day(tmp_path, capsys):
+    out = tmp_path / "day.json"
+    assert (
+        main(
+            [
+                "data",
+                "synth",
+                "--preset",
+                "A",
+                "--out",
+                str(out),
+                "--minutes",
+                "0.5",
+                "--start",
+                "2022-11-30T06:45:50-06:00",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert out.read_bytes().startswith(b"[") and "trajectories" in capsys.readouterr().out
+    assert main(["data", "synth", "--preset", "A", "--out", str(out), "--start", "06:45"]) == 2
+    assert "ISO 8601" in capsys.readouterr().err

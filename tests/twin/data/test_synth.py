@@ -1,0 +1,113 @@
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from twin.data import i24
+from twin.data.synth import PRESET_B, SCENARIO_TIME, synthesize
+from twin.data.waves import speed_field, wave_front_speed
+
+MPH15 = 15 * 0.44704  # [m/s]
+
+
+def _lane_samples(store, lane, t0, t1):
+    s = store.samples("westbound", t0, t1)
+    rows = s["lane"] == lane
+    return {k: v[rows] for k, v in s.items()}
+
+
+def test_wave_travels_upstream_at_the_corridors_measured_speed(wave_store):
+    s = _lane_samples(wave_store, -1, SCENARIO_TIME - 240, SCENARIO_TIME + 180)
+    field = speed_field(
+        s["t"],
+        s["x"],
+        s["speed"].astype(float),
+        np.arange(SCENARIO_TIME - 240, SCENARIO_TIME + 180, 2.0),
+        np.arange(0.0, 1609.4, 50.0),
+    )
+    fit = wave_front_speed(field, MPH15, SCENARIO_TIME - 240)
+    assert -5.5 <= fit.speed <= -4.5  # m/s: 10 to 12 mph upstream (I24_DATA.md)
+    assert fit.r2 > 0.95
+    assert len(fit.x) >= 25  # seen across the whole segment
+
+
+def test_scenario_b_wave_reaches_the_hov_lane_near_700m_and_spares_lanes_3_and_4(wave_store):
+    s = wave_store.samples("westbound", SCENARIO_TIME - 5, SCENARIO_TIME + 5)
+    near = np.abs(s["x"] - 700.0) < 100.0
+    hov = near & (s["lane"] == -1)
+    assert np.median(s["speed"][hov]) < MPH15
+    for lane in (-3, -4):
+        rows = near & (s["lane"] == lane)
+        assert np.mean(s["speed"][rows]) > 20.0
+
+
+def test_vehicles_spend_tens_of_seconds_below_15_mph_in_the_wave(wave_store):
+    table = wave_store.trajectories
+    complete = table.index[
+        (table["x_first"] < -550) & (table["x_last"] > 2150) & (table["lanes_seen"] == 1)
+    ]  # whole HOV-lane trips on record
+    durations = []
+    for tid in complete:
+        tr = wave_store.trajectory(int(tid))
+        durations.append(np.sum(np.diff(tr["t"])[tr["speed"][:-1] < MPH15]))
+    durations = np.array(durations)
+    slowed = durations[durations > 0]
+    assert len(slowed) > 20
+    assert 10.0 <= np.median(slowed) <= 120.0  # corridor median is about 30 s
+
+
+def test_free_flow_in_preset_a(light_result):
+    speeds = np.concatenate([np.diff(x) / np.diff(t) for t, x, _ in light_result.tracks])
+    assert 28.0 <= np.median(speeds) <= 36.0  # 63 to 80 mph
+    assert light_result.collisions == 0
+
+
+def test_synthesis_is_deterministic_by_seed():
+    config = replace(PRESET_B, start=SCENARIO_TIME, minutes=0.5, warmup=30.0)
+    a, b = synthesize(config), synthesize(config)
+    c = synthesize(replace(config, seed=1))
+    assert np.array_equal(a.vid, b.vid)
+    for (ta, xa, ya), (tb, xb, yb) in zip(a.tracks, b.tracks, strict=True):
+        assert np.array_equal(ta, tb) and np.array_equal(xa, xb) and np.array_equal(ya, yb)
+    assert len(a.tracks) != len(c.tracks) or not np.array_equal(a.tracks[0][1], c.tracks[0][1])
+
+
+def test_the_synthetic_day_is_valid_i24_data_with_a_realistic_class_mix(wave_store):
+    ingest = wave_store.metadata["ingest"]
+    assert ingest["documents"]["rejected"] == {} and ingest["samples"]["rejected"] == {}
+    table = wave_store.trajectories
+    shares = table["vehicle_class"].value_counts(normalize=True)
+    assert 0.25 <= shares[0] <= 0.55  # sedans
+    assert shares.get(4, 0) > 0.02  # semis
+    hov = (table["lanes_seen"] & 1) > 0
+    assert not table.loc[hov, "vehicle_class"].isin([4, 5]).any()  # no heavy trucks in HOV
+    semis = table[table["vehicle_class"] == 4]
+    assert semis["length"].between(16, 25).all()
+    dt = np.diff(wave_store.trajectory(int(table.index[0]))["t"])
+    assert np.allclose(dt, 0.04, atol=1e-3)  # 25 Hz
+
+
+def test_lane_changes_are_manoeuvres_of_several_seconds(wave_store):
+    table = wave_store.trajectories
+    # Exactly two adjacent lanes seen, neither HOV: one lane change on record.
+    one_change = table.index[table["lanes_seen"].isin([0b0110, 0b1100])]
+    assert len(one_change) > 10
+    durations = []
+    for tid in one_change[:60]:
+        tr = wave_store.trajectory(int(tid))
+        lane_from, lane_to = int(tr["lane"][0]), int(tr["lane"][-1])
+        if lane_from == lane_to:
+            continue
+        at_from = np.abs(tr["y"] - i24.lane_center(lane_from)) < 0.3
+        at_to = np.abs(tr["y"] - i24.lane_center(lane_to)) < 0.3
+        left = tr["t"][np.flatnonzero(at_from)[-1]]
+        arrived = tr["t"][np.flatnonzero(at_to)[0]]
+        durations.append(arrived - left)
+    assert len(durations) > 10
+    assert np.min(durations) > 1.5  # s: no teleports
+    assert 2.0 <= np.median(durations) <= 6.0  # configured manoeuvres last 3 to 6 s
+
+
+def test_invalid_config_is_named():
+    with pytest.raises(ValueError, match="flow"):
+        replace(PRESET_B, flow=(1.0, 2.0))
