@@ -234,3 +234,24 @@ def test_cli_ingest_and_info(tmp_path, capsys):
     assert "lane -1: 1 trajectories, 50 samples  (HOV)" in out
     assert "lane -2: 1 trajectories, 50 samples" in out
     assert pytest.approx(1609.344) == i24.SEGMENT_LENGTH
+
+
+def test_leftovers_of_a_killed_ingest_are_cleaned_and_an_interrupt_leaves_nothing(
+    tmp_path, monkeypatch
+):
+    stale = tmp_path / ".store.partial-999999999"  # no such process: killed with -9
+    stale.mkdir()
+    (stale / "samples_westbound.parquet").write_bytes(b"half")
+    day = write_day(tmp_path / "day.json", [make_doc()])
+    ingest([day], tmp_path / "store", progress=False)
+    assert not stale.exists()
+    assert TrajectoryStore(tmp_path / "store").metadata["ingest"]["documents"]["kept"] == 1
+
+    def interrupt(*_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("twin.data.ingest._write_samples", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        ingest([day], tmp_path / "other", progress=False)
+    assert not (tmp_path / "other").exists()
+    assert not list(tmp_path.glob(".other.partial-*"))
