@@ -8,7 +8,6 @@ import json
 import math
 import os
 import platform
-import resource
 import subprocess
 import sys
 import tempfile
@@ -82,6 +81,7 @@ def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
             minutes = math.ceil(mb / 10.5)  # preset B writes about 10.9 MB per minute
             result = synth.synthesize(replace(synth.PRESET_B, minutes=minutes))
             files[label] = synth.write_i24_json(result, tmp / f"{label}.json")
+            del result
         figures = {}
         for label, path in files.items():
             seconds, peaks = [], []
@@ -100,13 +100,19 @@ def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
 
 
 def _ingest_in_child(path: Path, out: Path) -> tuple[float, float]:
+    """Ingest in a fresh process; return its seconds and peak resident memory [MB].
+
+    The peak is the child's VmHWM: ru_maxrss would include the parent's peak, which
+    a forked child inherits on Linux.
+    """
     code = (
-        "import sys, time, resource, json\n"
+        "import sys, time, json\n"
         "from twin.data.ingest import ingest\n"
         "start = time.perf_counter()\n"
         "ingest([sys.argv[1]], sys.argv[2], progress=False)\n"
-        "print(json.dumps([time.perf_counter() - start,"
-        " resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024]))\n"
+        "elapsed = time.perf_counter() - start\n"
+        "status = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
+        "print(json.dumps([elapsed, int(status) / 1024]))\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", code, str(path), str(out)],
@@ -136,5 +142,4 @@ def context() -> dict:
         "commit": commit,
         "python": platform.python_version(),
         "cpus": len(os.sched_getaffinity(0)),
-        "maxrss_self_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
     }
