@@ -13,7 +13,7 @@ import numpy as np
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.data.store import TrajectoryStore
-from twin.timeutil import CST
+from twin.timeutil import CST, format_local
 
 SPEED_RANGE = (0.0, 35.0)  # [m/s] colour scale
 MAX_POINTS_PER_LANE = 400_000
@@ -40,8 +40,9 @@ def time_space_plot(
     if len(samples["t"]) == 0:
         t_min, t_max = store.time_range(road)
         raise ValueError(
-            f"no {road.value} samples between unix {start:.0f} and {end:.0f}; "
-            f"the store covers {t_min:.0f} to {t_max:.0f}"
+            f"no {road.value} samples between {format_local(start)} and {format_local(end)} CST "
+            f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
+            f"{format_local(t_max)} CST on this road"
         )
     fig, axes = plt.subplots(
         len(i24.LANES), 1, figsize=(12, 11), sharex=True, constrained_layout=True
