@@ -388,7 +388,7 @@ class _Simulation:
 
         acc += cfg.accel_noise * self.rng.standard_normal(len(veh))
         acc = np.clip(acc, -MAX_DECEL, veh.a * 1.5)
-        self._change_lanes(owner, lane, key, gap, acc)
+        self._change_lanes(owner, lane, key, acc)
 
         v_new = veh.v + acc * dt
         stopping = v_new < 0
@@ -403,7 +403,7 @@ class _Simulation:
         veh.keep(veh.x < self.x_out)
         self._insert()
 
-    def _change_lanes(self, owner, lane, key, gap, acc) -> None:
+    def _change_lanes(self, owner, lane, key, acc) -> None:
         """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres."""
         cfg, veh = self.cfg, self.vehicles
         due = np.flatnonzero(
