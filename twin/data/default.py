@@ -9,6 +9,7 @@ like real data. It is built once (about a minute) and cached under
 
 import hashlib
 import inspect
+from dataclasses import replace
 from pathlib import Path
 
 from twin.data import ingest as ingest_module
@@ -47,7 +48,7 @@ def build_default_store(out: Path, *, seed: int = DEFAULT_SEED, progress: bool =
     for name, preset in sorted(synth.PRESETS.items()):
         if progress:
             print(f"building the default data: synthetic preset {name} ({preset.road.value})")
-        config = synth.SynthConfig(**{**vars(preset), "seed": seed})
+        config = replace(preset, seed=seed)
         result = synth.synthesize(config, progress=progress)
         days.append(
             synth.write_i24_json(result, work / f"synthetic_{name}.json", progress=progress)

@@ -189,7 +189,7 @@ def ingest(
                 for doc in _documents(path, bar.update):
                     _ingest_document(doc, source_index, options, report, seen, spill, trajectories)
         spill.flush()
-        lane_counts = _write_samples(writer, spill, trajectories.lanes_seen)
+        lane_counts = _write_samples(writer, spill)
         writer.write_table("trajectories.parquet", trajectories.to_arrow())
         writer.write_metadata(_metadata(paths, options, report, trajectories, lane_counts))
     return report
@@ -466,10 +466,9 @@ class _TrajectoryTable:
 
     def __init__(self):
         self.columns = {name: [] for name in TRAJECTORY_SCHEMA.names}
-        self.lanes_seen: list[int] = []
 
     def add(self, traj: _Trajectory, source_index: int) -> int:
-        tid = len(self.lanes_seen)
+        tid = len(self.columns["tid"])
         mask = 0
         for lane in np.unique(traj.lane):
             mask |= 1 << (-int(lane) - 1)
@@ -492,7 +491,6 @@ class _TrajectoryTable:
         }
         for name, value in row.items():
             self.columns[name].append(value)
-        self.lanes_seen.append(mask)
         return tid
 
     def to_arrow(self) -> pa.Table:
@@ -564,7 +562,7 @@ class _Spill:
         return pa.concat_tables(tables)
 
 
-def _write_samples(writer: StoreWriter, spill: _Spill, lanes_seen) -> dict:
+def _write_samples(writer: StoreWriter, spill: _Spill) -> dict:
     """Sort each spilled bucket by (tid, t) and write it as one row group; return lane counts."""
     lane_counts = {}
     for road in Road:

@@ -223,13 +223,13 @@ class _Simulation:
         self.classes = vehicle_classes()
         self.x_in = config.x_record[0] - config.upstream
         self.x_out = config.x_record[1] + config.downstream
+        self.t = config.start - config.warmup  # [s] unix, simulation clock
         self.next_vid = 0
         self.lane_changes = 0
         self.collisions = 0
         self.pending = np.zeros(4, dtype=int)
-        self.waiting: list[_Vehicles | None] = [
-            None
-        ] * 4  # drawn arrival per lane, waiting for a gap
+        # The arrival drawn for each lane, waiting for a gap to enter.
+        self.waiting: list[_Vehicles | None] = [None] * 4
         self.next_arrival = np.full(4, np.inf)
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
@@ -250,9 +250,10 @@ class _Simulation:
     def _new_vehicles(self, lanes: np.ndarray, x: np.ndarray, v: np.ndarray) -> _Vehicles:
         n = len(lanes)
         rng = self.rng
-        cls = np.array(
-            [rng.choice(7, p=self._class_weights(int(lane))) for lane in lanes], dtype=np.int8
-        )
+        cls = np.empty(n, dtype=np.int8)
+        for lane in np.unique(lanes):
+            rows = lanes == lane
+            cls[rows] = rng.choice(7, size=int(rows.sum()), p=self._class_weights(int(lane)))
         dims = self.classes.sample_dimensions(cls, rng)
         c = self.classes
         v0 = c.column("desired_speed_mps")[cls] + c.column("desired_speed_sd_mps")[cls] * np.clip(
@@ -272,7 +273,7 @@ class _Simulation:
             lane_from=lanes.copy(),
             change_start=np.zeros(n),
             change_duration=np.ones(n),
-            next_decision=rng.uniform(0, self.cfg.decision_interval, n) + getattr(self, "t", 0.0),
+            next_decision=self.t + rng.uniform(0, self.cfg.decision_interval, n),
             length=dims[:, 0],
             width=dims[:, 1],
             height=dims[:, 2],
@@ -287,9 +288,8 @@ class _Simulation:
             forced_decel=np.zeros(n),
         )
 
-    def populate(self, t0: float) -> None:
+    def populate(self) -> None:
         """Fill the road with traffic at each lane's demand, at free-flow spacing."""
-        self.t = t0
         lanes = []
         for k, lane in enumerate(i24.LANES):
             q = self.cfg.flow[k] / HOUR
@@ -303,7 +303,7 @@ class _Simulation:
             new.x = self.x_in + self.rng.uniform(0, spacing) + np.r_[0.0, np.cumsum(step)]
             new.keep(new.x < self.x_out - 25.0)
             lanes.append(new)
-            self.next_arrival[k] = t0 + self._headway(q)
+            self.next_arrival[k] = self.t + self._headway(q)
         self.vehicles = lanes[0]
         for new in lanes[1:]:
             self.vehicles.extend(new)
@@ -482,7 +482,7 @@ def synthesize(config: SynthConfig, *, progress: bool = False) -> SynthResult:
     rng = np.random.default_rng(config.seed)
     sim = _Simulation(config, rng)
     t0 = config.start - config.warmup
-    sim.populate(t0)
+    sim.populate()
     n_steps = math.ceil((config.end - t0) / config.dt) + 1
     events = sorted(config.slowdowns, key=lambda s: s.t)
     lo, hi = config.x_record
