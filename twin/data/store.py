@@ -25,6 +25,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from twin.atomic import AtomicFolder
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.errors import StoreError
@@ -79,49 +80,20 @@ def is_store(path: Path) -> bool:
 
 def check_replaceable(out: Path) -> None:
     """Raise StoreError when ``out`` exists and is not a store: user data is never overwritten."""
-    out = Path(out)
-    if out.exists() and not is_store(out):
-        raise StoreError(
-            f"{out} exists and is not an i24-twin store; refusing to overwrite it "
-            "(choose another --out or remove it yourself)"
-        )
+    StoreWriter(out).check_replaceable()
 
 
-class StoreWriter:
-    """Writes a store under a temporary folder beside ``out`` and renames it into place.
-
-    On an exception (or KeyboardInterrupt) inside the ``with`` block the temporary
-    folder is removed and ``out`` is left as it was. Leftovers of a killed process are
-    removed by the next writer of the same store.
-    """
+class StoreWriter(AtomicFolder):
+    """Writes a store under a temporary folder beside ``out`` and renames it into place
+    (see :class:`twin.atomic.AtomicFolder`)."""
 
     def __init__(self, out: Path):
-        self.out = Path(out)
-        self.tmp = self.out.parent / f".{self.out.name}.partial-{os.getpid()}"
-
-    def __enter__(self) -> "StoreWriter":
-        check_replaceable(self.out)
-        self.out.parent.mkdir(parents=True, exist_ok=True)
-        for stale in self.out.parent.glob(f".{self.out.name}.partial-*"):
-            if not _pid_alive(stale.name.rsplit("-", 1)[-1]):
-                shutil.rmtree(stale, ignore_errors=True)
-        shutil.rmtree(self.tmp, ignore_errors=True)
-        self.tmp.mkdir()
-        return self
+        super().__init__(out, recognise=is_store, kind="store", error=StoreError)
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            return
-        shutil.rmtree(self.tmp / "spill", ignore_errors=True)
-        check_replaceable(self.out)
-        if self.out.exists():
-            old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
-            os.rename(self.out, old)
-            os.rename(self.tmp, self.out)
-            shutil.rmtree(old)
-        else:
-            os.rename(self.tmp, self.out)
+        if exc_type is None:
+            shutil.rmtree(self.tmp / "spill", ignore_errors=True)
+        super().__exit__(exc_type, exc, tb)
 
     @contextmanager
     def parquet(self, name: str, schema: pa.Schema):
@@ -135,16 +107,6 @@ class StoreWriter:
     def write_metadata(self, metadata: dict) -> None:
         content = {"format": FORMAT, "version": FORMAT_VERSION, **metadata}
         (self.tmp / METADATA).write_text(json.dumps(content, indent=2, sort_keys=True) + "\n")
-
-
-def _pid_alive(pid: str) -> bool:
-    try:
-        os.kill(int(pid), 0)
-    except (ValueError, ProcessLookupError):
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 class TrajectoryStore:

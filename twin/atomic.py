@@ -1,0 +1,78 @@
+"""Folders written whole or not at all: build under a temporary name, then rename.
+
+Used by everything the twin writes as a folder (trajectory stores, maps, runs), so
+that an interrupt or an error never leaves a half-written folder under the real name
+and never destroys the previous one.
+"""
+
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+from twin.errors import TwinError
+
+
+class AtomicFolder:
+    """Context manager: write into ``self.tmp``; on success it replaces ``out``.
+
+    ``out`` may be replaced only when it does not exist or ``recognise(out)`` says it
+    is a folder of the same kind; anything else raises ``error`` (user data is never
+    overwritten). On an exception (or KeyboardInterrupt) inside the ``with`` block the
+    temporary folder is removed and ``out`` is left as it was. Leftovers of a killed
+    process are removed by the next writer of the same folder.
+    """
+
+    def __init__(
+        self,
+        out: Path,
+        *,
+        recognise: Callable[[Path], bool],
+        kind: str,
+        error: type[TwinError] = TwinError,
+    ):
+        self.out = Path(out)
+        self.tmp = self.out.parent / f".{self.out.name}.partial-{os.getpid()}"
+        self._recognise = recognise
+        self._kind = kind
+        self._error = error
+
+    def check_replaceable(self) -> None:
+        if self.out.exists() and not self._recognise(self.out):
+            raise self._error(
+                f"{self.out} exists and is not an i24-twin {self._kind}; refusing to overwrite "
+                "it (choose another --out or remove it yourself)"
+            )
+
+    def __enter__(self):
+        self.check_replaceable()
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        for stale in self.out.parent.glob(f".{self.out.name}.partial-*"):
+            if not _pid_alive(stale.name.rsplit("-", 1)[-1]):
+                shutil.rmtree(stale, ignore_errors=True)
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        self.tmp.mkdir()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            return
+        self.check_replaceable()
+        if self.out.exists():
+            old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
+            os.rename(self.out, old)
+            os.rename(self.tmp, self.out)
+            shutil.rmtree(old)
+        else:
+            os.rename(self.tmp, self.out)
+
+
+def _pid_alive(pid: str) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ValueError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True
+    return True
