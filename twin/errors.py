@@ -15,3 +15,7 @@ class StoreError(TwinError):
 
 class NoVehicleNearError(TwinError):
     """No recorded vehicle lies within the tolerance of a requested lane, position and time."""
+
+
+class MapError(TwinError):
+    """A map source file or a built map is missing, malformed or inconsistent."""

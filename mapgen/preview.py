@@ -1,0 +1,123 @@
+"""A picture of a built map for a person to check: overview, close top view, driver's eye.
+
+Rendered headless with pybullet's CPU renderer (TinyRenderer) from the same OBJ files
+the cameras use, so what the picture shows is what the twin's cameras will see.
+"""
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pybullet as p
+
+from mapgen.build import MapBundle
+from twin.data.i24 import MILE, SEGMENT_START_MM, Road, lane_center
+from twin.physics.map_bodies import load_map_bodies
+
+WIDTH = 1600  # [px] of the picture
+SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
+SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)
+LIGHT = {
+    "lightDirection": [0.25, -0.35, 1.0],  # sun high in the south: the paper's "high noon"
+    "lightColor": [1.0, 1.0, 1.0],
+    "lightAmbientCoeff": 0.55,
+    "lightDiffuseCoeff": 0.55,
+    "lightSpecularCoeff": 0.05,
+    "shadow": 0,
+}
+
+
+def render_preview(bundle: MapBundle, out: Path) -> Path:
+    """Render the preview of ``bundle`` to the PNG ``out`` (written whole, then renamed).
+
+    Returns:
+        ``out``.
+    """
+    out = Path(out)
+    client = p.connect(p.DIRECT)
+    try:
+        load_map_bodies(client, bundle, collision=False)
+        road = bundle.road
+        s0, s1 = road.station_range
+        overpass = bundle.description["objects"]["overpass"]["station_m"]
+        half_width = road.outer_edge + 60.0
+        overview = _top_view(client, road, (s0, s1), half_width, WIDTH)
+        close = _top_view(client, road, (overpass - 110.0, overpass + 110.0), 55.0, WIDTH)
+        eye = _drivers_eye(client, road, overpass - 140.0, WIDTH, WIDTH * 9 // 16)
+    finally:
+        p.disconnect(client)
+    panels = [
+        _titled(overview, f"Overview: MM {_mm(s0):.2f} to {_mm(s1):.2f}, westbound on top"),
+        _titled(close, "Top view at the Old Franklin Rd overpass (MM 60.82)"),
+        _titled(eye, "Driver's eye: eastbound lane -2, 140 m before the overpass"),
+    ]
+    picture = cv2.cvtColor(np.concatenate(panels, axis=0), cv2.COLOR_RGB2BGR)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}.png")
+    try:
+        if not cv2.imwrite(str(tmp), picture):
+            raise OSError(f"could not write {out}")
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return out
+
+
+def _mm(station: float) -> float:
+    return SEGMENT_START_MM + station / MILE
+
+
+def _top_view(client, road, stations, half_width, width) -> np.ndarray:
+    """View from straight above, eastbound travel to the right and westbound on top.
+
+    TinyRenderer takes its near and far planes from a perspective matrix, so the view
+    is a narrow perspective from high up (20 km), which is orthographic within 0.1 %.
+    """
+    length = stations[1] - stations[0]
+    height = max(2, round(width * 2.0 * half_width / length))
+    center = 0.5 * (stations[0] + stations[1]) * road.direction_vector
+    altitude = 20_000.0  # [m]
+    eye = [center[0], center[1], altitude]
+    up = -road.right_vector
+    view = p.computeViewMatrix(eye, [center[0], center[1], 0.0], [up[0], up[1], 0.0])
+    fov = np.degrees(2.0 * np.arctan(half_width / altitude))
+    projection = p.computeProjectionMatrixFOV(fov, length / (2.0 * half_width), 19_000.0, 21_000.0)
+    return _render(client, view, projection, width, height)
+
+
+def _drivers_eye(client, road, station, width, height) -> np.ndarray:
+    """Perspective view from 1.4 m above the centre of eastbound lane -2."""
+    x = station
+    position, _, _ = road.to_world(Road.EASTBOUND, [x], [float(lane_center(-2))])
+    eye = position[0] + [0.0, 0.0, 1.4]
+    ahead, _, _ = road.to_world(Road.EASTBOUND, [x + 60.0], [float(lane_center(-2))])
+    target = ahead[0] + [0.0, 0.0, 0.4]
+    view = p.computeViewMatrix(eye.tolist(), target.tolist(), [0.0, 0.0, 1.0])
+    projection = p.computeProjectionMatrixFOV(60.0, width / height, 0.3, 2500.0)
+    return _render(client, view, projection, width, height, horizon=True)
+
+
+def _render(client, view, projection, width, height, horizon=False) -> np.ndarray:
+    _, _, rgba, _, seg = p.getCameraImage(
+        width,
+        height,
+        view,
+        projection,
+        renderer=p.ER_TINY_RENDERER,
+        physicsClientId=client,
+        **LIGHT,
+    )
+    rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))[:, :, :3].copy()
+    sky = np.reshape(np.asarray(seg), (height, width)) < 0
+    rows = np.linspace(0.0, 1.0, height)[:, None] if horizon else np.full((height, 1), 0.5)
+    gradient = SKY_TOP + (SKY_HORIZON - SKY_TOP) * np.minimum(rows * 2.0, 1.0)
+    background = np.broadcast_to(gradient[:, None, :], (height, width, 3)).astype(np.uint8)
+    rgb[sky] = background[sky]
+    return rgb
+
+
+def _titled(image: np.ndarray, title: str) -> np.ndarray:
+    band = np.full((34, image.shape[1], 3), 245, dtype=np.uint8)
+    cv2.putText(band, title, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (20, 20, 20), 1, cv2.LINE_AA)
+    return np.concatenate([band, image], axis=0)

@@ -1,0 +1,1 @@
+"""The physics world: the only place that creates and moves pybullet bodies."""
