@@ -105,15 +105,16 @@ class RoadModel:
         at_origin = np.flatnonzero(np.isclose(sources.post_mm, SEGMENT_START_MM))
         if at_origin.size != 1:
             raise MapError(f"no mile-marker post at MM {SEGMENT_START_MM}")
-        origin_latlon = (
-            float(sources.post_lat[at_origin[0]]),
-            float(sources.post_lon[at_origin[0]]),
-        )
+        have = np.round(sources.profile_mm / PROFILE_STEP_MI).astype(np.int64)
+        k0 = round(SEGMENT_START_MM / PROFILE_STEP_MI)
+        if k0 not in have:
+            raise MapError(f"the elevation profile has no row at MM {SEGMENT_START_MM}")
+        z0 = float(sources.profile_elevation[np.searchsorted(have, k0)])
+        origin = (float(sources.post_lat[at_origin[0]]), float(sources.post_lon[at_origin[0]]), z0)
+        # Posts at the road's height at the origin, where from_geodetic puts points by
+        # default, so that both measure distances at the same height.
         enu = geodesy.to_enu(
-            sources.post_lat,
-            sources.post_lon,
-            np.zeros(sources.post_mm.size),
-            (*origin_latlon, 0.0),
+            sources.post_lat, sources.post_lon, np.full(sources.post_mm.size, z0), origin
         )[:, :2]
         lo, hi = params.alignment.fit_mm
         fit = (sources.post_mm >= lo - 1e-9) & (sources.post_mm <= hi + 1e-9)
@@ -129,27 +130,22 @@ class RoadModel:
         bearing = math.degrees(math.atan2(d[0], d[1])) % 360.0
 
         step = PROFILE_STEP_MI * MILE
-        k0 = round(SEGMENT_START_MM / PROFILE_STEP_MI)
         n_margin = math.ceil(params.extent.margin / step - 1e-9)
         n_segment = round(SEGMENT_LENGTH / step)
         wanted = np.arange(k0 - n_margin, k0 + n_segment + n_margin + 1)
-        have = np.round(sources.profile_mm / PROFILE_STEP_MI).astype(np.int64)
-        index = np.searchsorted(have, wanted)
         if wanted[0] < have[0] or wanted[-1] > have[-1]:
             raise MapError(
                 f"the elevation profile covers MM {have[0] / 100:.2f}..{have[-1] / 100:.2f}, "
                 f"the map needs {wanted[0] / 100:.2f}..{wanted[-1] / 100:.2f}"
             )
-        elevation = sources.profile_elevation[index]
-        z0 = float(sources.profile_elevation[np.searchsorted(have, k0)])
-        d_unit = np.array([math.sin(math.radians(bearing)), math.cos(math.radians(bearing))])
+        elevation = sources.profile_elevation[np.searchsorted(have, wanted)]
         return cls(
-            origin=(*origin_latlon, z0),
+            origin=origin,
             bearing=bearing,
             profile_s=(wanted - k0) * step,
             profile_z=elevation - z0,
             post_mm=sources.post_mm.copy(),
-            post_along=enu @ d_unit,
+            post_along=enu @ d,
             outer_edge=(N_LANES + 1) * LANE_WIDTH + params.cross_section.outer_shoulder,
         )
 

@@ -81,3 +81,11 @@ def wave_store(tmp_path_factory, wave_config) -> TrajectoryStore:
 def light_result():
     """Preset A, two minutes around 06:45:50."""
     return synthesize(replace(PRESET_A, start=SCENARIO_TIME - 60.0, minutes=2.0))
+
+
+@pytest.fixture(scope="session")
+def built_map(tmp_path_factory):
+    """The map with the default seed, built once for the session."""
+    from mapgen.build import build_map
+
+    return build_map(tmp_path_factory.mktemp("map") / "map", seed=0)

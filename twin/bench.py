@@ -67,6 +67,28 @@ def synth_bench(*, minutes: float = 10.0, repeats: int = 3) -> dict:
     }
 
 
+def map_bench(*, repeats: int = 5) -> dict:
+    """Time of a full map build (sources to files on disk, no cache) and its size."""
+    from mapgen.build import build_map
+
+    seconds = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(repeats):
+            start = time.perf_counter()
+            bundle = build_map(Path(tmp) / "map", seed=seed)
+            seconds.append(time.perf_counter() - start)
+        glb_mb = (bundle.folder / "scene.glb").stat().st_size / 1e6
+    return {
+        "median_s": round(float(np.median(seconds)), 3),
+        "target_s": 10,
+        "triangles_visual": bundle.description["triangles"]["visual"],
+        "triangles_collision": bundle.description["triangles"]["collision"],
+        "triangles_per_part": {part.name: part.triangles for part in bundle.parts},
+        "glb_mb": round(glb_mb, 2),
+        "repeats": repeats,
+    }
+
+
 def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
     """Ingest throughput and peak memory on a synthetic day of at least ``size_mb``.
 

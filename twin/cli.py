@@ -84,6 +84,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("timespace.png"))
     p.set_defaults(handler=_plot)
 
+    maps = commands.add_parser("map", help="the road map: build it, look at it")
+    map_commands = maps.add_subparsers(title="map commands")
+    p = map_commands.add_parser(
+        "build", help="build the map (GLB, OBJ, road.json); default: into the cache"
+    )
+    p.add_argument(
+        "--out", type=Path, default=None, help="map folder to write (default: the cache)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="terrain seed")
+    p.set_defaults(handler=_map_build)
+    p = map_commands.add_parser("preview", help="render a top view and a driver's-eye view")
+    p.add_argument("--out", type=Path, default=Path("map.png"))
+    p.add_argument("--map", type=Path, default=None, help="map folder (default: the cached map)")
+    p.add_argument("--seed", type=int, default=0, help="terrain seed of the cached map")
+    p.set_defaults(handler=_map_preview)
+
     bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
     bench_commands = bench.add_subparsers(title="benchmarks")
     p = bench_commands.add_parser("query", help="snapshot latency of EmpiricalTraffic")
@@ -94,6 +110,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--minutes", type=float, default=10.0)
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_synth)
+    p = bench_commands.add_parser("map", help="full map build time and triangle counts")
+    p.add_argument("--repeats", type=int, default=5)
+    p.set_defaults(handler=_bench_map)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -160,6 +179,31 @@ def _plot(args) -> int:
     return 0
 
 
+def _map(folder: Path | None, seed: int):
+    from mapgen.build import default_map, load_map
+
+    return load_map(folder) if folder is not None else default_map(seed, progress=True)
+
+
+def _map_build(args) -> int:
+    from mapgen.build import build_map, default_map
+
+    bundle = build_map(args.out, seed=args.seed) if args.out else default_map(args.seed)
+    triangles = bundle.description["triangles"]
+    print(
+        f"map {bundle.key} (seed {args.seed}) in {bundle.folder}: "
+        f"{triangles['visual']:,} visual and {triangles['collision']:,} collision triangles"
+    )
+    return 0
+
+
+def _map_preview(args) -> int:
+    from mapgen.preview import render_preview
+
+    print(f"wrote {render_preview(_map(args.map, args.seed), args.out)}")
+    return 0
+
+
 def _emit(name: str, figures: dict) -> int:
     from twin.bench import context
 
@@ -177,6 +221,12 @@ def _bench_synth(args) -> int:
     from twin.bench import synth_bench
 
     return _emit("synth", synth_bench(minutes=args.minutes, repeats=args.repeats))
+
+
+def _bench_map(args) -> int:
+    from twin.bench import map_bench
+
+    return _emit("map", map_bench(repeats=args.repeats))
 
 
 def _bench_ingest(args) -> int:
