@@ -30,7 +30,7 @@ from mapgen.meshes import SceneMeshes, build_meshes
 from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
-from twin.atomic import AtomicFolder
+from twin.atomic import AtomicFolder, marked_as
 from twin.data import i24
 from twin.errors import MapError
 from twin.paths import asset, cache_dir
@@ -99,13 +99,7 @@ def map_key(seed: int = DEFAULT_SEED) -> str:
 
 def is_map(path: Path) -> bool:
     """True when ``path`` is a folder holding a map's ``road.json``."""
-    meta = Path(path) / ROAD_JSON
-    if not meta.is_file():
-        return False
-    try:
-        return json.loads(meta.read_text()).get("format") == FORMAT
-    except (OSError, ValueError):
-        return False
+    return marked_as(path, ROAD_JSON, FORMAT)
 
 
 def default_map(seed: int = DEFAULT_SEED, *, progress: bool = False) -> MapBundle:

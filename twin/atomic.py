@@ -5,6 +5,7 @@ that an interrupt or an error never leaves a half-written folder under the real 
 and never destroys the previous one.
 """
 
+import json
 import os
 import shutil
 from collections.abc import Callable
@@ -66,6 +67,17 @@ class AtomicFolder:
             shutil.rmtree(old)
         else:
             os.rename(self.tmp, self.out)
+
+
+def marked_as(folder: Path, marker: str, fmt: str) -> bool:
+    """True when ``folder`` holds the JSON file ``marker`` whose "format" is ``fmt``."""
+    path = Path(folder) / marker
+    if not path.is_file():
+        return False
+    try:
+        return json.loads(path.read_text()).get("format") == fmt
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _pid_alive(pid: str) -> bool:

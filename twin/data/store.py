@@ -25,7 +25,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.atomic import AtomicFolder
+from twin.atomic import AtomicFolder, marked_as
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.errors import StoreError
@@ -69,13 +69,7 @@ TRAJECTORY_SCHEMA = pa.schema(
 
 def is_store(path: Path) -> bool:
     """True when ``path`` is a folder holding a store's metadata file."""
-    meta = Path(path) / METADATA
-    if not meta.is_file():
-        return False
-    try:
-        return json.loads(meta.read_text()).get("format") == FORMAT
-    except (OSError, ValueError):
-        return False
+    return marked_as(path, METADATA, FORMAT)
 
 
 def check_replaceable(out: Path) -> None:
