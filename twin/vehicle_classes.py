@@ -24,6 +24,28 @@ COLUMNS = (
     "max_accel_mps2",
     "time_headway_s",
     "hov_allowed",
+    # physics (twin.physics.vehicle): sizes scale with each vehicle's recorded size
+    "mass_kg",
+    "wheelbase_ratio",  # of the body length
+    "track_ratio",  # of the body width
+    "wheel_radius_m",
+    "cg_height_ratio",  # centre of mass above the ground, of the body height
+    "ground_clearance_m",
+    "max_power_kw",
+    "drag_coefficient",
+    "frontal_area_ratio",  # of width x height
+    "rolling_resistance",
+    "tyre_friction",
+    "cornering_stiffness_per_load",  # [1/rad] lateral force per unit load and slip angle
+    "slip_stiffness_per_load",  # longitudinal force per unit load and slip ratio
+    "suspension_hz",
+    "damping_ratio",
+    "roll_gyration_ratio",  # radius of gyration, of the body width
+    "pitch_gyration_ratio",  # of the body length
+    "yaw_gyration_ratio",  # of the body length
+    "wheel_inertia_kgm2",
+    "drive_axle",  # 0 front, 1 rear
+    "brake_front_share",
 )
 
 
@@ -64,8 +86,13 @@ def vehicle_classes() -> VehicleClassTable:
     ):
         raise ValueError(f"{path}: rows must be the I-24 classes {VEHICLE_CLASSES} in id order")
     numeric = frame[list(COLUMNS[2:])].to_numpy(dtype=float)
-    if not np.all(np.isfinite(numeric)) or np.any(numeric[:, :-1] < 0):
+    if not np.all(np.isfinite(numeric)) or np.any(numeric < 0):
         raise ValueError(f"{path}: values must be finite and non-negative")
+    positive = ["mass_kg", "wheelbase_ratio", "track_ratio", "wheel_radius_m", "tyre_friction"]
+    if np.any(frame[positive].to_numpy() <= 0):
+        raise ValueError(f"{path}: {positive} must be positive")
+    if not frame["drive_axle"].isin([0, 1]).all() or (frame["brake_front_share"] > 1).any():
+        raise ValueError(f"{path}: drive_axle must be 0 or 1, brake_front_share at most 1")
     if abs(frame["share"].sum() - 1.0) > 1e-6:
         raise ValueError(f"{path}: shares sum to {frame['share'].sum()}, not 1")
     return VehicleClassTable(frame.set_index("class_id", drop=False))

@@ -1,0 +1,496 @@
+"""The physics world: one pybullet client, the map, and a pool of vehicle bodies.
+
+This is the only module that creates or moves pybullet bodies. The rest of the twin
+names vehicles by the twin's own ids (int64, never reused); bodies are created once
+per size and recycled (PYBULLET_FACTS.md: removing and re-creating bodies leaks
+memory, and a removed body's id is handed to the next new body).
+
+Collision groups: rays see only the road; vehicle bodies collide with each other and
+with the barrier and overpass, never with the road (the wheels' rays carry them).
+"""
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from mapgen.build import MapBundle
+from twin.data.i24 import Road
+from twin.physics.map_bodies import load_map_bodies
+from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
+from twin.vehicle_classes import vehicle_classes
+
+RAY_GROUP = 1  # pybullet's default group of a ray
+ROAD_GROUP = 2
+VEHICLE_GROUP = 4
+OBSTACLE_GROUP = 8
+SIZE_STEP = 0.05  # [m] body sizes are rounded to this for the pool's shapes
+PARK_DEPTH = -1000.0  # [m] where idle bodies wait, frozen
+MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Settings of the physics world.
+
+    Attributes:
+        dt: [s] fixed step.
+        ray_threads: threads for the wheels' ray batch (0: pybullet's default).
+        solver_iterations: contact solver iterations (vehicle-vehicle and barrier hits).
+    """
+
+    dt: float = 0.01
+    ray_threads: int = 0
+    solver_iterations: int = 10
+
+    def __post_init__(self):
+        if not 0.0 < self.dt <= 0.02:
+            raise ValueError(f"dt must be in (0, 0.02] s, got {self.dt}")
+        if self.ray_threads < 0 or self.solver_iterations < 1:
+            raise ValueError("ray_threads must be >= 0 and solver_iterations >= 1")
+
+
+@dataclass(frozen=True, eq=False)
+class SpawnStates:
+    """Vehicles to spawn, struct-of-arrays (n,).
+
+    ``road`` holds directions (+1 eastbound, -1 westbound); ``x`` [m] is the back
+    centre along the road as in I-24 MOTION, ``y`` [m] the centre from the median;
+    ``speed`` [m/s] along the lane; sizes [m].
+    """
+
+    road: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    speed: np.ndarray
+    vehicle_class: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+
+    @classmethod
+    def make(cls, road, x, y, speed, vehicle_class, length, width, height) -> "SpawnStates":
+        """Coerce and check: every array the same length, values finite and in range.
+
+        Raises:
+            ValueError: naming the bad field.
+        """
+        x = np.atleast_1d(np.asarray(x, dtype=np.float64))
+        n = x.size
+        if np.ndim(road) == 0:
+            road = np.full(n, Road.parse(road).direction)
+        values = {
+            "road": np.asarray(road, dtype=np.int8),
+            "x": x,
+            "y": np.broadcast_to(np.asarray(y, dtype=np.float64), (n,)).copy(),
+            "speed": np.broadcast_to(np.asarray(speed, dtype=np.float64), (n,)).copy(),
+            "vehicle_class": np.broadcast_to(
+                np.asarray(vehicle_class, dtype=np.int64), (n,)
+            ).copy(),
+            "length": np.broadcast_to(np.asarray(length, dtype=np.float64), (n,)).copy(),
+            "width": np.broadcast_to(np.asarray(width, dtype=np.float64), (n,)).copy(),
+            "height": np.broadcast_to(np.asarray(height, dtype=np.float64), (n,)).copy(),
+        }
+        for name, value in values.items():
+            if value.shape != (n,):
+                raise ValueError(f"spawn field {name} has shape {value.shape}, expected ({n},)")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"spawn field {name} holds a non-finite value")
+        if not np.all(np.isin(values["road"], (-1, 1))):
+            raise ValueError("spawn road must be +1 (eastbound) or -1 (westbound)")
+        if np.any(values["speed"] < 0) or np.any(values["speed"] > MAX_SPEED):
+            raise ValueError(f"spawn speeds must be in 0..{MAX_SPEED} m/s")
+        return cls(**values)
+
+    def __len__(self) -> int:
+        return self.x.size
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleStates:
+    """The active vehicles after the last step, struct-of-arrays.
+
+    Attributes:
+        id: (n,) twin ids. position: (n, 3) [m] centre of mass; orientation: (n, 4)
+        quaternion (x, y, z, w); velocity, angular_velocity: (n, 3) world frame.
+        speed: (n,) [m/s] along the body's heading; yaw_rate: (n,) [rad/s] about the
+        world's up axis; heading: (n,) [rad] world yaw.
+        road, x, y, lane: road frame (x of the back centre, as the data's x).
+        wheel_spin, load: (n, 4) [rad/s], [N]; contact: (n, 4) bool.
+    """
+
+    id: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    heading: np.ndarray
+    road: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    lane: np.ndarray
+    wheel_spin: np.ndarray
+    load: np.ndarray
+    contact: np.ndarray
+
+
+class PhysicsWorld:
+    """A pybullet world (DIRECT) with the map's road and a pool of vehicle bodies.
+
+    Raises:
+        RuntimeError: pybullet cannot connect or cannot load the map.
+    """
+
+    def __init__(self, bundle: MapBundle, config: PhysicsConfig = PhysicsConfig()):
+        self.config = config
+        self.road = bundle.road
+        self.classes = vehicle_classes()
+        self.client = p.connect(p.DIRECT)
+        if self.client < 0:
+            raise RuntimeError("pybullet could not start a physics client")
+        p.setTimeStep(config.dt, physicsClientId=self.client)
+        p.setGravity(0.0, 0.0, -9.81, physicsClientId=self.client)
+        p.setPhysicsEngineParameter(
+            numSolverIterations=config.solver_iterations,
+            deterministicOverlappingPairs=1,
+            physicsClientId=self.client,
+        )
+        self.map_bodies = load_map_bodies(self.client, bundle, visual=False)
+        self._group(self.map_bodies.collision["road"], ROAD_GROUP, RAY_GROUP)
+        self._group(self.map_bodies.collision["obstacles"], OBSTACLE_GROUP, VEHICLE_GROUP)
+        self.time = 0.0
+        self._next_id = itertools.count()
+        self._shapes: dict[tuple, int] = {}
+        self._free: dict[tuple, list[int]] = {}
+        self._ids = np.empty(0, dtype=np.int64)
+        self._bodies = np.empty(0, dtype=np.int64)
+        self._keys: list[tuple] = []
+        self._params = VehicleParams.from_classes(self.classes, [], [], [], [])
+        self._controls = {k: np.empty(0) for k in ("accel", "drive", "brake", "steer")}
+        self._spin = np.empty((0, 4))
+        self._impulse = np.empty((0, 3))
+        self._read = None  # (position, quaternion, velocity, angular velocity) of now
+        self._last = None  # WheelForces of the last step
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    def close(self) -> None:
+        if self.client is not None:
+            p.disconnect(self.client)
+            self.client = None
+
+    def __enter__(self) -> "PhysicsWorld":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def ids(self) -> np.ndarray:
+        """(n,) twin ids of the active vehicles, in the order of :meth:`states`."""
+        return self._ids.copy()
+
+    @property
+    def params(self) -> VehicleParams:
+        """Physical parameters of the active vehicles, in the order of :meth:`states`."""
+        return self._params
+
+    @property
+    def body_count(self) -> int:
+        """Bodies ever created for vehicles (the pool's size)."""
+        return sum(len(v) for v in self._free.values()) + len(self._bodies)
+
+    # -- spawn and despawn ------------------------------------------------------------
+
+    def spawn(self, states: SpawnStates) -> np.ndarray:
+        """Place vehicles on the road at their road-frame pose, at rest on their
+        suspension, and give each its speed along the lane by an impulse applied in the
+        next step (J = m v along the heading; wheels spun up to v / r).
+
+        Returns:
+            (n,) the new vehicles' twin ids.
+
+        Raises:
+            ValueError: a state is invalid or lies beyond the map.
+        """
+        n = len(states)
+        if n == 0:
+            return np.empty(0, dtype=np.int64)
+        params = VehicleParams.from_classes(
+            self.classes, states.vehicle_class, states.length, states.width, states.height
+        )
+        center_x = states.x + 0.5 * states.length
+        ground, heading, pitch = self.road.to_world(states.road, center_x, states.y)
+        normal = np.stack(
+            [
+                -np.sin(pitch) * np.cos(heading),
+                -np.sin(pitch) * np.sin(heading),
+                np.cos(pitch),
+            ],
+            axis=1,
+        )
+        position = ground + normal * params.cg_height[:, None]
+        quaternion = _quaternion(heading, pitch)
+        direction = np.stack(
+            [np.cos(pitch) * np.cos(heading), np.cos(pitch) * np.sin(heading), np.sin(pitch)],
+            axis=1,
+        )
+        ids = np.fromiter(itertools.islice(self._next_id, n), dtype=np.int64, count=n)
+        bodies, keys = [], []
+        for i in range(n):
+            key = _size_key(params.box_half[i], params.box_center[i])
+            body = self._acquire(key)
+            p.changeDynamics(
+                body,
+                -1,
+                mass=float(params.mass[i]),
+                localInertiaDiagonal=params.inertia[i].tolist(),
+                physicsClientId=self.client,
+            )
+            p.resetBasePositionAndOrientation(
+                body, position[i].tolist(), quaternion[i].tolist(), physicsClientId=self.client
+            )
+            p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+            bodies.append(body)
+            keys.append(key)
+        self._ids = np.concatenate([self._ids, ids])
+        self._bodies = np.concatenate([self._bodies, np.asarray(bodies, dtype=np.int64)])
+        self._keys += keys
+        self._params = VehicleParams.concatenate([self._params, params])
+        for name, default in (("accel", 0.0), ("drive", 0.0), ("brake", 0.0), ("steer", 0.0)):
+            self._controls[name] = np.concatenate([self._controls[name], np.full(n, default)])
+        self._spin = np.concatenate(
+            [self._spin, (states.speed / params.wheel_radius)[:, None].repeat(4, 1)]
+        )
+        self._impulse = np.concatenate([self._impulse, direction * states.speed[:, None]])
+        self._read = None
+        return ids
+
+    def despawn(self, ids: np.ndarray) -> None:
+        """Return the vehicles' bodies to the pool.
+
+        Raises:
+            KeyError: an id is not an active vehicle.
+        """
+        remove = self._index(ids)
+        keep = np.ones(self._ids.size, dtype=bool)
+        keep[remove] = False
+        for i in remove:
+            self._release(int(self._bodies[i]), self._keys[i])
+        self._ids = self._ids[keep]
+        self._bodies = self._bodies[keep]
+        self._keys = [k for k, kept in zip(self._keys, keep, strict=True) if kept]
+        self._params = self._params.take(np.flatnonzero(keep))
+        for name in self._controls:
+            self._controls[name] = self._controls[name][keep]
+        self._spin = self._spin[keep]
+        self._impulse = self._impulse[keep]
+        self._read = None
+
+    # -- controls ---------------------------------------------------------------------
+
+    def set_controls(self, ids=None, *, accel=None, steer=None, drive=None, brake=None) -> None:
+        """Set inputs of vehicles ``ids`` (default: all active ones); unset ones stay.
+
+        ``accel`` [m/s^2] selects acceleration tracking; ``drive``/``brake`` (0..1)
+        select raw control (``accel`` is then cleared for those vehicles). ``steer``
+        [rad] is the front wheels' angle.
+
+        Raises:
+            KeyError: an id is not active. ValueError: a value is out of range.
+        """
+        index = slice(None) if ids is None else self._index(ids)
+        if accel is not None:
+            accel = np.asarray(accel, dtype=np.float64)
+            if not np.all(np.isfinite(accel)):
+                raise ValueError("accel must be finite")
+            self._controls["accel"][index] = accel
+        for name, value in (("drive", drive), ("brake", brake)):
+            if value is not None:
+                value = np.asarray(value, dtype=np.float64)
+                if np.any((value < 0) | (value > 1)) or not np.all(np.isfinite(value)):
+                    raise ValueError(f"{name} must be in 0..1")
+                self._controls[name][index] = value
+                self._controls["accel"][index] = np.nan
+        if steer is not None:
+            steer = np.asarray(steer, dtype=np.float64)
+            if not np.all(np.isfinite(steer)) or np.any(np.abs(steer) > 0.7):
+                raise ValueError("steer must be finite and within +/- 0.7 rad")
+            self._controls["steer"][index] = steer
+
+    # -- stepping ---------------------------------------------------------------------
+
+    def step(self) -> None:
+        """Advance the world by dt: wheel rays, vehicle forces, one engine step."""
+        dt = self.config.dt
+        if self._ids.size:
+            position, quaternion, velocity, angular = self._state()
+            rotation = _rotation(quaternion)
+            start, end = ray_ends(self._params, position, rotation)
+            hits = p.rayTestBatch(
+                start.reshape(-1, 3).tolist(),
+                end.reshape(-1, 3).tolist(),
+                numThreads=self.config.ray_threads,
+                collisionFilterMask=ROAD_GROUP,
+                physicsClientId=self.client,
+            )
+            fraction = np.fromiter(
+                (h[2] if h[0] >= 0 else 2.0 for h in hits), np.float64, len(hits)
+            )
+            normal = np.array([h[4] for h in hits]).reshape(-1, 4, 3)
+            forces = vehicle_forces(
+                self._params,
+                Controls(**self._controls),
+                position,
+                rotation,
+                velocity + self._impulse,
+                angular,
+                self._spin,
+                fraction.reshape(-1, 4),
+                normal,
+                dt,
+            )
+            force = forces.force + self._params.mass[:, None] * self._impulse / dt
+            client = self.client
+            for body, f, t, at in zip(
+                self._bodies.tolist(),
+                force.tolist(),
+                forces.torque.tolist(),
+                position.tolist(),
+                strict=True,
+            ):
+                p.applyExternalForce(body, -1, f, at, p.WORLD_FRAME, physicsClientId=client)
+                p.applyExternalTorque(body, -1, t, p.WORLD_FRAME, physicsClientId=client)
+            self._spin = forces.wheel_spin
+            self._impulse = np.zeros_like(self._impulse)
+            self._last = forces
+        p.stepSimulation(physicsClientId=self.client)
+        self.time += dt
+        self._read = None
+
+    def states(self) -> VehicleStates:
+        """The active vehicles now (after the last step)."""
+        position, quaternion, velocity, angular = self._state()
+        rotation = _rotation(quaternion)
+        coords = self.road.to_road(position) if len(position) else None
+        n = self._ids.size
+        return VehicleStates(
+            id=self._ids.copy(),
+            position=position,
+            orientation=quaternion,
+            velocity=velocity,
+            angular_velocity=angular,
+            speed=np.einsum("nj,nj->n", velocity, rotation[:, :, 0]),
+            yaw_rate=angular[:, 2],
+            heading=np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0]),
+            road=coords.road if n else np.empty(0, np.int8),
+            x=coords.x - 0.5 * self._params.length if n else np.empty(0),
+            y=coords.y if n else np.empty(0),
+            lane=coords.lane if n else np.empty(0, np.int8),
+            wheel_spin=self._spin.copy(),
+            load=self._last.load.copy()
+            if self._last is not None and len(self._last.load) == n
+            else np.zeros((n, 4)),
+            contact=self._last.contact.copy()
+            if self._last is not None and len(self._last.contact) == n
+            else np.zeros((n, 4), bool),
+        )
+
+    # -- internals --------------------------------------------------------------------
+
+    def _state(self):
+        if self._read is None:
+            client = self.client
+            poses = [
+                p.getBasePositionAndOrientation(b, physicsClientId=client)
+                for b in self._bodies.tolist()
+            ]
+            twists = [p.getBaseVelocity(b, physicsClientId=client) for b in self._bodies.tolist()]
+            n = len(poses)
+            pose = np.fromiter(
+                itertools.chain.from_iterable(a + b for a, b in poses), np.float64, 7 * n
+            )
+            twist = np.fromiter(
+                itertools.chain.from_iterable(a + b for a, b in twists), np.float64, 6 * n
+            )
+            pose, twist = pose.reshape(n, 7), twist.reshape(n, 6)
+            self._read = (pose[:, :3], pose[:, 3:], twist[:, :3], twist[:, 3:])
+        return self._read
+
+    def _index(self, ids) -> np.ndarray:
+        """Positions of ``ids`` in the active arrays (which are sorted by id)."""
+        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
+        where = np.searchsorted(self._ids, ids)
+        found = where < self._ids.size
+        found[found] = self._ids[where[found]] == ids[found]
+        if not found.all():
+            raise KeyError(f"not an active vehicle: {ids[~found].tolist()}")
+        return where
+
+    def _group(self, body: int, group: int, mask: int) -> None:
+        p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=self.client)
+
+    def _acquire(self, key: tuple) -> int:
+        free = self._free.setdefault(key, [])
+        if free:
+            body = free.pop()
+        else:
+            if key not in self._shapes:
+                half = [key[0] * SIZE_STEP, key[1] * SIZE_STEP, key[2] * SIZE_STEP]
+                self._shapes[key] = p.createCollisionShape(
+                    p.GEOM_BOX, halfExtents=half, physicsClientId=self.client
+                )
+            body = p.createMultiBody(
+                baseMass=1.0,
+                baseCollisionShapeIndex=self._shapes[key],
+                baseVisualShapeIndex=-1,
+                baseInertialFramePosition=[0.0, 0.0, -key[3] * SIZE_STEP],
+                useMaximalCoordinates=False,
+                physicsClientId=self.client,
+            )
+            p.changeDynamics(
+                body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client
+            )
+        self._group(body, VEHICLE_GROUP, VEHICLE_GROUP | OBSTACLE_GROUP)
+        return body
+
+    def _release(self, body: int, key: tuple) -> None:
+        p.changeDynamics(body, -1, mass=0.0, physicsClientId=self.client)
+        self._group(body, 0, 0)
+        p.resetBasePositionAndOrientation(
+            body, [10.0 * body, 0.0, PARK_DEPTH], [0, 0, 0, 1], physicsClientId=self.client
+        )
+        p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self._free[key].append(body)
+
+
+def _size_key(half: np.ndarray, center: np.ndarray) -> tuple:
+    """Pool key: box half extents and the box centre's height in the body frame, in
+    SIZE_STEP units (bodies of one key share a collision shape)."""
+    return (*(max(1, round(v / SIZE_STEP)) for v in half), round(center[2] / SIZE_STEP))
+
+
+def _quaternion(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """(n, 4) quaternions (x, y, z, w) of a yaw about z then a nose-up pitch.
+
+    Body x forward and z up: nose-up is a negative rotation about the body's y (left).
+    """
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    cp, sp = np.cos(-pitch / 2), np.sin(-pitch / 2)
+    return np.stack([-sy * sp, cy * sp, sy * cp, cy * cp], axis=1)
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices (body to world) of (n, 4) quaternions (x, y, z, w)."""
+    x, y, z, w = q.T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=1,
+    )
