@@ -89,6 +89,57 @@ def map_bench(*, repeats: int = 5) -> dict:
     }
 
 
+def physics_bench(*, counts=(100, 200), steps: int = 500, repeats: int = 3) -> dict:
+    """Wall time of one physics step (rays, vehicle model, engine step, state read-back)
+    with n vehicles of the corridor's class mix in the four lanes of both carriageways
+    of the I-24 mesh, holding their speed (a vehicle collision would make the engine's
+    contact solver part of the figure)."""
+    from mapgen.build import default_map
+    from twin.data.i24 import LANE_WIDTH
+    from twin.physics.world import PhysicsWorld, SpawnStates
+    from twin.vehicle_classes import vehicle_classes
+
+    table = vehicle_classes()
+    bundle = default_map()
+    figures = {}
+    for n in counts:
+        medians = []
+        for repeat in range(repeats):
+            rng = np.random.default_rng(repeat)
+            lane = np.arange(n) % 4
+            classes = rng.choice(7, n, p=table.column("share"))
+            sizes = [table.column(c)[classes] for c in ("length_m", "width_m", "height_m")]
+            states = SpawnStates.make(
+                np.where(np.arange(n) % 8 < 4, 1, -1),
+                -350.0 + (np.arange(n) // 8) * (1900.0 / max(1, n // 8)),
+                (1.5 + lane) * LANE_WIDTH,
+                np.array([24.0, 27.0, 30.0, 33.0])[lane],  # one speed per lane: no crashes
+                classes,
+                *sizes,
+            )
+            with PhysicsWorld(bundle) as world:
+                world.spawn(states)
+                world.set_controls(accel=np.zeros(n))
+                for _ in range(20):
+                    world.step()
+                    world.states()
+                seconds = np.empty(steps)
+                for k in range(steps):
+                    start = time.perf_counter()
+                    world.step()
+                    world.states()
+                    seconds[k] = time.perf_counter() - start
+                medians.append(float(np.median(seconds)))
+        step = float(np.median(medians))
+        figures[f"vehicles_{n}"] = {
+            "step_ms": round(1e3 * step, 3),
+            "real_time_factor": round(0.01 / step, 2),
+        }
+    figures["targets"] = {"vehicles_100": ">= 10 x (<= 1 ms)", "vehicles_200": ">= 5 x"}
+    figures.update({"dt": 0.01, "steps": steps, "repeats": repeats})
+    return figures
+
+
 def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
     """Ingest throughput and peak memory on a synthetic day of at least ``size_mb``.
 

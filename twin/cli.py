@@ -113,6 +113,10 @@ def _parser() -> argparse.ArgumentParser:
     p = bench_commands.add_parser("map", help="full map build time and triangle counts")
     p.add_argument("--repeats", type=int, default=5)
     p.set_defaults(handler=_bench_map)
+    p = bench_commands.add_parser("physics", help="physics step time with 100 and 200 vehicles")
+    p.add_argument("--steps", type=int, default=500)
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_physics)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -227,6 +231,12 @@ def _bench_map(args) -> int:
     from twin.bench import map_bench
 
     return _emit("map", map_bench(repeats=args.repeats))
+
+
+def _bench_physics(args) -> int:
+    from twin.bench import physics_bench
+
+    return _emit("physics", physics_bench(steps=args.steps, repeats=args.repeats))
 
 
 def _bench_ingest(args) -> int:

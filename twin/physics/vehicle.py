@@ -231,39 +231,53 @@ def vehicle_forces(
         hit_normal: (n, 4, 3) road normals at the hits.
         dt: [s] the step.
     """
-    up = rotation[:, :, 2]
-    mounts = np.einsum("nij,nkj->nki", rotation, params.mounts)
+    # Vectors are handled as their world components, each (n, 4) per wheel or (n, 1)
+    # per body: numpy's per-call cost dominates on arrays this small.
+    r = rotation
+    ex, ey, ez = r[:, 0, 0:1], r[:, 1, 0:1], r[:, 2, 0:1]  # body forward axis
+    lx, ly, lz = r[:, 0, 1:2], r[:, 1, 1:2], r[:, 2, 1:2]  # body left axis
+    ux, uy, uz = r[:, 0, 2:3], r[:, 1, 2:3], r[:, 2, 2:3]  # body up axis
+    bx, by, bz = params.mounts[..., 0], params.mounts[..., 1], params.mounts[..., 2]
+    mx = ex * bx + lx * by + ux * bz  # suspension tops from the centre of mass
+    my = ey * bx + ly * by + uy * bz
+    mz = ez * bx + lz * by + uz * bz
     contact = hit_fraction < 1.0
-    distance = np.minimum(hit_fraction, 1.0) * params.ray_length[:, None]
-    arm = mounts - up[:, None, :] * distance[..., None]  # contact point from the centre of mass
-    spin_axis = angular_velocity[:, None, :]
+    ray = params.ray_length[:, None]
+    distance = np.minimum(hit_fraction, 1.0) * ray
+    ax, ay, az = mx - ux * distance, my - uy * distance, mz - uz * distance  # contact points
+    vx0, vy0, vz0 = velocity[:, 0:1], velocity[:, 1:2], velocity[:, 2:3]
+    wx, wy, wz = angular_velocity[:, 0:1], angular_velocity[:, 1:2], angular_velocity[:, 2:3]
 
     # suspension, along the body's up axis
-    compression = params.ray_length[:, None] - distance
-    rate = -np.einsum("nj,nj->n", velocity, up)[:, None] - np.einsum(
-        "nkj,nj->nk", _cross(spin_axis, mounts), up
+    rate = -(
+        (vx0 + wy * mz - wz * my) * ux
+        + (vy0 + wz * mx - wx * mz) * uy
+        + (vz0 + wx * my - wy * mx) * uz
     )
-    load = np.where(
-        contact,
-        np.maximum(params.spring[:, None] * compression + params.damper[:, None] * rate, 0.0),
-        0.0,
-    )
+    spring = params.spring[:, None] * (ray - distance) + params.damper[:, None] * rate
+    load = np.where(contact, np.maximum(spring, 0.0), 0.0)
 
-    # tyre axes on the road plane: front wheels steered about the body's up axis
-    turned = (
-        np.cos(controls.steer)[:, None] * rotation[:, :, 0]
-        + np.sin(controls.steer)[:, None] * rotation[:, :, 1]
-    )
-    forward = np.stack([turned, turned, rotation[:, :, 0], rotation[:, :, 0]], axis=1)
-    normal = np.where(contact[..., None], hit_normal, up[:, None, :])
-    forward -= np.sum(forward * normal, axis=-1, keepdims=True) * normal
-    forward /= np.sqrt(np.sum(forward * forward, axis=-1, keepdims=True))
-    lateral = _cross(normal, forward)
-    contact_velocity = velocity[:, None, :] + _cross(spin_axis, arm)
-    vx = np.sum(contact_velocity * forward, axis=-1)
-    vy = np.sum(contact_velocity * lateral, axis=-1)
+    # tyre axes on the road plane; the front wheels are steered about the body's up axis
+    cos, sin = np.cos(controls.steer)[:, None], np.sin(controls.steer)[:, None]
+    fx = np.where(FRONT, cos * ex + sin * lx, ex)
+    fy = np.where(FRONT, cos * ey + sin * ly, ey)
+    fz = np.where(FRONT, cos * ez + sin * lz, ez)
+    nx = np.where(contact, hit_normal[..., 0], ux)
+    ny = np.where(contact, hit_normal[..., 1], uy)
+    nz = np.where(contact, hit_normal[..., 2], uz)
+    along = fx * nx + fy * ny + fz * nz
+    fx, fy, fz = fx - along * nx, fy - along * ny, fz - along * nz
+    norm = np.sqrt(fx * fx + fy * fy + fz * fz)
+    fx, fy, fz = fx / norm, fy / norm, fz / norm
+    sx, sy, sz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx  # lateral = n x f
+    cvx = vx0 + wy * az - wz * ay  # contact point velocities
+    cvy = vy0 + wz * ax - wx * az
+    cvz = vz0 + wx * ay - wy * ax
+    vx = cvx * fx + cvy * fy + cvz * fz
+    vy = cvx * sx + cvy * sy + cvz * sz
 
-    drive_torque, brake_torque = _torques(params, controls, rotation, velocity)
+    speed = (vx0 * ex + vy0 * ey + vz0 * ez)[:, 0]
+    drive_torque, brake_torque = _torques(params, controls, speed, ez[:, 0])
 
     # longitudinal: slip of a spinning wheel, its spin implicit in the slip stiffness
     radius = params.wheel_radius[:, None]
@@ -274,53 +288,52 @@ def vehicle_forces(
     free = (wheel_spin + dt * drive_torque / inertia + a * vx / radius) / (1.0 + a)
     stop = dt * brake_torque / (inertia * (1.0 + a))
     spin = free - np.sign(free) * np.minimum(np.abs(free), stop)
-    fx = stiffness * (spin * radius - vx) / reference
-    # lateral: slip angle
-    fy = -params.cornering[:, None] * load * np.arctan(vy / reference)
+    tx = stiffness * (spin * radius - vx) / reference
+    # lateral: slip angle, never more than what stops the sideways slide in one step
+    ty = -params.cornering[:, None] * load * np.arctan(vy / reference)
     corner_mass = (params.mass / 4.0)[:, None]
-    fy = np.clip(fy, -corner_mass * np.abs(vy) / dt, corner_mass * np.abs(vy) / dt)
+    slide = corner_mass * np.abs(vy) / dt
+    ty = np.clip(ty, -slide, slide)
     # friction circle
     limit = params.mu[:, None] * load
-    total = np.hypot(fx, fy)
-    scale = np.where(total > limit, limit / np.maximum(total, 1e-12), 1.0)
-    sliding = scale < 1.0
-    fx, fy = fx * scale, fy * scale
-    slid = wheel_spin + dt * (drive_torque - radius * fx) / inertia
+    total = np.hypot(tx, ty)
+    sliding = total > limit
+    scale = np.where(sliding, limit / np.maximum(total, 1e-12), 1.0)
+    tx, ty = tx * scale, ty * scale
+    slid = wheel_spin + dt * (drive_torque - radius * tx) / inertia
     slid -= np.sign(slid) * np.minimum(np.abs(slid), dt * brake_torque / inertia)
     spin = np.where(sliding, slid, spin)
     spin = np.where(contact, spin, wheel_spin + dt * drive_torque / inertia)
-
     rolling = -params.rolling[:, None] * load * np.clip(vx / ROLLING_SPEED, -1.0, 1.0)
     # Held at rest by the brakes: static friction cancels the creep and the grade's
     # pull in one step, within the friction limit (a slip model alone lets it creep).
-    held = _held(controls, np.einsum("nj,nj->n", velocity, rotation[:, :, 0]))[:, None] & contact
-    sin_pitch = rotation[:, 2, 0][:, None]
-    static = np.clip(corner_mass * (GRAVITY * sin_pitch - vx / dt), -limit, limit)
-    fx = np.where(held, static, fx)
-    rolling = np.where(held, 0.0, rolling)
+    held = _held(controls, speed)[:, None] & contact
+    static = np.clip(corner_mass * (GRAVITY * ez - vx / dt), -limit, limit)
+    tx = np.where(held, static, tx + rolling)
     spin = np.where(held, 0.0, spin)
-    wheel_force = (
-        load[..., None] * up[:, None, :]
-        + (fx + rolling)[..., None] * forward
-        + fy[..., None] * lateral
+
+    # wheel forces, then their sum and moment about the centre of mass, plus drag
+    px = load * ux + tx * fx + ty * sx
+    py = load * uy + tx * fy + ty * sy
+    pz = load * uz + tx * fz + ty * sz
+    drag = -0.5 * AIR_DENSITY * params.drag_area[:, None] * np.sqrt(vx0**2 + vy0**2 + vz0**2)
+    force = np.concatenate(
+        [
+            px.sum(1, keepdims=True) + drag * vx0,
+            py.sum(1, keepdims=True) + drag * vy0,
+            pz.sum(1, keepdims=True) + drag * vz0,
+        ],
+        axis=1,
     )
-    drag = (
-        -0.5
-        * AIR_DENSITY
-        * params.drag_area[:, None]
-        * np.linalg.norm(velocity, axis=1, keepdims=True)
-        * velocity
+    torque = np.stack(
+        [
+            (ay * pz - az * py).sum(1),
+            (az * px - ax * pz).sum(1),
+            (ax * py - ay * px).sum(1),
+        ],
+        axis=1,
     )
-    force = wheel_force.sum(axis=1) + drag
-    torque = _cross(arm, wheel_force).sum(axis=1)
     return WheelForces(force=force, torque=torque, wheel_spin=spin, load=load, contact=contact)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (np.cross costs several times more on small arrays)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _held(controls: Controls, speed: np.ndarray) -> np.ndarray:
@@ -332,11 +345,9 @@ def _held(controls: Controls, speed: np.ndarray) -> np.ndarray:
     return braking & (np.abs(speed) < HOLD_SPEED)
 
 
-def _torques(params, controls, rotation, velocity):
-    """Drive and brake torque per wheel (n, 4) [N m] from the controls."""
-    forward = rotation[:, :, 0]
-    speed = np.einsum("nj,nj->n", velocity, forward)
-    sin_pitch = forward[:, 2]
+def _torques(params, controls, speed, sin_pitch):
+    """Drive and brake torque per wheel (n, 4) [N m] from the controls, given the
+    speed along the heading (n,) [m/s] and the sine of the body's pitch (n,)."""
     radius = params.wheel_radius
     # the force at the wheels that makes the body accelerate at `accel` (feedforward)
     resist = (

@@ -327,8 +327,7 @@ class PhysicsWorld:
         """Advance the world by dt: wheel rays, vehicle forces, one engine step."""
         dt = self.config.dt
         if self._ids.size:
-            position, quaternion, velocity, angular = self._state()
-            rotation = _rotation(quaternion)
+            position, _, velocity, angular, rotation = self._state()
             start, end = ray_ends(self._params, position, rotation)
             hits = p.rayTestBatch(
                 start.reshape(-1, 3).tolist(),
@@ -337,10 +336,7 @@ class PhysicsWorld:
                 collisionFilterMask=ROAD_GROUP,
                 physicsClientId=self.client,
             )
-            fraction = np.fromiter(
-                (h[2] if h[0] >= 0 else 2.0 for h in hits), np.float64, len(hits)
-            )
-            normal = np.array([h[4] for h in hits]).reshape(-1, 4, 3)
+            hit = np.array([(h[2], *h[4]) for h in hits]).reshape(-1, 4, 4)
             forces = vehicle_forces(
                 self._params,
                 Controls(**self._controls),
@@ -349,12 +345,14 @@ class PhysicsWorld:
                 velocity + self._impulse,
                 angular,
                 self._spin,
-                fraction.reshape(-1, 4),
-                normal,
+                hit[..., 0],
+                hit[..., 1:],
                 dt,
             )
             force = forces.force + self._params.mass[:, None] * self._impulse / dt
-            client = self.client
+            # positional arguments: pybullet parses keywords noticeably slower
+            client, world_frame = self.client, p.WORLD_FRAME
+            apply_force, apply_torque = p.applyExternalForce, p.applyExternalTorque
             for body, f, t, at in zip(
                 self._bodies.tolist(),
                 force.tolist(),
@@ -362,8 +360,8 @@ class PhysicsWorld:
                 position.tolist(),
                 strict=True,
             ):
-                p.applyExternalForce(body, -1, f, at, p.WORLD_FRAME, physicsClientId=client)
-                p.applyExternalTorque(body, -1, t, p.WORLD_FRAME, physicsClientId=client)
+                apply_force(body, -1, f, at, world_frame, client)
+                apply_torque(body, -1, t, world_frame, client)
             self._spin = forces.wheel_spin
             self._impulse = np.zeros_like(self._impulse)
             self._last = forces
@@ -373,8 +371,7 @@ class PhysicsWorld:
 
     def states(self) -> VehicleStates:
         """The active vehicles now (after the last step)."""
-        position, quaternion, velocity, angular = self._state()
-        rotation = _rotation(quaternion)
+        position, quaternion, velocity, angular, rotation = self._state()
         coords = self.road.to_road(position) if len(position) else None
         n = self._ids.size
         return VehicleStates(
@@ -402,22 +399,24 @@ class PhysicsWorld:
     # -- internals --------------------------------------------------------------------
 
     def _state(self):
+        """(position, quaternion, velocity, angular velocity, rotation) of the active
+        vehicles now, read once per step."""
         if self._read is None:
-            client = self.client
-            poses = [
-                p.getBasePositionAndOrientation(b, physicsClientId=client)
-                for b in self._bodies.tolist()
-            ]
-            twists = [p.getBaseVelocity(b, physicsClientId=client) for b in self._bodies.tolist()]
-            n = len(poses)
-            pose = np.fromiter(
-                itertools.chain.from_iterable(a + b for a, b in poses), np.float64, 7 * n
+            client, bodies = self.client, self._bodies.tolist()
+            get_pose, get_twist = p.getBasePositionAndOrientation, p.getBaseVelocity
+            poses = [get_pose(b, client) for b in bodies]
+            twists = [get_twist(b, client) for b in bodies]
+            n = len(bodies)
+            pose = np.array([(*a, *b) for a, b in poses]).reshape(n, 7)
+            twist = np.array([(*a, *b) for a, b in twists]).reshape(n, 6)
+            quaternion = pose[:, 3:]
+            self._read = (
+                pose[:, :3],
+                quaternion,
+                twist[:, :3],
+                twist[:, 3:],
+                _rotation(quaternion),
             )
-            twist = np.fromiter(
-                itertools.chain.from_iterable(a + b for a, b in twists), np.float64, 6 * n
-            )
-            pose, twist = pose.reshape(n, 7), twist.reshape(n, 6)
-            self._read = (pose[:, :3], pose[:, 3:], twist[:, :3], twist[:, 3:])
         return self._read
 
     def _index(self, ids) -> np.ndarray:
