@@ -173,7 +173,8 @@ class PhysicsWorld:
         self._spin = np.empty((0, 4))
         self._impulse = np.empty((0, 3))
         self._read = None  # (position, quaternion, velocity, angular velocity) of now
-        self._last = None  # WheelForces of the last step
+        self._load = np.empty((0, 4))  # [N] per wheel, from the last step
+        self._contact = np.empty((0, 4), dtype=bool)
 
     # -- lifecycle --------------------------------------------------------------------
 
@@ -262,6 +263,8 @@ class PhysicsWorld:
         self._params = VehicleParams.concatenate([self._params, params])
         for name, default in (("accel", 0.0), ("drive", 0.0), ("brake", 0.0), ("steer", 0.0)):
             self._controls[name] = np.concatenate([self._controls[name], np.full(n, default)])
+        self._load = np.concatenate([self._load, np.zeros((n, 4))])  # until the first step
+        self._contact = np.concatenate([self._contact, np.zeros((n, 4), dtype=bool)])
         self._spin = np.concatenate(
             [self._spin, (states.speed / params.wheel_radius)[:, None].repeat(4, 1)]
         )
@@ -287,6 +290,8 @@ class PhysicsWorld:
         for name in self._controls:
             self._controls[name] = self._controls[name][keep]
         self._spin = self._spin[keep]
+        self._load = self._load[keep]
+        self._contact = self._contact[keep]
         self._impulse = self._impulse[keep]
         self._read = None
 
@@ -364,7 +369,7 @@ class PhysicsWorld:
                 apply_torque(body, -1, t, world_frame, client)
             self._spin = forces.wheel_spin
             self._impulse = np.zeros_like(self._impulse)
-            self._last = forces
+            self._load, self._contact = forces.load, forces.contact
         p.stepSimulation(physicsClientId=self.client)
         self.time += dt
         self._read = None
@@ -372,8 +377,7 @@ class PhysicsWorld:
     def states(self) -> VehicleStates:
         """The active vehicles now (after the last step)."""
         position, quaternion, velocity, angular, rotation = self._state()
-        coords = self.road.to_road(position) if len(position) else None
-        n = self._ids.size
+        coords = self.road.to_road(position)
         return VehicleStates(
             id=self._ids.copy(),
             position=position,
@@ -383,17 +387,13 @@ class PhysicsWorld:
             speed=np.einsum("nj,nj->n", velocity, rotation[:, :, 0]),
             yaw_rate=angular[:, 2],
             heading=np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0]),
-            road=coords.road if n else np.empty(0, np.int8),
-            x=coords.x - 0.5 * self._params.length if n else np.empty(0),
-            y=coords.y if n else np.empty(0),
-            lane=coords.lane if n else np.empty(0, np.int8),
+            road=coords.road,
+            x=coords.x - 0.5 * self._params.length,
+            y=coords.y,
+            lane=coords.lane,
             wheel_spin=self._spin.copy(),
-            load=self._last.load.copy()
-            if self._last is not None and len(self._last.load) == n
-            else np.zeros((n, 4)),
-            contact=self._last.contact.copy()
-            if self._last is not None and len(self._last.contact) == n
-            else np.zeros((n, 4), bool),
+            load=self._load.copy(),
+            contact=self._contact.copy(),
         )
 
     # -- internals --------------------------------------------------------------------

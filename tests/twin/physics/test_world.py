@@ -50,6 +50,25 @@ def test_bodies_are_recycled_and_ids_never_reused(world):
     assert np.all(np.isfinite(world.states().position))
 
 
+def test_empty_world_steps_and_reports_nothing(world):
+    world.step()
+    state = world.states()
+    assert state.id.size == 0 and state.position.shape == (0, 3) and state.load.shape == (0, 4)
+
+
+def test_wheel_loads_follow_their_vehicles_through_despawn_and_spawn(world):
+    light, heavy = world.spawn(sedans(2, x=[0.0, 100.0]))
+    world.step()
+    world.despawn([light])
+    truck = world.spawn(SpawnStates.make("eastbound", [300.0], 9.0, 25.0, 4, 20.5, 2.59, 4.0))
+    state = world.states()
+    assert state.id.tolist() == [heavy, truck[0]]
+    assert state.load[0].sum() > 1000.0  # the remaining sedan keeps its loads
+    assert not state.contact[1].any()  # the new truck has no contact before its first step
+    world.step()
+    assert world.states().load[1].sum() > 20 * world.states().load[0].sum() / 2
+
+
 def test_bad_spawns_and_controls_are_refused(world):
     with pytest.raises(ValueError, match="beyond the map"):
         world.spawn(sedans(1, x=5000.0))
