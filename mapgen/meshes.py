@@ -14,9 +14,9 @@ import numpy as np
 import trimesh
 
 from mapgen.params import MapParams, Terrain
-from mapgen.road import RoadModel
+from mapgen.road import RoadModel, mile_marker_of, station_of
 from mapgen.sources import Sources
-from twin.data.i24 import LANE_WIDTH, MILE, N_LANES, SEGMENT_START_MM, lane_center
+from twin.data.i24 import LANE_WIDTH, N_LANES, lane_center
 
 INNER_EDGE = LANE_WIDTH  # [m] the yellow line: 12 ft from the median centre line
 LANES_OUTER_EDGE = (N_LANES + 1) * LANE_WIDTH  # [m] the white edge line
@@ -296,7 +296,7 @@ def _poles(model, params, sources, terrain_height):
             p.head[0],
         )
         meshes += [mast.copy().apply_transform(frame), head]
-        mm = SEGMENT_START_MM + station / MILE
+        mm = float(mile_marker_of(station))
         objects.append(
             {
                 "pole": pole_id,
@@ -316,13 +316,13 @@ def _posts(model, params, terrain_height):
     """Green 0.1-mile demarcation posts beside both carriageways, plates facing traffic."""
     p = params.posts
     s0, s1 = model.station_range
-    first = math.ceil(round((SEGMENT_START_MM + s0 / MILE) / p.spacing_mi, 6))
-    last = math.floor(round((SEGMENT_START_MM + s1 / MILE) / p.spacing_mi, 6))
+    first = math.ceil(round(float(mile_marker_of(s0)) / p.spacing_mi, 6))
+    last = math.floor(round(float(mile_marker_of(s1)) / p.spacing_mi, 6))
     meshes, objects = [], []
     lateral = model.outer_edge + p.offset
     for k in range(first, last + 1):
         mm = round(k * p.spacing_mi, 6)
-        station = (mm - SEGMENT_START_MM) * MILE
+        station = float(station_of(mm))
         for side, road in ((1.0, "eastbound"), (-1.0, "westbound")):
             base = terrain_height(station, side * lateral) - 0.5
             top = model.surface_z(station) + p.height
@@ -345,7 +345,7 @@ def _overpass(model, params, sources):
     for name in o.landmarks:
         if name not in sources.landmarks:
             raise ValueError(f"landmark {name!r} not in {sorted(sources.landmarks)}")
-        stations.append((sources.landmarks[name][1] - SEGMENT_START_MM) * MILE)
+        stations.append(float(station_of(sources.landmarks[name][1])))
     center = float(np.mean(stations))
     half = o.deck_width / 2.0
     below = np.concatenate([[center - half, center + half], model.profile_s])
@@ -395,7 +395,7 @@ def _overpass(model, params, sources):
         "name": "Old Franklin Rd overpass",
         "landmarks": list(o.landmarks),
         "station_m": center,
-        "mm": round(SEGMENT_START_MM + center / MILE, 4),
+        "mm": round(float(mile_marker_of(center)), 4),
         "deck_stations_m": [center - half, center + half],
         "deck_bottom_z_m": bottom,
         "clearance_m": bottom - float(model.surface_z(below).max()),

@@ -12,7 +12,8 @@ import numpy as np
 import pybullet as p
 
 from mapgen.build import MapBundle
-from twin.data.i24 import MILE, SEGMENT_START_MM, Road, lane_center
+from mapgen.road import mile_marker_of
+from twin.data.i24 import Road, lane_center
 from twin.physics.map_bodies import load_map_bodies
 
 WIDTH = 1600  # [px] of the picture
@@ -48,7 +49,10 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
     finally:
         p.disconnect(client)
     panels = [
-        _titled(overview, f"Overview: MM {_mm(s0):.2f} to {_mm(s1):.2f}, westbound on top"),
+        _titled(
+            overview,
+            f"Overview: MM {mile_marker_of(s0):.2f} to {mile_marker_of(s1):.2f}, westbound on top",
+        ),
         _titled(close, "Top view at the Old Franklin Rd overpass (MM 60.82)"),
         _titled(eye, "Driver's eye: eastbound lane -2, 140 m before the overpass"),
     ]
@@ -62,10 +66,6 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return out
-
-
-def _mm(station: float) -> float:
-    return SEGMENT_START_MM + station / MILE
 
 
 def _top_view(client, road, stations, half_width, width) -> np.ndarray:

@@ -37,11 +37,22 @@ from twin.data.i24 import (
     Road,
     lane_center,
     lane_of,
+    mile_marker,
 )
 from twin.errors import MapError
 
 EARTH_RADIUS = 6_371_000.0  # [m] mean radius, for the curvature drop of a tangent plane
 STATION_TOLERANCE = 1e-6  # [m] beyond the map's ends still accepted as on the map
+
+
+def station_of(mm: np.ndarray) -> np.ndarray:
+    """Eastbound station [m] of mile markers: ``(MM - 60.6) * 1609.344``."""
+    return (np.asarray(mm, dtype=np.float64) - SEGMENT_START_MM) * MILE
+
+
+def mile_marker_of(station: np.ndarray) -> np.ndarray:
+    """Mile markers of eastbound stations [m] (the inverse of :func:`station_of`)."""
+    return mile_marker(station, Road.EASTBOUND)
 
 
 class RoadCoordinates(NamedTuple):
@@ -333,7 +344,7 @@ class RoadModel:
             ValueError: a point lies beyond the posts.
         """
         positions = np.atleast_2d(np.asarray(positions, dtype=np.float64))
-        mm = SEGMENT_START_MM + (positions[:, :2] @ self._d) / MILE
+        mm = mile_marker_of(positions[:, :2] @ self._d)
         if np.any((mm < self.post_mm[0]) | (mm > self.post_mm[-1])):
             raise ValueError(f"points beyond the posts (MM {self.post_mm[0]}..{self.post_mm[-1]})")
         along = np.interp(mm, self.post_mm, self.post_along)
@@ -362,7 +373,7 @@ class RoadModel:
             raise ValueError("points beyond the posts")
         order = np.argsort(self.post_along)
         mm = np.interp(along, self.post_along[order], self.post_mm[order])
-        s = (mm - SEGMENT_START_MM) * MILE
+        s = station_of(mm)
         lateral = enu[:, :2] @ self._r
         out = np.empty((lat.size, 3))
         out[:, :2] = s[:, None] * self._d + lateral[:, None] * self._r
