@@ -117,6 +117,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=500)
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_physics)
+    p = bench_commands.add_parser(
+        "traffic", help="traffic manager decision step and closed loop, 100 vehicles"
+    )
+    p.add_argument("--vehicles", type=int, default=100)
+    p.add_argument("--steps", type=int, default=3000)
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_traffic)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -237,6 +244,15 @@ def _bench_physics(args) -> int:
     from twin.bench import physics_bench
 
     return _emit("physics", physics_bench(steps=args.steps, repeats=args.repeats))
+
+
+def _bench_traffic(args) -> int:
+    from twin.bench import traffic_bench
+
+    return _emit(
+        "traffic",
+        traffic_bench(vehicles=args.vehicles, steps=args.steps, repeats=args.repeats),
+    )
 
 
 def _bench_ingest(args) -> int:

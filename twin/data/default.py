@@ -17,14 +17,16 @@ from twin.data import synth
 from twin.data.ingest import IngestOptions, ingest
 from twin.data.store import TrajectoryStore, is_store
 from twin.paths import asset, cache_dir
+from twin.traffic import drivers, idm, lanes
 
 DEFAULT_SEED = 0
 
 
 def default_key(seed: int = DEFAULT_SEED) -> str:
-    """Hash of the generator's code, presets, class table, ingest code and seed."""
+    """Hash of the generator's code (with the driver models it uses), presets, class
+    table, ingest code and seed."""
     digest = hashlib.sha256()
-    for module in (synth, ingest_module):
+    for module in (synth, ingest_module, idm, drivers, lanes):
         digest.update(inspect.getsource(module).encode())
     digest.update(asset("vehicle_classes.csv").read_bytes())
     digest.update(str(seed).encode())

@@ -26,7 +26,9 @@ from tqdm import tqdm
 
 from twin.data import i24
 from twin.data.i24 import Road
+from twin.traffic.drivers import DriverDistribution
 from twin.traffic.idm import IDMParams, idm_acceleration
+from twin.traffic.lanes import Occupancy
 from twin.vehicle_classes import vehicle_classes
 
 SCENARIO_TIME = 1669812350.0  # [s] unix, 2022-11-30 06:45:50 CST: the paper's scenarios
@@ -34,6 +36,7 @@ HOUR = 3600.0  # [s]
 MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
 MIN_GAP = 2.0  # [m] IDM s0 mean
+DRIVERS = DriverDistribution(min_gap=MIN_GAP, comfortable_decel=COMFORT_DECEL)
 
 
 @dataclass(frozen=True)
@@ -255,11 +258,7 @@ class _Simulation:
             rows = lanes == lane
             cls[rows] = rng.choice(7, size=int(rows.sum()), p=self._class_weights(int(lane)))
         dims = self.classes.sample_dimensions(cls, rng)
-        c = self.classes
-        v0 = c.column("desired_speed_mps")[cls] + c.column("desired_speed_sd_mps")[cls] * np.clip(
-            rng.standard_normal(n), -2, 2
-        )
-        T = c.column("time_headway_s")[cls] * np.exp(0.12 * np.clip(rng.standard_normal(n), -2, 2))
+        drivers = DRIVERS.draw(self.classes, cls, rng)
         vid = np.arange(self.next_vid, self.next_vid + n)
         self.next_vid += n
         self.registry_class.append(cls)
@@ -268,7 +267,7 @@ class _Simulation:
         return _Vehicles(
             vid=vid,
             x=np.asarray(x, float),
-            v=np.minimum(np.asarray(v, float), v0),
+            v=np.minimum(np.asarray(v, float), drivers.desired_speed),
             lane=lanes,
             lane_from=lanes.copy(),
             change_start=np.zeros(n),
@@ -278,11 +277,10 @@ class _Simulation:
             width=dims[:, 1],
             height=dims[:, 2],
             vehicle_class=cls,
-            v0=v0,
-            T=T,
-            s0=MIN_GAP + 0.3 * np.clip(rng.standard_normal(n), -2, 2),
-            a=c.column("max_accel_mps2")[cls]
-            * np.exp(0.15 * np.clip(rng.standard_normal(n), -2, 2)),
+            v0=drivers.desired_speed,
+            T=drivers.time_headway,
+            s0=drivers.min_gap,
+            a=drivers.max_accel,
             forced_speed=np.full(n, np.nan),
             forced_until=np.zeros(n),
             forced_decel=np.zeros(n),
@@ -348,32 +346,18 @@ class _Simulation:
             veh.extend(new)
 
     # -- one step ---------------------------------------------------------------------
-    def _entries(self):
+    def _occupancy(self) -> Occupancy:
         """Lane occupancy: each vehicle in its lane, and a changing vehicle in its origin lane."""
         veh = self.vehicles
-        n = len(veh)
-        changing = np.flatnonzero(veh.lane_from != veh.lane)
-        owner = np.r_[np.arange(n), changing]
-        lane = np.r_[veh.lane, veh.lane_from[changing]].astype(np.int64)
-        x = veh.x[owner]
-        key = -lane * 1e5 + x
-        order = np.argsort(key, kind="stable")
-        return owner[order], lane[order], key[order]
-
-    def _leaders(self, owner, lane):
-        """Gap [m] and leader speed for each occupancy entry (inf gap when none)."""
-        veh = self.vehicles
-        same = np.r_[lane[1:] == lane[:-1], False]
-        lead = np.r_[owner[1:], 0]
-        gap = np.where(same, veh.x[lead] - veh.x[owner] - veh.length[owner], np.inf)
-        return gap, veh.v[lead]
+        return Occupancy.build(np.ones(len(veh)), veh.x, [veh.lane, veh.lane_from])
 
     def step(self) -> None:
         cfg, veh, dt = self.cfg, self.vehicles, self.cfg.dt
-        owner, lane, key = self._entries()
-        gap, v_lead = self._leaders(owner, lane)
+        occupancy = self._occupancy()
+        owner = occupancy.owner
+        gap, leader = occupancy.leaders(veh.x, veh.length)
         params = veh.params.take(owner)
-        acc_entry = idm_acceleration(veh.v[owner], v_lead, gap, params)
+        acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, params)
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))
@@ -388,7 +372,7 @@ class _Simulation:
 
         acc += cfg.accel_noise * self.rng.standard_normal(len(veh))
         acc = np.clip(acc, -MAX_DECEL, veh.a * 1.5)
-        self._change_lanes(owner, lane, key, acc)
+        self._change_lanes(occupancy, acc)
 
         v_new = veh.v + acc * dt
         stopping = v_new < 0
@@ -403,7 +387,7 @@ class _Simulation:
         veh.keep(veh.x < self.x_out)
         self._insert()
 
-    def _change_lanes(self, owner, lane, key, acc) -> None:
+    def _change_lanes(self, occupancy: Occupancy, acc: np.ndarray) -> None:
         """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres."""
         cfg, veh = self.cfg, self.vehicles
         due = np.flatnonzero(
@@ -424,11 +408,8 @@ class _Simulation:
             if len(cand) == 0:
                 continue
             tgt = target[allowed].astype(np.int64)
-            pos = np.searchsorted(key, -tgt * 1e5 + veh.x[cand])
-            has_lead = (pos < len(key)) & (lane[np.minimum(pos, len(key) - 1)] == tgt)
-            lead = owner[np.minimum(pos, len(key) - 1)]
-            has_fol = (pos > 0) & (lane[np.maximum(pos - 1, 0)] == tgt)
-            fol = owner[np.maximum(pos - 1, 0)]
+            lead, fol = occupancy.around(np.ones(len(cand)), tgt, veh.x[cand])
+            has_lead, has_fol = lead >= 0, fol >= 0
             gap_lead = np.where(has_lead, veh.x[lead] - veh.x[cand] - veh.length[cand], np.inf)
             gap_fol = np.where(has_fol, veh.x[cand] - veh.x[fol] - veh.length[fol], np.inf)
             a_new = idm_acceleration(veh.v[cand], veh.v[lead], gap_lead, veh.params.take(cand))

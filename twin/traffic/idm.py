@@ -50,10 +50,23 @@ def desired_gap(v: np.ndarray, v_lead: np.ndarray, params: IDMParams) -> np.ndar
     return params.min_gap + np.maximum(dynamic, 0.0)
 
 
+def free_road_term(v: np.ndarray, params: IDMParams) -> np.ndarray:
+    """IDM free-road acceleration a (1 - (v / v0)^delta) [m/s^2]."""
+    return params.max_accel * (1.0 - _speed_ratio(v, params))
+
+
+def interaction_term(
+    v: np.ndarray, v_lead: np.ndarray, gap: np.ndarray, params: IDMParams
+) -> np.ndarray:
+    """IDM interaction -a (s* / s)^2 [m/s^2]; 0 where ``gap`` is inf (no leader)."""
+    return -params.max_accel * _gap_ratio(v, v_lead, gap, params)
+
+
 def idm_acceleration(
     v: np.ndarray, v_lead: np.ndarray, gap: np.ndarray, params: IDMParams
 ) -> np.ndarray:
-    """IDM acceleration [m/s^2] of followers behind their leaders.
+    """IDM acceleration [m/s^2] of followers behind their leaders: the sum of
+    :func:`free_road_term` and :func:`interaction_term`.
 
     Args:
         v: (n,) [m/s] follower speeds, >= 0.
@@ -65,14 +78,23 @@ def idm_acceleration(
     Returns:
         (n,) float64 acceleration, unclipped.
     """
+    return params.max_accel * (1.0 - _speed_ratio(v, params) - _gap_ratio(v, v_lead, gap, params))
+
+
+def _speed_ratio(v, params: IDMParams) -> np.ndarray:
+    """(v / v0)^delta."""
+    return (np.asarray(v, dtype=np.float64) / params.desired_speed) ** params.delta
+
+
+def _gap_ratio(v, v_lead, gap, params: IDMParams) -> np.ndarray:
+    """(s* / s)^2, 0 where ``gap`` is inf."""
     v = np.asarray(v, dtype=np.float64)
-    free = 1.0 - (v / params.desired_speed) ** params.delta
     gap = np.asarray(gap, dtype=np.float64)
     finite = np.isfinite(gap)
     v_lead = np.where(finite, v_lead, v)
     s_star = desired_gap(v, v_lead, params)
     ratio = np.divide(s_star, np.maximum(gap, 1e-3), out=np.zeros_like(v), where=finite)
-    return params.max_accel * (free - ratio**2)
+    return ratio**2
 
 
 def equilibrium_gap(v: np.ndarray, params: IDMParams) -> np.ndarray:

@@ -1,0 +1,106 @@
+"""IDM on the physics world: analytic oracles for car following, stopping, cruising,
+and emergency braking whatever the leader or the boundary does."""
+
+import numpy as np
+import pytest
+
+from tests.twin.traffic.conftest import make_manager, run, spawn
+from twin.traffic.manager import EgoCommand, Obstacles
+
+DRIVER = dict(time_headway=1.2, min_gap=2.0, max_accel=1.0, comfortable_decel=1.5, delta=4.0)
+
+
+def follower_gap(recording, length):
+    return recording.x[:, 0] - recording.x[:, 1] - length
+
+
+def test_follower_settles_at_the_idm_equilibrium_gap(world, built_map):
+    manager = make_manager(built_map, auto_lane_change=False)
+    ids = spawn(world, manager, 1, -2, [-250.0, -330.0], 20.0, desired_speed=[20.0, 30.0])
+    manager.set_params(ids, **DRIVER)
+    rec = run(world, manager, 90.0)
+    length = world.params_of(ids[1:]).length[0]
+    v = rec.speed[-1, 1]
+    assert rec.speed[-1, 0] == pytest.approx(20.0, abs=0.1)
+    assert v == pytest.approx(rec.speed[-1, 0], abs=0.02)  # steady
+    # the IDM's steady state behind a leader at v: s*(v) = (s0 + v T) / sqrt(1 - (v/v0)^4)
+    expected = (2.0 + v * 1.2) / np.sqrt(1.0 - (v / 30.0) ** 4)
+    assert follower_gap(rec, length)[-1] == pytest.approx(expected, rel=0.01)
+    assert rec.contacts == 0
+
+
+def test_approach_to_a_stopped_vehicle_ends_stopped_at_the_minimum_gap(world, built_map):
+    manager = make_manager(built_map, auto_lane_change=False)
+    ids = spawn(world, manager, -1, -3, [400.0, 0.0], [0.0, 25.0], desired_speed=[0.0, 30.0])
+    manager.set_params(ids[1:], **DRIVER)
+    rec = run(world, manager, 60.0)
+    gap = follower_gap(rec, world.params_of(ids[1:]).length[0])
+    assert rec.speed[-1, 1] < 0.05 and abs(rec.speed[-1, 0]) < 0.01
+    assert gap[-1] == pytest.approx(2.0, abs=0.3)  # s0
+    assert gap.min() > 1.5
+    assert rec.x[-1, 0] == pytest.approx(rec.x[0, 0], abs=0.05)  # the stopped one held
+    assert rec.contacts == 0
+
+
+@pytest.mark.parametrize("road", [1, -1])  # uphill and downhill
+def test_free_road_cruise_reaches_the_desired_speed_within_a_tenth(world, built_map, road):
+    manager = make_manager(built_map, auto_lane_change=False)
+    classes = [0, 2, 4, 6]  # sedan, pickup, semi, motorcycle
+    desired = [31.0, 29.0, 25.0, 33.0]
+    spawn(world, manager, road, [-1, -2, -3, -4], -350.0, 22.0, classes, desired_speed=desired)
+    rec = run(world, manager, 60.0)
+    assert np.abs(rec.speed[-1] - desired).max() <= 0.1
+    assert np.abs(rec.speed[-200:] - desired).max() <= 0.1  # steady over the last 2 s
+
+
+def test_a_lowered_desired_speed_is_followed_at_the_comfortable_deceleration(world, built_map):
+    manager = make_manager(built_map, auto_lane_change=False)
+    ids = spawn(world, manager, 1, -2, -350.0, 30.0, desired_speed=30.0)
+    manager.set_params(ids, **DRIVER)
+    run(world, manager, 2.0)
+    manager.set_desired_speed(ids, 10.0)
+    rec = run(world, manager, 30.0)
+    decel = -np.diff(rec.speed[:, 0]) / world.config.dt
+    assert rec.speed[-1, 0] == pytest.approx(10.0, abs=0.1)
+    assert decel.max() < 1.5 * 1.1  # b, not IDM's huge free-road braking above v0
+
+
+def test_emergency_braking_stops_followers_behind_a_leader_that_brakes_at_the_limit(
+    world, built_map
+):
+    manager = make_manager(built_map, auto_lane_change=False)
+    # five cars at 30 m/s, 6 m apart (0.2 s): far shorter than the IDM would keep
+    x = -100.0 - np.arange(5) * (6.0 + 4.7)
+    ids = spawn(world, manager, 1, -3, x, 30.0, desired_speed=30.0)
+    manager.set_controller(int(ids[0]), lambda obs: EgoCommand(accel=-12.0))
+    rec = run(world, manager, 12.0)
+    assert rec.speed[-1].max() < 0.1
+    assert rec.contacts == 0
+    gaps = rec.x[:, :-1] - rec.x[:, 1:] - 4.7
+    assert gaps.min() >= 1.0  # the emergency margin (the IDM alone comes within 0.8 m)
+    assert manager.emergency_steps > 0
+
+
+def test_no_collision_between_managed_vehicles_whatever_the_ghosts_do(world, built_map):
+    manager = make_manager(built_map, auto_lane_change=False)
+    x = 200.0 - np.arange(6) * 30.0
+    ids = spawn(world, manager, -1, -2, x, 28.0, desired_speed=30.0)
+    rng = np.random.default_rng(4)
+
+    def ghosts(t):
+        # a ghost that jumps around just ahead of the platoon, stopped or fast
+        if t < 1.0:
+            return None
+        lead = world.states().x[0]
+        return Obstacles.make(
+            -1, -2, lead + rng.uniform(5.0, 40.0), 4.7, rng.choice([0.0, 35.0]), -9.0
+        )
+
+    def boundary(states):
+        # and the desired speeds jump as ghost speeds do at a window edge
+        manager.set_desired_speed(ids, rng.choice([0.0, 5.0, 35.0], size=ids.size))
+
+    rec = run(world, manager, 20.0, obstacles=ghosts, each_step=boundary)
+    assert rec.contacts == 0
+    gaps = rec.x[:, :-1] - rec.x[:, 1:] - world.params_of(ids[1:]).length
+    assert gaps.min() > 0.5

@@ -1,0 +1,84 @@
+"""Heterogeneous drivers: IDM parameters drawn per vehicle from its class.
+
+Class means come from ``assets/vehicle_classes.csv`` (desired speed and its spread,
+maximum acceleration, time headway); the spreads around them are settings here.
+Draws are standard normals clipped to +/- 2 sd, so no driver is absurd.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.traffic.idm import IDMParams
+from twin.vehicle_classes import VehicleClassTable
+
+CLIP_SD = 2.0  # draws are clipped to this many standard deviations
+
+
+@dataclass(frozen=True)
+class DriverDistribution:
+    """How IDM parameters are drawn per vehicle.
+
+    Attributes:
+        time_headway_sd_log: [-] log-normal spread of T around the class's T.
+        min_gap: [m] mean s0; min_gap_sd: [m] its spread.
+        max_accel_sd_log: [-] log-normal spread of a around the class's a.
+        comfortable_decel: [m/s^2] b, positive; comfortable_decel_sd: [m/s^2].
+        delta: [-] IDM exponent.
+    """
+
+    time_headway_sd_log: float = 0.12
+    min_gap: float = 2.0
+    min_gap_sd: float = 0.3
+    max_accel_sd_log: float = 0.15
+    comfortable_decel: float = 1.7
+    comfortable_decel_sd: float = 0.0
+    delta: float = 4.0
+
+    def __post_init__(self):
+        spreads = (
+            self.time_headway_sd_log,
+            self.min_gap_sd,
+            self.max_accel_sd_log,
+            self.comfortable_decel_sd,
+        )
+        if any(not np.isfinite(s) or s < 0 for s in spreads):
+            raise ValueError(f"driver spreads must be finite and >= 0, got {spreads}")
+        if not self.min_gap - CLIP_SD * self.min_gap_sd > 0:
+            raise ValueError(f"min_gap {self.min_gap} m must stay positive at -2 sd")
+        if not self.comfortable_decel - CLIP_SD * self.comfortable_decel_sd > 0:
+            raise ValueError(
+                f"comfortable_decel {self.comfortable_decel} m/s^2 must stay positive at -2 sd"
+            )
+        if not self.delta > 0:
+            raise ValueError(f"delta must be positive, got {self.delta}")
+
+    def draw(
+        self, classes: VehicleClassTable, vehicle_class: np.ndarray, rng: np.random.Generator
+    ) -> IDMParams:
+        """IDM parameters (n,) for vehicles of ``vehicle_class`` (n,) ints.
+
+        The draws are made in the order v0, T, s0, a, b, each ``n`` at a time.
+        """
+        n = len(vehicle_class)
+
+        def z():
+            return np.clip(rng.standard_normal(n), -CLIP_SD, CLIP_SD)
+
+        desired_speed = (
+            classes.column("desired_speed_mps")[vehicle_class]
+            + classes.column("desired_speed_sd_mps")[vehicle_class] * z()
+        )
+        time_headway = classes.column("time_headway_s")[vehicle_class] * np.exp(
+            self.time_headway_sd_log * z()
+        )
+        min_gap = self.min_gap + self.min_gap_sd * z()
+        max_accel = classes.column("max_accel_mps2")[vehicle_class] * np.exp(
+            self.max_accel_sd_log * z()
+        )
+        decel = np.full(n, self.comfortable_decel)
+        if self.comfortable_decel_sd > 0:
+            decel = decel + self.comfortable_decel_sd * z()
+        return IDMParams(
+            desired_speed, time_headway, min_gap, max_accel, decel, np.full(n, self.delta)
+        )
