@@ -36,6 +36,7 @@ from twin.vehicle_classes import vehicle_classes
 
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
+SETTLED = 0.1  # [m] from the new lane's centre, a lane change is over
 MAX_STEER = 0.5  # [rad] front-wheel angle limit of the lateral controller
 NEIGHBOUR_RANGE = 150.0  # [m] along the road, for the ego's observation
 IDM_FIELDS = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
@@ -71,6 +72,8 @@ class TrafficConfig:
         brake_limit: [-] deceleration limit of normal driving as a share of mu g (the
             tyre limit); emergency braking uses all of mu g.
         lateral_gain: [1/s] cross-track gain of the lateral (Stanley) controller.
+        path_preview: [s] the path's direction and curvature are taken this far ahead
+            (at the current speed), against the body's yaw lag.
         max_lateral_accel: [m/s^2] limit of the lateral controller.
         seed: random seed of the drivers' draws.
     """
@@ -89,6 +92,7 @@ class TrafficConfig:
     reaction_time: float = 0.1
     brake_limit: float = 0.9
     lateral_gain: float = 1.0
+    path_preview: float = 0.1
     max_lateral_accel: float = 4.0
     seed: int = 0
 
@@ -121,8 +125,8 @@ class TrafficConfig:
             raise ValueError(f"hov_share must be in 0..1, got {self.hov_share}")
         if not 0 < self.brake_limit <= 1:
             raise ValueError(f"brake_limit must be in (0, 1], got {self.brake_limit}")
-        if self.emergency_margin < 0 or self.reaction_time < 0:
-            raise ValueError("emergency_margin and reaction_time must be >= 0")
+        if self.emergency_margin < 0 or self.reaction_time < 0 or self.path_preview < 0:
+            raise ValueError("emergency_margin, reaction_time and path_preview must be >= 0")
         if any(len(o) != 2 or not o[0] < o[1] for o in self.hov_openings):
             raise ValueError(f"hov_openings must be (x0, x1) with x0 < x1: {self.hov_openings}")
         _check_mobil(self.mobil)
@@ -184,7 +188,8 @@ class Commands:
 
     ``accel`` [m/s^2] for the vehicle model's acceleration tracking, ``steer`` [rad]
     front-wheel angle, ``lane`` the lane each vehicle is driving to (its own when not
-    changing), ``changing`` whether it is mid-lane-change.
+    changing), ``changing`` whether it is mid-lane-change (until it is centred in the
+    new lane), ``path_y`` [m] the lateral position its path asks for now.
     """
 
     id: np.ndarray
@@ -192,6 +197,7 @@ class Commands:
     steer: np.ndarray
     lane: np.ndarray
     changing: np.ndarray
+    path_y: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -561,13 +567,18 @@ class TrafficManager:
         if n == 0:
             self.time += cfg.dt
             self._steps += 1
-            return Commands(*(np.empty(0) for _ in range(5)))
+            return Commands(*(np.empty(0) for _ in range(6)))
         obstacles = NO_OBSTACLES if obstacles is None else obstacles
         speed = np.maximum(states.speed, 0.0)
         x, length = states.x, d.length
         center = x + 0.5 * length
+        # a change is over when its path has ended and the vehicle is centred in its lane
         changing = d.lane_from != d.lane
-        done = changing & (center >= d.start_x + d.path_length)
+        done = (
+            changing
+            & (center >= d.start_x + d.path_length)
+            & (np.abs(states.y - _lane_center(d.lane)) < SETTLED)
+        )
         d.lane_from[done] = d.lane[done]
 
         # leaders in every lane each vehicle occupies, obstacles after the vehicles
@@ -632,8 +643,12 @@ class TrafficManager:
         d.accel = command
 
         # lateral: the lane centre or the lane-change path, by the Stanley controller
-        path, slope, bend = path_shape(
-            center, d.start_x, d.start_y, _lane_center(d.lane), d.path_length
+        # Stanley on the path's cross-track error here, with the path's direction and
+        # curvature taken a little ahead to make up for the body's yaw lag
+        end_y = _lane_center(d.lane)
+        path, _, _ = path_shape(center, d.start_x, d.start_y, end_y, d.path_length)
+        _, slope, bend = path_shape(
+            center + cfg.path_preview * speed, d.start_x, d.start_y, end_y, d.path_length
         )
         heading_error = np.angle(
             np.exp(1j * (states.heading - self._heading[(d.road > 0) * 1] + np.arctan(slope)))
@@ -659,6 +674,7 @@ class TrafficManager:
             steer=steer,
             lane=d.lane.copy(),
             changing=d.lane_from != d.lane,
+            path_y=path,
         )
 
     # -- lane changes -----------------------------------------------------------------
