@@ -583,24 +583,25 @@ class TrafficManager:
 
         # leaders in every lane each vehicle occupies, obstacles after the vehicles
         k = len(obstacles)
+
+        def join(mine, theirs):
+            return np.concatenate([mine, theirs]) if k else mine
+
         none = np.zeros(k, np.int8)
+        road_all, x_all = join(d.road, obstacles.road), join(x, obstacles.x)
         occupancy = Occupancy.build(
-            np.concatenate([d.road, obstacles.road]),
-            np.concatenate([x, obstacles.x]),
-            [
-                np.concatenate([d.lane, obstacles.lane]),
-                np.concatenate([d.lane_from, none]),
-                np.concatenate([states.lane, none]),
-            ],
+            road_all,
+            x_all,
+            [join(d.lane, obstacles.lane), join(d.lane_from, none), join(states.lane, none)],
         )
         scene = _Scene(
             n=n,
-            road=np.concatenate([d.road, obstacles.road]),
-            x=np.concatenate([x, obstacles.x]),
-            y=np.concatenate([states.y, lane_center(obstacles.lane)]),
-            length=np.concatenate([length, obstacles.length]),
-            speed=np.concatenate([speed, obstacles.speed]),
-            accel=np.concatenate([d.accel, obstacles.accel]),
+            road=road_all,
+            x=x_all,
+            y=join(states.y, _lane_center(obstacles.lane)),
+            length=join(length, obstacles.length),
+            speed=join(speed, obstacles.speed),
+            accel=join(d.accel, obstacles.accel).copy(),
             occupancy=occupancy,
         )
         driven = occupancy.owner < n
@@ -645,14 +646,16 @@ class TrafficManager:
         # lateral: the lane centre or the lane-change path, by the Stanley controller
         # Stanley on the path's cross-track error here, with the path's direction and
         # curvature taken a little ahead to make up for the body's yaw lag
-        end_y = _lane_center(d.lane)
-        path, _, _ = path_shape(center, d.start_x, d.start_y, end_y, d.path_length)
-        _, slope, bend = path_shape(
-            center + cfg.path_preview * speed, d.start_x, d.start_y, end_y, d.path_length
-        )
-        heading_error = np.angle(
-            np.exp(1j * (states.heading - self._heading[(d.road > 0) * 1] + np.arctan(slope)))
-        )
+        path = _lane_center(d.lane)
+        slope, bend = np.zeros(n), np.zeros(n)
+        moving = np.flatnonzero(d.lane_from != d.lane)
+        if moving.size:
+            start_x, start_y = d.start_x[moving], d.start_y[moving]
+            end_y, length = path[moving], d.path_length[moving]
+            path[moving] = path_shape(center[moving], start_x, start_y, end_y, length)[0]
+            ahead = center[moving] + cfg.path_preview * speed[moving]
+            _, slope[moving], bend[moving] = path_shape(ahead, start_x, start_y, end_y, length)
+        heading_error = _wrap(states.heading - self._heading[(d.road > 0) * 1] + np.arctan(slope))
         max_steer = np.minimum(
             MAX_STEER,
             np.arctan(d.wheelbase * cfg.max_lateral_accel / np.maximum(speed, 1.0) ** 2),
@@ -892,6 +895,11 @@ def _free(v: np.ndarray, params: IDMParams) -> np.ndarray:
 def _idm(v, v_lead, gap, params: IDMParams) -> np.ndarray:
     """The manager's IDM: :func:`_free` plus the interaction term."""
     return _free(v, params) + interaction_term(v, v_lead, gap, params)
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles [rad] into [-pi, pi)."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def _lane_center(lane: np.ndarray) -> np.ndarray:
