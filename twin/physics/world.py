@@ -21,6 +21,7 @@ from twin.physics.map_bodies import load_map_bodies
 from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
 from twin.vehicle_classes import vehicle_classes
 
+_chain = itertools.chain.from_iterable
 RAY_GROUP = 1  # pybullet's default group of a ray
 ROAD_GROUP = 2
 VEHICLE_GROUP = 4
@@ -361,7 +362,9 @@ class PhysicsWorld:
                 collisionFilterMask=ROAD_GROUP,
                 physicsClientId=self.client,
             )
-            hit = np.array([(h[2], *h[4]) for h in hits]).reshape(-1, 4, 4)
+            rays = len(hits)
+            fraction = np.fromiter((h[2] for h in hits), np.float64, rays).reshape(-1, 4)
+            point = np.fromiter(_chain(h[4] for h in hits), np.float64, 3 * rays)
             forces = vehicle_forces(
                 self._params,
                 Controls(**self._controls),
@@ -370,8 +373,8 @@ class PhysicsWorld:
                 velocity + self._impulse,
                 angular,
                 self._spin,
-                hit[..., 0],
-                hit[..., 1:],
+                fraction,
+                point.reshape(-1, 4, 3),
                 dt,
             )
             force = forces.force + self._params.mass[:, None] * self._impulse / dt
@@ -427,8 +430,9 @@ class PhysicsWorld:
             poses = [get_pose(b, client) for b in bodies]
             twists = [get_twist(b, client) for b in bodies]
             n = len(bodies)
-            pose = np.array([(*a, *b) for a, b in poses]).reshape(n, 7)
-            twist = np.array([(*a, *b) for a, b in twists]).reshape(n, 6)
+            # flattened by fromiter: half the time of building tuples for np.array
+            pose = np.fromiter(_chain(_chain(poses)), np.float64, 7 * n).reshape(n, 7)
+            twist = np.fromiter(_chain(_chain(twists)), np.float64, 6 * n).reshape(n, 6)
             quaternion = pose[:, 3:]
             self._read = (
                 pose[:, :3],
