@@ -19,3 +19,7 @@ class NoVehicleNearError(TwinError):
 
 class MapError(TwinError):
     """A map source file or a built map is missing, malformed or inconsistent."""
+
+
+class ControllerError(TwinError):
+    """A user's ego controller failed or returned something that is not a command."""

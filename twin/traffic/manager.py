@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from twin.data.i24 import HOV_LANE, LANE_WIDTH, LANES, N_LANES, lane_center
-from twin.errors import TwinError
+from twin.errors import ControllerError
 from twin.physics.vehicle import GRAVITY, VehicleParams
 from twin.traffic.control import path_shape, required_decel, stanley_steer
 from twin.traffic.drivers import DriverDistribution
@@ -42,10 +42,6 @@ NEIGHBOUR_RANGE = 150.0  # [m] along the road, for the ego's observation
 IDM_FIELDS = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
 MOBIL_FIELDS = ("politeness", "threshold", "safe_decel", "keep_right")
 LEFT, RIGHT = 1, -1  # lane-change directions: toward lane -1, toward lane -4
-
-
-class ControllerError(TwinError):
-    """A user's ego controller failed or returned something that is not a command."""
 
 
 @dataclass(frozen=True)

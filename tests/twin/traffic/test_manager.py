@@ -6,8 +6,8 @@ import pytest
 
 from tests.twin.traffic.conftest import PointMasses, make_manager, point_mass_manager, run, spawn
 from twin.data.i24 import lane_center
+from twin.errors import ControllerError
 from twin.traffic.manager import (
-    ControllerError,
     EgoCommand,
     Obstacles,
     TrafficConfig,
