@@ -275,7 +275,6 @@ class _Drivers:
     vehicle_class: np.ndarray
     length: np.ndarray
     wheelbase: np.ndarray
-    max_decel: np.ndarray  # [m/s^2] commanded braking limit
     tyre_decel: np.ndarray  # [m/s^2] mu g, the limit of emergency braking
     desired_speed: np.ndarray
     time_headway: np.ndarray
@@ -407,7 +406,6 @@ class TrafficManager:
             vehicle_class=np.asarray(params.vehicle_class, dtype=np.int64),
             length=params.length.copy(),
             wheelbase=params.mounts[:, 0, 0] - params.mounts[:, 2, 0],
-            max_decel=cfg.brake_limit * params.mu * GRAVITY,
             tyre_decel=params.mu * GRAVITY,
             desired_speed=desired,
             time_headway=drawn.time_headway,
@@ -630,7 +628,8 @@ class TrafficManager:
 
         if self._steps % self._decision_every == 0:
             self._decide_lane_changes(scene, center)
-        low, high = np.where(emergency, -d.tyre_decel, -d.max_decel), d.max_accel
+        normal_limit = cfg.brake_limit * d.tyre_decel
+        low, high = np.where(emergency, -d.tyre_decel, -normal_limit), d.max_accel
         if self._controllers:
             # a user's controller may use all the tyres give; the engine limits the rest
             command, controlled = self._ask_controllers(scene, command)
