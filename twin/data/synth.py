@@ -146,8 +146,10 @@ PRESET_A = SynthConfig(
     flow=(450.0, 900.0, 850.0, 650.0),
 )
 
-#: Scenario B of the paper: westbound (inbound), a stop-and-go wave reaching the HOV
-#: lane near x = 700 m at 06:45:50 while lanes -3 and -4 are only mildly disturbed.
+#: Scenario B of the paper: westbound (inbound), a stop-and-go wave arriving in the HOV
+#: lane: the vehicle at x = 700 m in lane -1 at 06:45:50 is at cruise speed, meets the
+#: wave's front a few seconds later and is stopped within the 30 s episode, while lanes
+#: -3 and -4 are only mildly disturbed.
 PRESET_B = SynthConfig(
     road=Road.WESTBOUND,
     anchor=SCENARIO_TIME,
@@ -155,9 +157,9 @@ PRESET_B = SynthConfig(
     flow=(2300.0, 2100.0, 1600.0, 1300.0),
     slowdowns=(
         Slowdown(t=-560.0, x=2500.0, lanes=(-1, -2), speed=3.0, duration=15.0),
-        Slowdown(t=-370.0, x=2450.0, lanes=(-1,), speed=0.0, duration=20.0),
-        Slowdown(t=-370.0, x=2450.0, lanes=(-2,), speed=6.0, duration=10.0),
-        Slowdown(t=-370.0, x=2450.0, lanes=(-3, -4), speed=22.0, duration=8.0),
+        Slowdown(t=-285.0, x=2450.0, lanes=(-1,), speed=0.0, duration=20.0),
+        Slowdown(t=-285.0, x=2450.0, lanes=(-2,), speed=6.0, duration=10.0),
+        Slowdown(t=-285.0, x=2450.0, lanes=(-3, -4), speed=22.0, duration=8.0),
         Slowdown(t=0.0, x=2500.0, lanes=(-1, -2), speed=2.0, duration=15.0),
         Slowdown(t=200.0, x=2450.0, lanes=(-1,), speed=4.0, duration=12.0),
     ),
