@@ -398,8 +398,10 @@ class PhysicsWorld:
         self._read = None
 
     def states(self) -> VehicleStates:
-        """The active vehicles now (after the last step)."""
+        """The active vehicles now (after the last step). A vehicle spawned since then
+        is reported at its spawn speed: its impulse is applied in the next step."""
         position, quaternion, velocity, angular, rotation = self._state()
+        velocity = velocity + self._impulse
         coords = self.road.to_road(position)
         return VehicleStates(
             id=self._ids.copy(),

@@ -49,6 +49,8 @@ def test_spawn_speed_is_exact_one_step_after_spawn_and_after_holding(world, road
     slot = np.arange(speed.size)
     x = -350.0 + 80.0 * (slot // 4)
     ids = spawn(world, road, x, speed, cls, y=(1.5 + slot % 4) * LANE_WIDTH)
+    # before the impulse's step the state already tells the spawn speed (drivers see it)
+    assert world.states().speed == pytest.approx(speed, abs=1e-9)
     world.set_controls(ids, accel=np.zeros(ids.size))
     world.step()
     error = np.abs(world.states().speed - speed) / np.maximum(speed, 1.0)
