@@ -34,6 +34,48 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"i24-twin {__version__}")
     commands = parser.add_subparsers(title="commands")
 
+    p = commands.add_parser(
+        "run",
+        help="one cosimulation episode: ego in recorded traffic; writes a run folder",
+        description="Run the paper's ghost-cell cosimulation around an ego and write a run "
+        "folder (config.toml, trajectories.parquet, metrics.json, timespace.png, bev.png). "
+        "Settings: preset (--scenario) < --config file < flags.",
+    )
+    p.add_argument("--scenario", choices=["A", "B"], default=None, help="paper preset (default B)")
+    p.add_argument("--config", type=Path, default=None, help="TOML configuration file")
+    p.add_argument(
+        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
+    )
+    p.add_argument("--road", default=None, help="eastbound or westbound")
+    p.add_argument("--lane", type=int, default=None, help="desired ego lane, -1 (HOV) .. -4")
+    p.add_argument("--x", type=float, default=None, help="desired ego x [m] along travel")
+    p.add_argument("--time", default=None, help="desired ego time: unix or ISO 8601 with offset")
+    p.add_argument("--duration", type=float, default=None, help="episode length t_max [s]")
+    p.add_argument("--dt", type=float, default=None, help="step [s] (default 0.01)")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
+    p.add_argument("--w-visible", type=float, default=None, help="visible window each side [m]")
+    p.add_argument("--w-ghost", type=float, default=None, help="ghost window beyond it [m]")
+    p.add_argument(
+        "--ghost-smoothing", type=float, default=None, help="lag on ghost speeds [s] (0: off)"
+    )
+    p.add_argument(
+        "--ego-controller", default=None, help="module:function driving the ego (see README)"
+    )
+    p.add_argument("--bev-time", type=float, default=None, help="time of bev.png [s after t0]")
+    p.add_argument("--bev-video", action="store_true", default=None, help="also write bev.mp4")
+    p.add_argument(
+        "--set",
+        dest="assignments",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any other setting, e.g. --set traffic.hov_share=0.2 (repeatable)",
+    )
+    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/<scenario>)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_run)
+
     data = commands.add_parser("data", help="I-24 MOTION data: ingest, inspect, synthesize, plot")
     data_commands = data.add_subparsers(title="data commands")
 
@@ -124,11 +166,57 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_traffic)
+    p = bench_commands.add_parser(
+        "run", help="the whole cosimulation loop of scenario B (no outputs written)"
+    )
+    p.add_argument("--scenario", choices=["A", "B"], default="B")
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_run)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_ingest)
     return parser
+
+
+def _run_config(args):
+    from twin.cosim.config import PRESETS, SCENARIO_B, load_config, override, parse_assignments
+    from twin.timeutil import parse_time
+
+    base = PRESETS[args.scenario] if args.scenario else None
+    config = base or SCENARIO_B
+    if args.config is not None:
+        config = load_config(args.config, base=base)
+    flags = {
+        "road": args.road,
+        "lane": args.lane,
+        "x": args.x,
+        "time": parse_time(args.time) if args.time is not None else None,
+        "t_max": args.duration,
+        "dt": args.dt,
+        "seed": args.seed,
+        "vel_default": args.vel_default,
+        "w_visible": args.w_visible,
+        "w_ghost": args.w_ghost,
+        "ghost_smoothing": args.ghost_smoothing,
+        "ego_controller": args.ego_controller,
+        "bev_time": args.bev_time,
+        "bev_video": args.bev_video,
+    }
+    values = parse_assignments(args.assignments)
+    values.update({k: v for k, v in flags.items() if v is not None})
+    return override(config, values, source="command line")
+
+
+def _run(args) -> int:
+    from twin.cosim.run import open_data, run_episode, summary
+
+    config = _run_config(args)
+    store = open_data(args.data, progress=not args.quiet)
+    out = args.out if args.out is not None else Path("runs") / config.scenario
+    result = run_episode(config, store, out, progress=not args.quiet)
+    print(summary(result))
+    return 0
 
 
 def _store(path: Path | None):
@@ -253,6 +341,12 @@ def _bench_traffic(args) -> int:
         "traffic",
         traffic_bench(vehicles=args.vehicles, steps=args.steps, repeats=args.repeats),
     )
+
+
+def _bench_run(args) -> int:
+    from twin.bench import run_bench
+
+    return _emit("run", run_bench(scenario=args.scenario, repeats=args.repeats))
 
 
 def _bench_ingest(args) -> int:

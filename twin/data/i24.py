@@ -115,17 +115,22 @@ def y_feet(y_m: np.ndarray, road: Road) -> np.ndarray:
     return -road.direction * np.asarray(y_m, dtype=np.float64) / FT
 
 
+_LANE_OF_BAND = np.array([0, *(-k for k in range(1, N_LANES + 1)), 0], dtype=np.int8)
+
+
 def lane_of(y_m: np.ndarray) -> np.ndarray:
-    """Lane id (-1..-4) of road-frame y [m]; 0 where y lies outside the four lane bands.
+    """Lane id (-1..-4) of road-frame y [m]; 0 where y lies outside the four lane bands
+    (or is NaN).
 
     Returns:
         (n,) int8.
     """
     # A nanometre of tolerance so that band edges given in feet (e.g. 60 ft) land on
-    # the band they start, despite the ft -> m round-off.
-    k = np.floor(np.asarray(y_m, dtype=np.float64) / LANE_WIDTH + 1e-9)
-    inside = (k >= 1) & (k <= N_LANES)
-    return np.where(inside, -k, 0).astype(np.int8)
+    # the band they start, despite the ft -> m round-off. fmin/fmax send NaN to the
+    # outside band; the cosimulator calls this every step, so it is kept to few ops.
+    band = np.asarray(y_m, dtype=np.float64) / LANE_WIDTH + 1e-9
+    band = np.fmax(np.fmin(band, N_LANES + 1.0), 0.0)
+    return _LANE_OF_BAND[band.astype(np.intp)]
 
 
 def lane_center(lane: np.ndarray | int) -> np.ndarray:

@@ -177,7 +177,7 @@ class EmpiricalTraffic:
             & (chunk.lo[i0:i1] <= s + _EPS)
             & (chunk.hi[i0:i1] >= s - _EPS)
         )
-        rows = np.flatnonzero(keep)
+        rows = keep.nonzero()[0]
         rows = rows[np.argsort(x[rows], kind="stable")]
         x = x[rows]
         rows += i0
@@ -198,6 +198,17 @@ class EmpiricalTraffic:
             height=meta["height"][tid],
             vehicle_class=meta["vehicle_class"][tid],
         )
+
+    def preload(self, road: Road | str, t_start: float, t_end: float) -> int:
+        """Build the frame tables covering ``t_start`` to ``t_end`` now (as many as the
+        cache holds, earliest first), so that snapshots in that span never pause to
+        build one. Returns how many tables are in the cache for the span."""
+        road = Road.parse(road)
+        first, last = math.floor(t_start / self.chunk), math.floor(t_end / self.chunk)
+        keys = list(range(first, last + 1))[: self.cache_chunks]
+        for k in reversed(keys):  # the earliest is used first: keep it the most recent
+            self._chunk(road, k)
+        return len(keys)
 
     def closest(
         self,

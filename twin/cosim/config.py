@@ -1,0 +1,314 @@
+"""Configuration of a cosimulation run: the paper's settings, presets A and B, TOML.
+
+A run is described by one frozen :class:`CosimConfig`. The command line builds it as
+preset (``--scenario``) < TOML file (``--config``) < flags; the resolved configuration
+is written with every run as ``config.toml``, which loads back to the same object.
+"""
+
+import math
+import tomllib
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from twin.data import i24
+from twin.data.i24 import Road
+from twin.data.synth import SCENARIO_TIME
+from twin.errors import TwinError
+from twin.physics.world import MAX_SPEED, PhysicsConfig
+from twin.traffic.manager import TrafficConfig
+
+MPH = 0.44704  # [m/s per mph]
+VEL_DEFAULT = 70.0 * MPH  # [m/s] the posted limit of this stretch (I24_DATA.md)
+
+
+class ConfigError(TwinError):
+    """A configuration file or override is malformed or impossible."""
+
+
+@dataclass(frozen=True)
+class CosimConfig:
+    """One cosimulation run (DESIGN.md: the paper's configuration, with its defaults).
+
+    Attributes:
+        scenario: a label for the run ("A", "B" for the presets, else "custom").
+        road: carriageway of the ego.
+        lane, x, time: the desired ego lane, road-frame x [m] and unix time [s]; the
+            ego is the recorded vehicle closest to them.
+        t_max: [s] episode length.
+        dt: [s] step of physics and cosimulation.
+        vel_default: [m/s] desired speed of the ego and of the visible vehicles that
+            do not lead their lane ahead of the ego.
+        w_visible: [m] visible window each side of the ego.
+        w_ghost: [m] ghost window beyond each end of the visible window.
+        ghost_smoothing: [s] time constant of a first-order lag on the speed a lane's
+            lead vehicle takes from its ghost (0: off, the paper's behaviour).
+        spawn_clearance: [m] bumper-to-bumper room a spawned vehicle needs to any body
+            it shares its lane's width with...
+        spawn_decel: [m/s^2] ...plus the difference of their braking distances at this
+            deceleration when the one behind is faster.
+        ego_controller: ``"module:function"`` driving the ego (see
+            :mod:`twin.traffic.manager`, ``EgoController``); empty: the traffic manager.
+        ghost_log_rate: [Hz] rate at which the ghost set is written to the log.
+        bev_time: [s] after t0 of the bird's-eye picture; ``None``: half the episode.
+        bev_video: also write ``bev.mp4`` of the whole episode.
+        seed: seed of every random choice of the run (drivers, HOV eligibility).
+        traffic: traffic-manager settings; its ``dt`` and ``seed`` are the run's.
+    """
+
+    scenario: str = "custom"
+    road: Road = Road.WESTBOUND
+    lane: int = -1
+    x: float = 700.0
+    time: float = SCENARIO_TIME
+    t_max: float = 30.0
+    dt: float = 0.01
+    vel_default: float = VEL_DEFAULT
+    w_visible: float = 150.0
+    w_ghost: float = 50.0
+    ghost_smoothing: float = 0.0
+    spawn_clearance: float = 2.0
+    spawn_decel: float = 4.0
+    ego_controller: str = ""
+    ghost_log_rate: float = 10.0
+    bev_time: float | None = None
+    bev_video: bool = False
+    seed: int = 0
+    traffic: TrafficConfig = field(default_factory=TrafficConfig)
+
+    def __post_init__(self):
+        try:
+            object.__setattr__(self, "road", Road.parse(self.road))
+        except ValueError as error:
+            raise ConfigError(f"road: {error}") from None
+        if self.lane not in i24.LANES or isinstance(self.lane, bool):
+            raise ConfigError(f"lane must be one of {i24.LANES}, got {self.lane!r}")
+        numbers = {
+            "x": self.x,
+            "time": self.time,
+            "t_max": self.t_max,
+            "dt": self.dt,
+            "vel_default": self.vel_default,
+            "w_visible": self.w_visible,
+            "w_ghost": self.w_ghost,
+            "ghost_smoothing": self.ghost_smoothing,
+            "spawn_clearance": self.spawn_clearance,
+            "spawn_decel": self.spawn_decel,
+            "ghost_log_rate": self.ghost_log_rate,
+        }
+        for name, value in numbers.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"{name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ConfigError(f"{name} must be finite, got {value!r}")
+        positive = ("t_max", "w_visible", "w_ghost", "spawn_decel", "ghost_log_rate")
+        for name in positive:
+            if not numbers[name] > 0:
+                raise ConfigError(f"{name} must be > 0, got {numbers[name]!r}")
+        if self.ghost_smoothing < 0 or self.spawn_clearance < 0:
+            raise ConfigError("ghost_smoothing and spawn_clearance must be >= 0")
+        if not 0 < self.vel_default <= MAX_SPEED:
+            raise ConfigError(
+                f"vel_default must be in (0, {MAX_SPEED}] m/s, got {self.vel_default}"
+            )
+        try:
+            PhysicsConfig(dt=self.dt)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+        every = 1.0 / (self.ghost_log_rate * self.dt)
+        if abs(every - round(every)) > 1e-6 or round(every) < 1:
+            raise ConfigError(
+                f"ghost_log_rate {self.ghost_log_rate} Hz must divide the step rate "
+                f"{1 / self.dt:g} Hz"
+            )
+        if self.bev_time is not None and not 0 <= self.bev_time <= self.t_max:
+            raise ConfigError(
+                f"bev_time must be in [0, t_max = {self.t_max}] s, got {self.bev_time}"
+            )
+        if self.ego_controller and self.ego_controller.count(":") != 1:
+            raise ConfigError(
+                f"ego_controller must be 'module:function', got {self.ego_controller!r}"
+            )
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
+        try:
+            traffic = replace(self.traffic, dt=self.dt, seed=self.seed)
+        except ValueError as error:
+            raise ConfigError(f"traffic: {error}") from None
+        object.__setattr__(self, "traffic", traffic)
+
+    @property
+    def steps(self) -> int:
+        """Physics steps in the episode."""
+        return math.ceil(self.t_max / self.dt - 1e-9)
+
+    @property
+    def ghost_log_every(self) -> int:
+        """Steps between two ghost-set records."""
+        return round(1.0 / (self.ghost_log_rate * self.dt))
+
+
+#: Scenario A of the paper: eastbound, lane -2, x = 300 m, light traffic.
+SCENARIO_A = CosimConfig(scenario="A", road=Road.EASTBOUND, lane=-2, x=300.0)
+#: Scenario B of the paper: westbound, HOV lane, x = 700 m, a stop-and-go wave arrives.
+SCENARIO_B = CosimConfig(scenario="B", road=Road.WESTBOUND, lane=-1, x=700.0)
+PRESETS = {"A": SCENARIO_A, "B": SCENARIO_B}
+
+
+# -- TOML ----------------------------------------------------------------------------
+
+
+def to_toml(config: CosimConfig) -> str:
+    """The configuration as TOML (``None`` values are left out; they are the default)."""
+    lines = ["# i24-twin cosimulation configuration (resolved; loads back with --config)"]
+    _table(config, [], lines)
+    return "\n".join(lines) + "\n"
+
+
+def from_toml(
+    text: str, *, source: str = "configuration", base: CosimConfig | None = None
+) -> CosimConfig:
+    """Parse TOML into a configuration.
+
+    Keys override the fields of ``base``; without a base, a top-level ``scenario = "A"``
+    or ``"B"`` starts from that preset, anything else from the defaults. Nested
+    settings go in ``[traffic]``, ``[traffic.drivers]`` and ``[traffic.mobil]`` tables.
+
+    Raises:
+        ConfigError: malformed TOML, an unknown key, a value of the wrong type or an
+            impossible value, naming the key and ``source``.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{source} is not valid TOML: {error}") from None
+    if base is None:
+        base = PRESETS.get(data.get("scenario"), CosimConfig())
+    return override(base, data, source=source)
+
+
+def load_config(path: str | Path, *, base: CosimConfig | None = None) -> CosimConfig:
+    """Read a TOML configuration file (see :func:`from_toml`).
+
+    Raises:
+        ConfigError: the file cannot be read or is not a valid configuration.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as error:
+        raise ConfigError(f"cannot read configuration {path}: {error.strerror}") from None
+    return from_toml(text, source=str(path), base=base)
+
+
+def parse_assignments(assignments: list[str]) -> dict:
+    """``["traffic.hov_share=0.2", "road=eastbound"]`` as nested dicts; values in TOML
+    syntax, bare words taken as strings.
+
+    Raises:
+        ConfigError: an assignment without ``=``.
+    """
+    values: dict = {}
+    for item in assignments:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r}: expected KEY=VALUE, e.g. traffic.hov_share=0.2")
+        try:
+            value = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = text.strip()
+        *tables, name = key.strip().split(".")
+        target = values
+        for table in tables:
+            target = target.setdefault(table, {})
+        target[name] = value
+    return values
+
+
+def override(config: Any, values: dict, *, source: str = "override", prefix: str = "") -> Any:
+    """``config`` (a configuration dataclass) with ``values`` (nested dicts) applied.
+
+    Raises:
+        ConfigError: an unknown key or a bad value, named as ``prefix.key``.
+    """
+    names = {f.name: f for f in fields(config)}
+    changes = {}
+    for key, value in values.items():
+        where = f"{prefix}{key}"
+        if key not in names:
+            known = ", ".join(sorted(names))
+            raise ConfigError(f"{source}: unknown setting {where!r} (known here: {known})")
+        current = getattr(config, key)
+        if is_dataclass(current):
+            if not isinstance(value, dict):
+                raise ConfigError(f"{source}: {where} must be a table")
+            changes[key] = override(current, value, source=source, prefix=f"{where}.")
+        else:
+            changes[key] = _coerce(value, current, names[key], where, source)
+    try:
+        return replace(config, **changes)
+    except ConfigError as error:
+        raise ConfigError(f"{source}: {error}") from None
+    except (ValueError, TypeError) as error:
+        raise ConfigError(f"{source}: {prefix.rstrip('.') or 'settings'}: {error}") from None
+
+
+def _coerce(value, current, spec, where: str, source: str):
+    """Check a TOML value against the field's current value and type."""
+    default = spec.default if spec.default is not MISSING else current
+    if isinstance(value, dict):
+        raise ConfigError(f"{source}: {where} must be a value, not a table")
+    if isinstance(default, bool) or isinstance(value, bool):
+        if not isinstance(value, bool) or not isinstance(default, bool):
+            raise ConfigError(f"{source}: {where} must be {type(default).__name__}, got {value!r}")
+        return value
+    if isinstance(default, float) or (default is None and isinstance(value, (int, float))):
+        if not isinstance(value, (int, float)):
+            raise ConfigError(f"{source}: {where} must be a number, got {value!r}")
+        return float(value)
+    if isinstance(default, int):
+        if not isinstance(value, int):
+            raise ConfigError(f"{source}: {where} must be an integer, got {value!r}")
+        return value
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise ConfigError(f"{source}: {where} must be a string, got {value!r}")
+        return value
+    if isinstance(default, tuple):
+        if not isinstance(value, list):
+            raise ConfigError(f"{source}: {where} must be an array, got {value!r}")
+        return tuple(tuple(v) if isinstance(v, list) else v for v in value)
+    return value
+
+
+def _table(obj, path: list[str], lines: list[str]) -> None:
+    nested = []
+    for f in fields(obj):
+        value = getattr(obj, f.name)
+        if value is None:
+            continue
+        if is_dataclass(value):
+            nested.append((f.name, value))
+        else:
+            lines.append(f"{f.name} = {_value(value)}")
+    for name, value in nested:
+        lines.append("")
+        lines.append(f"[{'.'.join([*path, name])}]")
+        _table(value, [*path, name], lines)
+
+
+def _value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, Road):
+        return f'"{value.value}"'
+    if isinstance(value, (int, float)):
+        if math.isnan(value):
+            return "nan"
+        return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+        return f'"{escaped}"'
+    if isinstance(value, (tuple, list)):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {value!r} as TOML")

@@ -1,0 +1,549 @@
+"""The cosimulator: the paper's ghost-cell loop around an ego (DESIGN.md, steps 1 to 8).
+
+The ego and the recorded vehicles near it (the visible window, ``w_visible`` each side)
+are physics bodies driven by the traffic manager; the recorded vehicles beyond them
+(the ghost windows, ``w_ghost`` further each side) are never spawned: they are reloaded
+from the data every step and are the boundary condition of the visible traffic. The
+lead visible vehicle of each lane ahead of the ego takes the speed of the ghost ahead
+of it, and every visible vehicle respects the ghosts as obstacles, so a recorded wave
+reaches the ego through the simulated vehicles.
+
+Lifecycle::
+
+    sim = Cosimulator(config, traffic, map_bundle)
+    sim.reset()              # steps 1 and 2: choose the ego, spawn ego and visible set
+    while not sim.done:
+        sim.step()           # steps 3 to 7
+    log = sim.log            # every simulated vehicle every step, ghosts at a lower rate
+    sim.close()
+
+The cosimulator orchestrates: the world owns the bodies, the manager the drivers, the
+data layer the recording. Vehicles are named by the world's ids; the recorded vehicle
+each one was spawned from is kept beside it (its ``tid``), for the metrics.
+"""
+
+import importlib
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mapgen.build import MapBundle
+from twin.cosim.config import CosimConfig
+from twin.cosim.log import TrajectoryLog
+from twin.data.i24 import LANES, lane_of
+from twin.data.traffic import EmpiricalTraffic, RecordedVehicle, Snapshot
+from twin.errors import ControllerError, TwinError
+from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
+from twin.traffic.manager import EgoController, Obstacles, TrafficManager
+
+MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
+LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
+
+
+class ScenarioError(TwinError):
+    """The scenario cannot run on these data and this map (e.g. the data end too soon)."""
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Road-frame x ranges [m] of the back centres in each window, clipped to where
+    the map and the data exist: ``ghost_back`` < ``visible`` < ``ghost_front``."""
+
+    ghost_back: tuple[float, float]
+    visible: tuple[float, float]
+    ghost_front: tuple[float, float]
+
+    @classmethod
+    def around(
+        cls, x: float, w_visible: float, w_ghost: float, limits: tuple[float, float]
+    ) -> "Windows":
+        lo, hi = limits
+
+        def clip(a, b):
+            return (min(max(a, lo), hi), min(max(b, lo), hi))
+
+        return cls(
+            ghost_back=clip(x - w_visible - w_ghost, x - w_visible),
+            visible=clip(x - w_visible, x + w_visible),
+            ghost_front=clip(x + w_visible, x + w_visible + w_ghost),
+        )
+
+    @property
+    def span(self) -> tuple[float, float]:
+        return self.ghost_back[0], self.ghost_front[1]
+
+    def in_visible(self, x: np.ndarray) -> np.ndarray:
+        return (x >= self.visible[0]) & (x <= self.visible[1])
+
+    def in_ghost(self, x: np.ndarray) -> np.ndarray:
+        back, front = self.ghost_back, self.ghost_front
+        return ((x >= back[0]) & (x < back[1])) | ((x > front[0]) & (x <= front[1]))
+
+
+@dataclass
+class Counters:
+    """What happened in a run (the summary and ``metrics.json``)."""
+
+    spawned: int = 0  # visible vehicles spawned after t0 (ghosts entering)
+    spawned_initially: int = 0  # the visible set at t0, ego excluded
+    despawned: int = 0
+    skipped_overlap: int = 0  # spawns refused: a body was in the way
+    skipped_invalid: int = 0  # spawns refused: recorded state outside the lanes or too fast
+    spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
+    collisions: list = field(default_factory=list)  # (time [s], id, id) of new contacts
+    off_road: set = field(default_factory=set)  # ids ever outside the four lanes
+    ended: str = ""  # why the run ended before t_max ("" when it did not)
+
+
+@dataclass
+class StepTimes:
+    """Wall time [s] of the loop's parts, summed over steps (for ``twin bench run``)."""
+
+    steps: int = 0
+    total: float = 0.0
+    ghosts: float = 0.0  # step 7 (and 6's lookup): the data reload
+    physics: float = 0.0
+    manager: float = 0.0
+
+    def per_step(self) -> dict:
+        n = max(self.steps, 1)
+        return {
+            "step_ms": 1e3 * self.total / n,
+            "ghost_reload_ms": 1e3 * self.ghosts / n,
+            "physics_ms": 1e3 * self.physics / n,
+            "manager_ms": 1e3 * self.manager / n,
+        }
+
+
+class Cosimulator:
+    """One episode of the ghost-cell cosimulation (see the module doc).
+
+    Args:
+        config: the run's configuration.
+        traffic: the recorded traffic (``EmpiricalTraffic`` over a store).
+        bundle: the map (``mapgen.build.default_map()``).
+        controller: a user's ego controller; default: ``config.ego_controller`` if
+            set, else the traffic manager drives the ego.
+
+    Raises:
+        ControllerError: ``config.ego_controller`` cannot be imported.
+    """
+
+    def __init__(
+        self,
+        config: CosimConfig,
+        traffic: EmpiricalTraffic,
+        bundle: MapBundle,
+        *,
+        controller: EgoController | None = None,
+    ):
+        self.config = config
+        self.traffic = traffic
+        self.road = config.road
+        self.direction = config.road.direction
+        self.controller = controller or load_controller(config.ego_controller)
+        self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
+        headings = {r: bundle.road.heading(r) for r in (1, -1)}
+        self.manager = TrafficManager(config.traffic, headings)
+        self.limits = _limits(bundle, traffic, config.road)
+        self.counters = Counters()
+        self.times = StepTimes()
+        self.log: TrajectoryLog | None = None
+        self.ego: RecordedVehicle | None = None
+        self.ego_id = -1
+        self.t0 = math.nan
+        self.t = math.nan
+        self.step_index = 0
+        self.windows: Windows | None = None
+        self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
+        self._ghosts = _no_ghosts()
+        # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
+        n_tids = len(traffic.store.trajectory_arrays["id"])
+        self._is_sim = np.zeros(n_tids, dtype=bool)
+        self._is_ghost = np.zeros(n_tids, dtype=bool)
+        self._lead_speed = dict.fromkeys(LANES, math.nan)  # smoothed ghost speed per lane
+        self._just_spawned = (np.empty(0, np.int64), np.empty(0))  # ids, spawn speeds
+        self._touching: set = set()
+
+    # -- lifecycle --------------------------------------------------------------------
+
+    def close(self) -> None:
+        self.world.close()
+
+    def __enter__(self) -> "Cosimulator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def done(self) -> bool:
+        """True when the episode is over (t_max reached, or ended early)."""
+        return self.step_index >= self.config.steps or bool(self.counters.ended)
+
+    @property
+    def sim_time(self) -> float:
+        """[s] since t0."""
+        return self.step_index * self.config.dt
+
+    def reset(self) -> None:
+        """Steps 1 and 2: the ego is the recorded vehicle closest to the requested lane,
+        x and time; it and the recorded vehicles of the visible window are spawned at
+        their recorded speeds; the ghost set is loaded.
+
+        Raises:
+            NoVehicleNearError: no recorded vehicle near the request.
+            ScenarioError: the data do not cover the episode, or the request lies
+                outside the map and data.
+        """
+        cfg = self.config
+        lo, hi = self.limits
+        if not lo <= cfg.x <= hi:
+            raise ScenarioError(
+                f"x = {cfg.x:g} m is outside the range where map and data both exist on "
+                f"{self.road.value} ({lo:.0f} to {hi:.0f} m)"
+            )
+        ego = self.traffic.closest(self.road, cfg.lane, cfg.x, cfg.time)
+        t_last = self.traffic.store.time_range(self.road)[1]
+        if ego.t + cfg.t_max > t_last:
+            raise ScenarioError(
+                f"the episode would run to unix {ego.t + cfg.t_max:.2f} but the data on "
+                f"{self.road.value} end at {t_last:.2f}; start earlier or shorten t_max"
+            )
+        self.ego, self.t0, self.t = ego, ego.t, ego.t
+        self.traffic.preload(self.road, self.t0, self.t0 + cfg.t_max)
+        self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
+        ego_state = _recorded_states(
+            self.direction, [ego.x], [ego.y], [ego.speed], [ego.vehicle_class], [ego.length],
+            [ego.width], [ego.height], [ego.tid],
+        )  # fmt: skip
+        self.ego_id = int(self._spawn(ego_state, desired_speed=cfg.vel_default)[0])
+        if self.controller is not None:
+            self.manager.set_controller(self.ego_id, self.controller)
+        self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
+        snap = self._snapshot()
+        visible = np.flatnonzero(self.windows.in_visible(snap.x) & (snap.tid != ego.tid))
+        self.counters.spawned_initially = self._spawn_recorded(snap, visible)
+        self._load_ghosts(snap)
+        states = self.world.states()
+        self._record(states, np.zeros(len(states.id)))
+
+    def step(self) -> None:
+        """Steps 3 to 7: desired speeds, one physics step, despawn, spawn, ghost reload."""
+        if self.log is None:
+            raise RuntimeError("call reset() before step()")
+        cfg, start = self.config, time.perf_counter()
+        states = self.world.states()
+
+        # 3. desired speeds; 4. one step of manager and physics
+        self._set_desired_speeds(states)
+        tick = time.perf_counter()
+        commands = self.manager.step(states, self._obstacles())
+        self.world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
+        tock = time.perf_counter()
+        self.world.step()
+        self.times.physics += time.perf_counter() - tock
+        self.times.manager += tock - tick
+        self.step_index += 1
+        self.t = self.t0 + self.step_index * cfg.dt
+        states = self.world.states()
+        self._check_spawn_speeds(states, commands)
+        self._check_contacts(states)
+
+        ego_x = float(states.x[states.id == self.ego_id][0])
+        lo, hi = self.limits
+        if not lo <= ego_x <= hi:
+            self.counters.ended = (
+                f"the ego left the range of map and data (x = {ego_x:.1f} m) at "
+                f"{self.sim_time:.2f} s"
+            )
+        self.windows = Windows.around(ego_x, cfg.w_visible, cfg.w_ghost, self.limits)
+
+        # 5. visible vehicles now outside the visible window are removed
+        out = ~self.windows.in_visible(states.x) & (states.id != self.ego_id)
+        if out.any():
+            gone = states.id[out]
+            self.manager.remove(gone)
+            self.world.despawn(gone)
+            keep = np.ones(self._tids.size, dtype=bool)
+            keep[np.searchsorted(states.id, gone)] = False  # _tids follow the world's ids
+            self._is_sim[self._tids[~keep]] = False
+            self._tids = self._tids[keep]
+            self.counters.despawned += gone.size
+
+        # 6. ghosts now inside the visible window are spawned; 7. the ghost set reloaded
+        tick = time.perf_counter()
+        snap = self._snapshot()
+        entering = np.flatnonzero(self.windows.in_visible(snap.x) & self._is_ghost[snap.tid])
+        self.times.ghosts += time.perf_counter() - tick
+        if entering.size:
+            self.counters.spawned += self._spawn_recorded(snap, entering)
+        tick = time.perf_counter()
+        self._load_ghosts(snap)
+        self.times.ghosts += time.perf_counter() - tick
+
+        if out.any() or entering.size:
+            states = self.world.states()
+        self._record(states, self._accel_of(states, commands))
+        self.times.steps += 1
+        self.times.total += time.perf_counter() - start
+
+    def run(self, progress: bool = False) -> None:
+        """Reset (if not done yet) and step to the end, with a progress bar if asked."""
+        from tqdm import tqdm
+
+        if self.log is None:
+            self.reset()
+        with tqdm(
+            total=self.config.steps,
+            initial=self.step_index,
+            unit="step",
+            disable=None if progress else True,
+            desc=f"scenario {self.config.scenario}",
+        ) as bar:
+            while not self.done:
+                self.step()
+                bar.update(1)
+
+    # -- the paper's steps, in parts --------------------------------------------------
+
+    def _snapshot(self) -> Snapshot:
+        x0, x1 = self.windows.span
+        return self.traffic.snapshot(self.road, self.t, x0, x1)
+
+    def _load_ghosts(self, snap: Snapshot) -> None:
+        """Step 7: the recorded vehicles in the ghost windows that are not simulated."""
+        ghost = self.windows.in_ghost(snap.x) & ~self._is_sim[snap.tid] & (snap.lane != 0)
+        rows = np.flatnonzero(ghost)
+        self._is_ghost[self._ghosts.tid] = False
+        self._ghosts = Ghosts.take(snap, rows)
+        self._is_ghost[self._ghosts.tid] = True
+        if self.step_index % self.config.ghost_log_every == 0:
+            self.log.add_ghosts(self.sim_time, self._ghosts)
+
+    def _obstacles(self) -> Obstacles:
+        g = self._ghosts
+        return Obstacles.make(self.direction, g.lane, g.x, g.length, g.speed)
+
+    def _set_desired_speeds(self, states) -> None:
+        """Step 3: vel_default for all but the lead visible vehicle of each lane ahead of
+        the ego, which takes the speed of the ghost ahead of it (vel_default if none)."""
+        cfg = self.config
+        desired = np.full(states.id.size, cfg.vel_default)
+        lanes = self.manager.lanes(states.id)
+        ego_x = states.x[states.id == self.ego_id][0]
+        ahead = (states.id != self.ego_id) & (states.x > ego_x)
+        g = self._ghosts
+        for lane in LANES:
+            rows = np.flatnonzero(ahead & (lanes == lane))
+            if rows.size == 0:
+                self._lead_speed[lane] = math.nan
+                continue
+            lead = rows[np.argmax(states.x[rows])]
+            beyond = np.flatnonzero((g.lane == lane) & (g.x > states.x[lead]))
+            target = (
+                float(g.speed[beyond[np.argmin(g.x[beyond])]]) if beyond.size else cfg.vel_default
+            )
+            desired[lead] = self._smooth(lane, target)
+        self.manager.set_desired_speed(states.id, desired)
+
+    def _smooth(self, lane: int, target: float) -> float:
+        """The optional first-order lag on a lane lead's ghost speed."""
+        tau, previous = self.config.ghost_smoothing, self._lead_speed[lane]
+        if tau > 0 and math.isfinite(previous):
+            target = previous + min(1.0, self.config.dt / tau) * (target - previous)
+        self._lead_speed[lane] = target
+        return target
+
+    def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray) -> int:
+        """Step 6 (and 2): spawn the recorded vehicles ``rows`` of ``snap`` where they
+        fit; count the ones skipped. Returns how many were spawned."""
+        if rows.size == 0:
+            return 0
+        rows = rows[np.argsort(snap.x[rows], kind="stable")]
+        valid = np.isin(snap.lane[rows], LANES) & (snap.speed[rows] <= MAX_SPEED)
+        self.counters.skipped_invalid += int(np.count_nonzero(~valid))
+        rows = rows[valid]
+        states = self.world.states()
+        params = self.world.params
+        body = {
+            "x": states.x,
+            "length": params.length,
+            "y": states.y,
+            "width": params.width,
+            "speed": np.maximum(states.speed, 0.0),
+        }
+        accepted = []
+        for i in rows:
+            if self._fits(snap, i, body):
+                accepted.append(i)
+                for name in body:
+                    body[name] = np.append(body[name], getattr(snap, name)[i])
+        self.counters.skipped_overlap += rows.size - len(accepted)
+        if not accepted:
+            return 0
+        accepted = np.array(accepted)
+        new = _recorded_states(
+            self.direction, snap.x[accepted], snap.y[accepted], snap.speed[accepted],
+            snap.vehicle_class[accepted], snap.length[accepted], snap.width[accepted],
+            snap.height[accepted], snap.tid[accepted],
+        )  # fmt: skip
+        self._spawn(new, desired_speed=self.config.vel_default)
+        return accepted.size
+
+    def _fits(self, snap: Snapshot, i: int, body: dict) -> bool:
+        """Whether recorded vehicle ``i`` can be spawned among the bodies: no body within
+        ``spawn_clearance`` plus the braking-distance difference, ahead or behind, among
+        those that overlap it laterally."""
+        cfg = self.config
+        x, length, speed = snap.x[i], snap.length[i], snap.speed[i]
+        side = np.abs(body["y"] - snap.y[i]) < 0.5 * (body["width"] + snap.width[i]) + (
+            LATERAL_MARGIN
+        )
+        if not side.any():
+            return True
+        bx, bl, bv = body["x"][side], body["length"][side], body["speed"][side]
+        ahead = bx >= x
+        gap = np.where(ahead, bx - (x + length), x - (bx + bl))
+        closing = np.where(ahead, speed**2 - bv**2, bv**2 - speed**2)
+        need = cfg.spawn_clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
+        return bool(np.all(gap >= need))
+
+    def _spawn(self, new: "_Recorded", *, desired_speed: float) -> np.ndarray:
+        ids = self.world.spawn(new.spawn)
+        self.manager.add(
+            ids,
+            np.full(ids.size, self.direction),
+            lane_of(new.spawn.y),
+            self.world.params_of(ids),
+            desired_speed=desired_speed,
+        )
+        self._tids = np.concatenate([self._tids, new.tid])
+        self._is_sim[new.tid] = True
+        ids_before, speeds_before = self._just_spawned
+        self._just_spawned = (
+            np.concatenate([ids_before, ids]),
+            np.concatenate([speeds_before, new.spawn.speed]),
+        )
+        return ids
+
+    # -- checks and records -----------------------------------------------------------
+
+    def _check_spawn_speeds(self, states, commands) -> None:
+        """Relative speed error of the vehicles spawned before this step, one step after
+        the impulse: |v - max(v_spawn + a_commanded dt, 0)| / max(v_spawn, 1 m/s)."""
+        ids, spawn_speed = self._just_spawned
+        if ids.size == 0:
+            return
+        at = np.searchsorted(states.id, ids)
+        accel = commands.accel[np.searchsorted(commands.id, ids)]
+        expected = np.maximum(spawn_speed + accel * self.config.dt, 0.0)  # brakes hold at 0
+        error = np.abs(states.speed[at] - expected) / np.maximum(spawn_speed, 1.0)
+        self.counters.spawn_speed_error.extend(error.tolist())
+        self._just_spawned = (np.empty(0, np.int64), np.empty(0))
+
+    def _check_contacts(self, states) -> None:
+        """New body contacts between vehicles are collisions; vehicles outside the four
+        lanes (or on the other road) are off the road."""
+        pairs = self.world.vehicle_contacts()
+        touching = set(map(tuple, pairs.tolist()))
+        for a, b in sorted(touching - self._touching):
+            self.counters.collisions.append((self.sim_time, a, b))
+        self._touching = touching
+        off = (states.lane == 0) | (states.road != self.direction)
+        if off.any():
+            self.counters.off_road.update(states.id[off].tolist())
+
+    def _accel_of(self, states, commands) -> np.ndarray:
+        """The commanded accelerations in the order of ``states`` (0 for new vehicles)."""
+        accel = np.zeros(states.id.size)
+        if commands.id.size:
+            at = np.minimum(np.searchsorted(commands.id, states.id), commands.id.size - 1)
+            hit = commands.id[at] == states.id
+            accel[hit] = commands.accel[at[hit]]
+        return accel
+
+    def _record(self, states, accel: np.ndarray) -> None:
+        # _tids follow the world's ids, and so do the states
+        self.log.add_vehicles(self.sim_time, states, self._tids, self.ego_id, accel)
+        self.log.add_windows(self.sim_time, self.windows)
+
+
+@dataclass(frozen=True)
+class _Recorded:
+    spawn: SpawnStates
+    tid: np.ndarray
+
+
+def _recorded_states(road, x, y, speed, vehicle_class, length, width, height, tid) -> _Recorded:
+    return _Recorded(
+        SpawnStates.make(road, x, y, speed, vehicle_class, length, width, height),
+        np.asarray(tid, dtype=np.int64),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Ghosts:
+    """The ghost set: recorded vehicles in the ghost windows, (k,) arrays sorted by x
+    (``tid`` store index, ``lane``, ``x`` [m] back centre, ``y`` [m], ``speed`` [m/s],
+    ``length`` [m])."""
+
+    tid: np.ndarray
+    lane: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+
+    @classmethod
+    def take(cls, snap: Snapshot, rows: np.ndarray) -> "Ghosts":
+        return cls(
+            snap.tid[rows], snap.lane[rows], snap.x[rows], snap.y[rows], snap.speed[rows],
+            snap.length[rows],
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return self.tid.size
+
+
+def _no_ghosts() -> Ghosts:
+    empty = np.empty(0)
+    return Ghosts(empty.astype(np.int32), empty.astype(np.int8), empty, empty, empty, empty)
+
+
+def _limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:
+    """[m] the x range where the map has road and the data have vehicles on ``road``."""
+    m0, m1 = bundle.road.x_range(road)
+    table = traffic.store.trajectories
+    table = table[table["road"] == road.value]
+    if table.empty:
+        raise ScenarioError(f"the data hold no trajectories on {road.value}")
+    d0 = float(np.minimum(table["x_first"], table["x_last"]).min())
+    d1 = float(np.maximum(table["x_first"], table["x_last"]).max())
+    lo, hi = max(m0 + MAP_MARGIN, d0), min(m1 - MAP_MARGIN, d1)
+    if not lo < hi:
+        raise ScenarioError(f"the map ({m0:.0f} to {m1:.0f} m) and data do not overlap")
+    return lo, hi
+
+
+def load_controller(spec: str) -> EgoController | None:
+    """Import ``"module:function"`` (``""``: ``None``, the traffic manager drives).
+
+    Raises:
+        ControllerError: the module cannot be imported or has no such callable.
+    """
+    if not spec:
+        return None
+    module_name, _, name = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as error:
+        raise ControllerError(
+            f"ego controller {spec!r}: cannot import {module_name!r} ({error})"
+        ) from None
+    controller = getattr(module, name, None)
+    if not callable(controller):
+        raise ControllerError(f"ego controller {spec!r}: {module_name} has no callable {name!r}")
+    return controller

@@ -1,0 +1,266 @@
+"""``twin run``: one cosimulation episode written as a run folder.
+
+The folder (written under a temporary name and renamed when complete)::
+
+    <out>/
+      config.toml            the resolved configuration (loads back with --config)
+      trajectories.parquet   every simulated vehicle every step, ghosts at a lower rate
+      metrics.json           fidelity, counts, physical checks, timing
+      timespace.png          recorded traffic with the simulated ego over it
+      bev.png                bird's-eye view of the windows at ``bev_time``
+      bev.mp4                the same for the whole episode (``bev_video``)
+"""
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from twin import __version__
+from twin.atomic import AtomicFolder, marked_as
+from twin.cosim import metrics, plots
+from twin.cosim.config import CosimConfig, to_toml
+from twin.cosim.cosimulator import Cosimulator
+from twin.cosim.log import write_parquet
+from twin.data.store import TrajectoryStore, is_store
+from twin.data.traffic import EmpiricalTraffic
+from twin.errors import StoreError
+from twin.paths import cache_dir
+from twin.traffic.manager import EgoController
+
+RUN_FORMAT = "i24-twin-run"
+METRICS = "metrics.json"
+COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What ``run_episode`` wrote and measured."""
+
+    folder: Path
+    metrics: dict
+    ego_speed: np.ndarray  # [m/s] the simulated ego, one value per second
+
+
+def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> TrajectoryStore:
+    """The trajectory data of a run: the embedded default store (``None``), a store
+    folder, or an I-24 MOTION JSON day file (ingested once into the cache).
+
+    Raises:
+        StoreError: the path is neither a store folder nor a JSON file.
+        FileNotFoundError: the path does not exist.
+    """
+    from twin.data.default import default_store
+    from twin.data.ingest import ingest
+
+    if data is None:
+        return default_store(progress=progress)
+    path = Path(data)
+    if not path.exists():
+        raise FileNotFoundError(f"--data {path}: no such file or folder")
+    if path.is_dir():
+        if not is_store(path):
+            raise StoreError(f"--data {path} is a folder but not an i24-twin store")
+        return TrajectoryStore(path)
+    if path.suffix.lower() != ".json":
+        raise StoreError(f"--data {path}: expected a store folder or an I-24 MOTION .json file")
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 22), b""):
+            digest.update(block)
+    folder = cache_dir() / f"store-{digest.hexdigest()[:16]}"
+    if not is_store(folder):
+        ingest([path], folder, progress=progress)
+    return TrajectoryStore(folder)
+
+
+def run_episode(
+    config: CosimConfig,
+    store: TrajectoryStore,
+    out: str | os.PathLike,
+    *,
+    bundle=None,
+    controller: EgoController | None = None,
+    progress: bool = True,
+) -> RunResult:
+    """Run one episode and write its run folder ``out`` (replacing an earlier run there).
+
+    Raises:
+        NoVehicleNearError, ScenarioError: the scenario cannot start on these data.
+        ControllerError: the ego controller cannot be loaded or fails.
+        TwinError: ``out`` exists and is not a run folder.
+    """
+    from mapgen.build import default_map
+
+    bundle = bundle or default_map(progress=progress)
+    traffic = EmpiricalTraffic(store)
+    folder = AtomicFolder(Path(out), recognise=is_run, kind="run folder")
+    folder.check_replaceable()
+    with Cosimulator(config, traffic, bundle, controller=controller) as sim:
+        setup = time.perf_counter()
+        sim.reset()
+        start = time.perf_counter()
+        sim.run(progress=progress)
+        loop_s = time.perf_counter() - start
+        with folder:
+            figures = _write_folder(folder.tmp, sim, store, bundle, loop_s, start - setup)
+    ego = figures.pop("_ego_speed")
+    return RunResult(folder.out, figures, ego)
+
+
+def is_run(path: Path) -> bool:
+    return marked_as(path, METRICS, RUN_FORMAT)
+
+
+def _write_folder(tmp: Path, sim: Cosimulator, store, bundle, loop_s: float, reset_s: float):
+    cfg, log = sim.config, sim.log
+    arrays = store.trajectory_arrays
+    table = log.table(arrays["id"], bundle.road, arrays)
+    write_parquet(
+        table,
+        tmp / "trajectories.parquet",
+        {
+            "i24_twin": json.dumps(
+                {"t0": sim.t0, "road": cfg.road.value, "ego_id": sim.ego_id,
+                 "ego_record_id": sim.ego.id, "dt": cfg.dt, "version": __version__},
+            ),
+        },
+    )  # fmt: skip
+    (tmp / "config.toml").write_text(to_toml(cfg))
+
+    vehicles = log.vehicles()
+    windows = log.windows()
+    ghosts = log.ghosts()
+    recorded_ego = store.trajectory(sim.ego.tid)
+    ego_rows = vehicles[vehicles["role"] == 0]
+    every = max(1, round(metrics.SAMPLE_PERIOD / cfg.dt))
+    step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
+    sampled = vehicles[step_of % every == 0]
+    sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
+    counters = sim.counters
+    errors = np.array(counters.spawn_speed_error)
+    sim_s = sim.sim_time
+    figures = {
+        "format": RUN_FORMAT,
+        "version": __version__,
+        "scenario": cfg.scenario,
+        "road": cfg.road.value,
+        "t0": sim.t0,
+        "simulated_s": round(sim_s, 6),
+        "ended_early": counters.ended or None,
+        "ego": {
+            "id": sim.ego_id,
+            "record_id": sim.ego.id,
+            "requested": {"lane": cfg.lane, "x_m": cfg.x, "time": cfg.time},
+            "selected": {
+                "lane": sim.ego.lane,
+                "x_m": round(sim.ego.x, 3),
+                "time": sim.ego.t,
+                "speed_mps": round(sim.ego.speed, 3),
+            },
+            **metrics.ego_metrics(ego_rows, recorded_ego, sim.t0),
+        },
+        "traffic": {
+            **metrics.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
+            "speed_field": metrics.speed_field_metrics(
+                sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
+            ),
+        },
+        "counts": {
+            "visible_at_start": counters.spawned_initially,
+            "spawned": counters.spawned,
+            "despawned": counters.despawned,
+            "spawns_skipped_overlap": counters.skipped_overlap,
+            "spawns_skipped_invalid": counters.skipped_invalid,
+            "visible_max": int(vehicles.groupby("time").size().max()) - 1,
+            "lane_changes": sim.manager.lane_changes,
+        },
+        "physics": {
+            "spawns_checked": int(errors.size),
+            "spawn_speed_error_max": _round(errors.max()) if errors.size else None,
+            "spawn_speed_error_median": _round(np.median(errors)) if errors.size else None,
+            "spawns_above_0.5_percent": int(np.count_nonzero(errors > 0.005)),
+            "collisions": len(counters.collisions),
+            "collision_list": [
+                {"time_s": round(t, 3), "ids": [a, b]}
+                for t, a, b in counters.collisions[:COLLISIONS_LISTED]
+            ],
+            "vehicles_off_road": len(counters.off_road),
+        },
+        "timing": {
+            "reset_s": round(reset_s, 3),
+            "loop_s": round(loop_s, 3),
+            "real_time_factor": round(sim_s / loop_s, 3) if loop_s > 0 else None,
+            **{k: round(v, 4) for k, v in sim.times.per_step().items()},
+        },
+    }
+    (tmp / METRICS).write_text(json.dumps(figures, indent=2) + "\n")
+
+    title = (
+        f"scenario {cfg.scenario}: {cfg.road.value}, ego {sim.ego.id} from lane {sim.ego.lane}, "
+        f"x = {sim.ego.x:.0f} m"
+    )
+    recorded = store.samples(cfg.road, sim.t0, sim.t0 + sim_s)
+    plots.timespace_plot(
+        recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
+    )
+    bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
+    ghost_times = np.unique(ghosts["time"].to_numpy()) if len(ghosts) else np.zeros(1)
+    at = float(ghost_times[np.argmin(np.abs(ghost_times - min(bev_time, sim_s)))])
+    plots.write_png(_bev(vehicles, ghosts, windows, arrays, at, title), tmp / "bev.png")
+    if cfg.bev_video:
+        plots.write_mp4(
+            (_bev(vehicles, ghosts, windows, arrays, t, title) for t in ghost_times),
+            tmp / "bev.mp4",
+            fps=cfg.ghost_log_rate,
+        )
+    per_second = max(1, round(1.0 / cfg.dt))
+    figures["_ego_speed"] = ego_rows["speed"].to_numpy()[::per_second]
+    return figures
+
+
+def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):
+    def near(frame):
+        return frame[np.abs(frame["time"].to_numpy() - at) < 1e-6]
+
+    sim = near(vehicles).copy()
+    ghost = near(ghosts).copy()
+    for frame in (sim, ghost):
+        tid = frame["tid"].to_numpy().astype(np.int64)
+        frame["length"] = arrays["length"][tid]
+        frame["width"] = arrays["width"][tid]
+    window = windows.iloc[int(np.argmin(np.abs(windows["time"].to_numpy() - at)))]
+    return plots.bev_frame(sim, ghost, window, at, title)
+
+
+def _round(value: float) -> float:
+    return round(float(value), 6) if math.isfinite(value) else None
+
+
+def summary(result: RunResult) -> str:
+    """A few lines for the terminal: ego speed profile, counts, fidelity, speed."""
+    m = result.metrics
+    ego, counts, physics = m["ego"], m["counts"], m["physics"]
+    profile = " ".join(f"{v:.0f}" for v in result.ego_speed)
+    lines = [
+        f"run folder: {result.folder}",
+        f"ego {ego['record_id']} (lane {ego['selected']['lane']}, x {ego['selected']['x_m']:.0f} m)"
+        f" speed each second [m/s]: {profile}",
+        f"ego vs recording: speed RMSE {ego.get('speed_rmse_mps', float('nan')):.2f} m/s, "
+        f"position RMSE {ego.get('position_rmse_m', float('nan')):.2f} m, min speed "
+        f"{ego.get('min_speed_sim_mps', float('nan')):.2f} (recorded "
+        f"{ego.get('min_speed_recorded_mps', float('nan')):.2f}) m/s",
+        f"vehicles: {counts['visible_at_start']} visible at start, {counts['spawned']} spawned, "
+        f"{counts['despawned']} despawned, {counts['spawns_skipped_overlap']} spawns skipped; "
+        f"{physics['collisions']} collisions, {physics['vehicles_off_road']} off the road",
+        f"simulated {m['simulated_s']:.1f} s in {m['timing']['loop_s']:.1f} s: "
+        f"{m['timing']['real_time_factor']:.1f} x real time",
+    ]
+    if m["ended_early"]:
+        lines.append(f"ended early: {m['ended_early']}")
+    return "\n".join(lines)
