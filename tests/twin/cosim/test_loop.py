@@ -1,0 +1,204 @@
+"""Each step of the paper's loop on hand-built recordings (DESIGN.md, steps 1 to 8)."""
+
+import numpy as np
+import pytest
+
+from tests.twin.cosim.scenes import EGO_X, T0, rows_of, step_until, tid_of, vehicle
+from twin.cosim.config import CosimConfig
+from twin.cosim.cosimulator import Cosimulator, ScenarioError
+from twin.data.traffic import EmpiricalTraffic
+from twin.errors import NoVehicleNearError
+
+EGO = 1  # the recorded ego of every scene: lane -2, x = 700 m at T0, 20 m/s
+
+
+def ego_doc(speed=20.0):
+    return vehicle(EGO, -2, EGO_X, speed)
+
+
+def test_step1_the_ego_is_the_recorded_vehicle_closest_to_the_request(cosim):
+    sim = cosim([vehicle(2, -2, EGO_X + 30.0, 20.0), ego_doc(), vehicle(3, -3, EGO_X, 20.0)])
+    assert sim.ego.id == f"{EGO:024x}"
+    assert sim.ego.lane == -2 and sim.ego.x == pytest.approx(EGO_X, abs=0.05)
+    assert sim.t0 == pytest.approx(T0, abs=1e-6)
+    states = sim.world.states()
+    ego = states.id == sim.ego_id
+    # spawned at its recorded pose and speed (the paper's ego started at 0 m/s)
+    assert states.x[ego][0] == pytest.approx(EGO_X, abs=0.05)
+    assert states.speed[ego][0] == pytest.approx(20.0, rel=1e-3)
+
+
+def test_step1_no_recorded_vehicle_near_the_request_is_a_named_error(built_map, tmp_path):
+    from tests.twin.cosim.scenes import make_store
+
+    store = make_store(tmp_path, [ego_doc()])
+    config = CosimConfig(road="westbound", lane=-4, x=EGO_X, time=T0)
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        with pytest.raises(NoVehicleNearError, match="lane -4 of westbound"):
+            sim.reset()
+
+
+def test_an_episode_past_the_end_of_the_data_is_refused(built_map, tmp_path):
+    from tests.twin.cosim.scenes import make_store
+
+    store = make_store(tmp_path, [ego_doc()])  # 40 s of data after T0
+    config = CosimConfig(road="westbound", lane=-2, x=EGO_X, time=T0, t_max=60.0)
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        with pytest.raises(ScenarioError, match="data on westbound end"):
+            sim.reset()
+
+
+def test_step2_visible_vehicles_spawn_at_their_recorded_speed_ghosts_do_not(cosim):
+    docs = [
+        ego_doc(),
+        vehicle(2, -1, EGO_X + 100.0, 23.0),  # visible ahead
+        vehicle(3, -4, EGO_X - 120.0, 17.0),  # visible behind
+        vehicle(4, -3, EGO_X + 175.0, 25.0),  # front ghost window
+        vehicle(5, -3, EGO_X - 190.0, 21.0),  # rear ghost window
+        vehicle(6, -3, EGO_X + 260.0, 25.0),  # beyond both windows
+    ]
+    sim = cosim(docs)
+    states = sim.world.states()
+    assert states.id.size == 3
+    for n, speed in ((2, 23.0), (3, 17.0)):
+        row = rows_of(sim, tid_of(sim, n))
+        assert row["speed"].iloc[0] == pytest.approx(speed, rel=1e-3)
+    assert sorted(sim._ghosts.tid.tolist()) == sorted([tid_of(sim, 4), tid_of(sim, 5)])
+
+
+def test_step3_the_lane_lead_takes_its_ghosts_speed_the_others_vel_default(cosim):
+    docs = [
+        ego_doc(),
+        vehicle(2, -2, EGO_X + 50.0, 20.0),  # visible, not the lead of lane -2
+        vehicle(3, -2, EGO_X + 110.0, 20.0),  # the lead of lane -2 among visible ones
+        vehicle(4, -2, EGO_X + 180.0, 12.0),  # its ghost
+        vehicle(5, -3, EGO_X + 90.0, 20.0),  # lead of lane -3, no ghost: vel_default
+        vehicle(6, -2, EGO_X - 60.0, 20.0),  # behind the ego: vel_default
+    ]
+    sim = cosim(docs)
+    sim.step()
+    ids = dict(zip(sim._tids.tolist(), sim.world.ids.tolist(), strict=True))
+    desired = {n: float(sim.manager.desired_speed([ids[tid_of(sim, n)]])[0]) for n in (2, 3, 5, 6)}
+    assert desired == {2: 30.0, 3: pytest.approx(12.0, abs=1e-6), 5: 30.0, 6: 30.0}
+    # and it slows toward it while the ghost is ahead of it (it enters the visible
+    # window after about 3.7 s, as the ego closes in on it)
+    for _ in range(300):
+        sim.step()
+    lead = rows_of(sim, tid_of(sim, 3))
+    assert np.all(np.diff(lead["speed"].iloc[1:]) < 0.0)
+    assert lead["speed"].iloc[-1] < 18.0
+
+
+def test_ghost_smoothing_lags_the_lead_speed_when_asked(cosim):
+    docs = [ego_doc(), vehicle(3, -2, EGO_X + 110.0, 20.0), vehicle(4, -2, EGO_X + 180.0, 12.0)]
+    sim = cosim(docs, ghost_smoothing=2.0)
+    lead = sim.world.ids[sim._tids == tid_of(sim, 3)]
+    sim.step()
+    first = float(sim.manager.desired_speed(lead)[0])
+    assert first == pytest.approx(12.0)  # the first value is taken as is
+    # a new ghost at a different speed is approached with the lag's time constant
+    sim._lead_speed[-2] = 20.0
+    sim.step()
+    assert float(sim.manager.desired_speed(lead)[0]) == pytest.approx(20.0 - 8.0 * 0.01 / 2.0)
+
+
+def test_step5_a_vehicle_crossing_into_a_ghost_window_is_removed(cosim):
+    # 10 m/s faster than the ego (held at 20 m/s): reaches the front ghost window at ~5 s
+    sim = cosim([ego_doc(), vehicle(2, -3, EGO_X + 100.0, 30.0)])
+    tid = tid_of(sim, 2)
+    step_until(sim, lambda: tid not in sim._tids)
+    rows = rows_of(sim, tid)
+    ego = sim.log.vehicles().query("role == 0")
+    gap = rows["x"].to_numpy() - ego["x"].to_numpy()[: len(rows)]
+    assert gap.max() <= 150.0 + 30.0 * 0.01  # never simulated beyond the window
+    assert gap[-1] > 149.0
+    assert sim.counters.despawned == 1
+    assert sim.world.ids.size == 1 and sim.manager.ids.size == 1
+    sim.step()
+    assert tid in sim._ghosts.tid  # its recording is now a ghost ahead
+
+
+def test_step6_a_ghost_entering_the_visible_window_is_spawned_at_its_recorded_speed(cosim):
+    # from the rear ghost window at 30 m/s: enters at ~3 s behind the ego
+    sim = cosim([ego_doc(), vehicle(2, -3, EGO_X - 180.0, 30.0)])
+    tid = tid_of(sim, 2)
+    assert tid in sim._ghosts.tid
+    step_until(sim, lambda: tid in sim._tids)
+    row = rows_of(sim, tid).iloc[0]
+    recorded_x = EGO_X - 180.0 + 30.0 * row["time"]
+    assert row["speed"] == pytest.approx(30.0, rel=1e-3)
+    assert row["x"] == pytest.approx(recorded_x, abs=0.05)
+    ego_x = sim.log.vehicles().query("role == 0")["x"].iloc[-1]
+    assert ego_x - 150.0 <= row["x"] <= ego_x - 149.0  # just inside the window's rear edge
+    sim.step()
+    error = np.array(sim.counters.spawn_speed_error)
+    assert error.size == 2 and error.max() <= 0.005  # the initial ego too
+    assert sim.counters.spawned == 1
+
+
+def test_step6_a_ghost_is_not_spawned_where_a_body_is_in_the_way(cosim):
+    docs = [
+        ego_doc(),
+        vehicle(2, -3, EGO_X - 140.0, 20.0),  # visible near the rear edge
+        vehicle(3, -3, EGO_X - 155.0, 30.0),  # a ghost 10 m/s faster, close behind it
+        vehicle(4, -4, EGO_X - 155.0, 30.0),  # the same in a free lane: spawned
+    ]
+    sim = cosim(docs)
+    for _ in range(100):
+        sim.step()
+    assert tid_of(sim, 3) not in sim._tids
+    assert tid_of(sim, 4) in sim._tids
+    assert sim.counters.skipped_overlap == 1 and sim.counters.spawned == 1
+
+
+def test_step7_the_ghosts_are_the_recording_now_and_the_managers_obstacles(cosim):
+    sim = cosim([ego_doc(), vehicle(4, -3, EGO_X + 175.0, 25.0)])
+    for _ in range(50):
+        sim.step()
+    # ego at 20 m/s, the ghost at 25: still in the front window, where the data put it
+    (k,) = np.flatnonzero(sim._ghosts.tid == tid_of(sim, 4))
+    assert sim._ghosts.x[k] == pytest.approx(EGO_X + 175.0 + 25.0 * 0.5, abs=0.02)
+    obstacles = sim._obstacles()
+    assert obstacles.lane.tolist() == [-3] and obstacles.speed[0] == pytest.approx(25.0, abs=0.01)
+
+
+def test_step8_the_episode_ends_at_t_max_and_every_step_is_logged(cosim):
+    sim = cosim([ego_doc(), vehicle(2, -1, EGO_X + 40.0, 20.0)], t_max=0.5)
+    sim.run()
+    assert sim.done and sim.step_index == 50
+    frame = sim.log.vehicles()
+    assert np.allclose(np.unique(frame["time"]), np.arange(51) * 0.01)
+    assert (frame.groupby("time").size() == 2).all()
+    # measured acceleration: the speed change over each step
+    ego = frame[frame["role"] == 0]
+    assert np.isnan(ego["accel"].iloc[0])
+    assert np.allclose(ego["accel"].iloc[1:], np.diff(ego["speed"]) / 0.01)
+    ghosts = sim.log.ghosts()
+    assert np.allclose(np.unique(ghosts["time"]) if len(ghosts) else [], [])  # none here
+    assert sim.windows.visible[1] - ego["x"].iloc[-1] == pytest.approx(150.0)
+
+
+def test_windows_are_clipped_to_the_data_and_the_map(cosim):
+    sim = cosim([ego_doc(), vehicle(2, -3, EGO_X - 90.0, 20.0)])
+    lo, hi = sim.limits
+    assert lo == pytest.approx(EGO_X - 90.0 - 20.0 * 5.0, abs=0.01)  # where the data start
+    assert hi == pytest.approx(EGO_X + 20.0 * 40.0, abs=0.01)  # where the data end
+    assert hi < sim.world.road.x_range("westbound")[1] - 30.0  # inside the map
+    assert sim.windows.ghost_back == pytest.approx((lo, EGO_X - 150.0), abs=0.01)
+    assert sim.windows.visible == pytest.approx((EGO_X - 150.0, EGO_X + 150.0), abs=0.01)
+
+
+def test_same_seed_same_run_bit_for_bit(cosim):
+    docs = [
+        ego_doc(),
+        vehicle(2, -2, EGO_X + 60.0, 18.0),
+        vehicle(3, -3, EGO_X - 180.0, 30.0),
+        vehicle(4, -2, EGO_X + 170.0, 10.0),
+    ]
+    frames = []
+    for _ in range(2):
+        sim = cosim(docs, controller=None)
+        for _ in range(300):
+            sim.step()
+        frames.append(sim.log.vehicles())
+    assert frames[0].equals(frames[1])
