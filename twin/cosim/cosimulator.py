@@ -77,9 +77,12 @@ class Windows:
     def in_visible(self, x: np.ndarray) -> np.ndarray:
         return (x >= self.visible[0]) & (x <= self.visible[1])
 
-    def in_ghost(self, x: np.ndarray) -> np.ndarray:
-        back, front = self.ghost_back, self.ghost_front
-        return ((x >= back[0]) & (x < back[1])) | ((x > front[0]) & (x <= front[1]))
+    def bounds(self, x: np.ndarray) -> tuple[int, int, int, int]:
+        """For ``x`` sorted: (a, b, c, d) such that ``x[a:b]`` is in the rear ghost
+        window, ``x[b:c]`` in the visible window and ``x[c:d]`` in the front one."""
+        a, b = x.searchsorted((self.ghost_back[0], self.visible[0]))
+        c, d = x.searchsorted((self.visible[1], self.ghost_front[1]), side="right")
+        return int(a), int(b), int(c), int(d)
 
 
 @dataclass
@@ -224,9 +227,11 @@ class Cosimulator:
             self.manager.set_controller(self.ego_id, self.controller)
         self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
         snap = self._snapshot()
-        visible = np.flatnonzero(self.windows.in_visible(snap.x) & (snap.tid != ego.tid))
+        bounds = self.windows.bounds(snap.x)
+        visible = np.arange(bounds[1], bounds[2])
+        visible = visible[snap.tid[visible] != ego.tid]
         self.counters.spawned_initially = self._spawn_recorded(snap, visible)
-        self._load_ghosts(snap)
+        self._load_ghosts(snap, bounds)
         states = self.world.states()
         self._record(states, np.zeros(len(states.id)))
 
@@ -276,12 +281,13 @@ class Cosimulator:
         # 6. ghosts now inside the visible window are spawned; 7. the ghost set reloaded
         tick = time.perf_counter()
         snap = self._snapshot()
-        entering = np.flatnonzero(self.windows.in_visible(snap.x) & self._is_ghost[snap.tid])
+        bounds = self.windows.bounds(snap.x)
+        entering = self._is_ghost[snap.tid[bounds[1] : bounds[2]]].nonzero()[0] + bounds[1]
         self.times.ghosts += time.perf_counter() - tick
         if entering.size:
             self.counters.spawned += self._spawn_recorded(snap, entering)
         tick = time.perf_counter()
-        self._load_ghosts(snap)
+        self._load_ghosts(snap, bounds)
         self.times.ghosts += time.perf_counter() - tick
 
         if out.any() or entering.size:
@@ -313,10 +319,11 @@ class Cosimulator:
         x0, x1 = self.windows.span
         return self.traffic.snapshot(self.road, self.t, x0, x1)
 
-    def _load_ghosts(self, snap: Snapshot) -> None:
+    def _load_ghosts(self, snap: Snapshot, bounds: tuple[int, int, int, int]) -> None:
         """Step 7: the recorded vehicles in the ghost windows that are not simulated."""
-        ghost = self.windows.in_ghost(snap.x) & ~self._is_sim[snap.tid] & (snap.lane != 0)
-        rows = np.flatnonzero(ghost)
+        a, b, c, d = bounds
+        rows = np.concatenate((np.arange(a, b), np.arange(c, d)))
+        rows = rows[~self._is_sim[snap.tid[rows]] & (snap.lane[rows] != 0)]
         self._is_ghost[self._ghosts.tid] = False
         self._ghosts = Ghosts.take(snap, rows)
         self._is_ghost[self._ghosts.tid] = True
