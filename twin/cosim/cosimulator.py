@@ -162,6 +162,7 @@ class Cosimulator:
         self.windows: Windows | None = None
         self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
         self._ghosts = _no_ghosts()
+        self._obstacles_now: Obstacles | None = None
         # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
         n_tids = len(traffic.store.trajectory_arrays["id"])
         self._is_sim = np.zeros(n_tids, dtype=bool)
@@ -245,7 +246,7 @@ class Cosimulator:
         # 3. desired speeds; 4. one step of manager and physics
         self._set_desired_speeds(states)
         tick = time.perf_counter()
-        commands = self.manager.step(states, self._obstacles())
+        commands = self.manager.step(states, self._obstacles_now)
         self.world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
         tock = time.perf_counter()
         self.world.step()
@@ -327,12 +328,23 @@ class Cosimulator:
         self._is_ghost[self._ghosts.tid] = False
         self._ghosts = Ghosts.take(snap, rows)
         self._is_ghost[self._ghosts.tid] = True
+        self._obstacles_now = self._obstacles()
         if self.step_index % self.config.ghost_log_every == 0:
             self.log.add_ghosts(self.sim_time, self._ghosts)
 
     def _obstacles(self) -> Obstacles:
+        """The ghosts as the manager's obstacles (built directly: the store's data were
+        validated at ingest, and ``Obstacles.make``'s checks cost more than the reload)."""
         g = self._ghosts
-        return Obstacles.make(self.direction, g.lane, g.x, g.length, g.speed)
+        k = len(g)
+        return Obstacles(
+            road=np.full(k, self.direction, dtype=np.int8),
+            lane=g.lane,
+            x=g.x,
+            length=g.length,
+            speed=g.speed,
+            accel=np.zeros(k),
+        )
 
     def _set_desired_speeds(self, states) -> None:
         """Step 3: vel_default for all but the lead visible vehicle of each lane ahead of

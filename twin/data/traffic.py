@@ -14,7 +14,8 @@ time returns that sample exactly); speeds are the store's smoothed speeds
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -28,42 +29,76 @@ from twin.timeutil import format_local
 _EPS = 1e-6  # [s] tolerance on validity ends; unix times near 1.7e9 s resolve 2.4e-7 s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Snapshot:
     """Recorded vehicles on one road at one time, as struct-of-arrays sorted by x.
 
     Attributes:
         road, t: the road and unix time [s] asked for.
         tid: (n,) int32 store trajectory index.
-        id: (n,) object, I-24 MOTION ``_id`` strings.
         x: (n,) float64 [m] road-frame x of the back centre.
         y: (n,) float64 [m] from the median centre line.
         lane: (n,) int8, -1..-4 (0 if between bands after interpolation, which
             ingest makes impossible for recorded samples).
         speed: (n,) float64 [m/s].
+        id: (n,) object, I-24 MOTION ``_id`` strings.
         length, width, height: (n,) float64 [m].
         vehicle_class: (n,) int8, index into ``i24.VEHICLE_CLASSES``.
+
+    ``id``, the sizes and the class are looked up on first use: the cosimulator
+    queries every step and needs them only for the few vehicles it spawns.
     """
 
     road: Road
     t: float
     tid: np.ndarray
-    id: np.ndarray
     x: np.ndarray
     y: np.ndarray
     lane: np.ndarray
     speed: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    height: np.ndarray
-    vehicle_class: np.ndarray
+    meta: "_Meta"
 
     def __len__(self) -> int:
         return len(self.tid)
 
+    @cached_property
+    def id(self) -> np.ndarray:
+        return self.meta.id[self.tid]
+
+    @cached_property
+    def _sizes(self) -> np.ndarray:
+        return self.meta.sizes[self.tid]
+
+    @property
+    def length(self) -> np.ndarray:
+        return self._sizes[:, 0]
+
+    @property
+    def width(self) -> np.ndarray:
+        return self._sizes[:, 1]
+
+    @property
+    def height(self) -> np.ndarray:
+        return self._sizes[:, 2]
+
+    @cached_property
+    def vehicle_class(self) -> np.ndarray:
+        return self.meta.vehicle_class[self.tid]
+
     def to_frame(self) -> pd.DataFrame:
         """The vehicles as a DataFrame (one row per vehicle)."""
-        return pd.DataFrame({f.name: getattr(self, f.name) for f in fields(self)[2:]})
+        names = ("id", "x", "y", "lane", "speed", "length", "width", "height", "vehicle_class")
+        return pd.DataFrame({name: getattr(self, name) for name in names})
+
+
+@dataclass(frozen=True)
+class _Meta:
+    """Per store tid: ``id`` (object), ``sizes`` (n, 3) length, width, height [m],
+    ``vehicle_class`` (int8)."""
+
+    id: np.ndarray
+    sizes: np.ndarray
+    vehicle_class: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -137,13 +172,11 @@ class EmpiricalTraffic:
         self.cache_chunks = cache_chunks
         self._cache: OrderedDict[tuple[Road, int], _Chunk] = OrderedDict()
         meta = self.store.trajectory_arrays
-        self._meta = {
-            "id": meta["id"],
-            "length": meta["length"].astype(np.float64),
-            "width": meta["width"].astype(np.float64),
-            "height": meta["height"].astype(np.float64),
-            "vehicle_class": meta["vehicle_class"],
-        }
+        self._meta = _Meta(
+            id=meta["id"],
+            sizes=np.stack([meta[k].astype(np.float64) for k in ("length", "width", "height")], 1),
+            vehicle_class=meta["vehicle_class"],
+        )
 
     def snapshot(self, road: Road | str, t: float, x_min: float, x_max: float) -> Snapshot:
         """Every recorded vehicle on ``road`` present at ``t`` with ``x_min <= x <= x_max``.
@@ -182,21 +215,15 @@ class EmpiricalTraffic:
         x = x[rows]
         rows += i0
         y = chunk.y0[rows] + chunk.dy[rows] * s
-        tid = chunk.tid[rows]
-        meta = self._meta
         return Snapshot(
             road=road,
             t=float(t),
-            tid=tid,
-            id=meta["id"][tid],
+            tid=chunk.tid[rows],
             x=x,
             y=y,
             lane=i24.lane_of(y),
             speed=np.maximum(chunk.v0[rows] + chunk.dv[rows] * s, 0.0),
-            length=meta["length"][tid],
-            width=meta["width"][tid],
-            height=meta["height"][tid],
-            vehicle_class=meta["vehicle_class"][tid],
+            meta=self._meta,
         )
 
     def preload(self, road: Road | str, t_start: float, t_end: float) -> int:

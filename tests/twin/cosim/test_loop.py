@@ -33,9 +33,11 @@ def test_step1_no_recorded_vehicle_near_the_request_is_a_named_error(built_map, 
 
     store = make_store(tmp_path, [ego_doc()])
     config = CosimConfig(road="westbound", lane=-4, x=EGO_X, time=T0)
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        with pytest.raises(NoVehicleNearError, match="lane -4 of westbound"):
-            sim.reset()
+    with (
+        Cosimulator(config, EmpiricalTraffic(store), built_map) as sim,
+        pytest.raises(NoVehicleNearError, match="lane -4 of westbound"),
+    ):
+        sim.reset()
 
 
 def test_an_episode_past_the_end_of_the_data_is_refused(built_map, tmp_path):
@@ -43,9 +45,11 @@ def test_an_episode_past_the_end_of_the_data_is_refused(built_map, tmp_path):
 
     store = make_store(tmp_path, [ego_doc()])  # 40 s of data after T0
     config = CosimConfig(road="westbound", lane=-2, x=EGO_X, time=T0, t_max=60.0)
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        with pytest.raises(ScenarioError, match="data on westbound end"):
-            sim.reset()
+    with (
+        Cosimulator(config, EmpiricalTraffic(store), built_map) as sim,
+        pytest.raises(ScenarioError, match="data on westbound end"),
+    ):
+        sim.reset()
 
 
 def test_step2_visible_vehicles_spawn_at_their_recorded_speed_ghosts_do_not(cosim):
