@@ -24,6 +24,8 @@ each one was spawned from is kept beside it (its ``tid``), for the metrics.
 
 import importlib
 import math
+import os
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -549,6 +551,8 @@ def _limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, 
 
 def load_controller(spec: str) -> EgoController | None:
     """Import ``"module:function"`` (``""``: ``None``, the traffic manager drives).
+    The current directory is searched first, as ``python -m`` would (like uvicorn's
+    app loading), so ``my_acc.py`` beside the user is found.
 
     Raises:
         ControllerError: the module cannot be imported or has no such callable.
@@ -556,6 +560,8 @@ def load_controller(spec: str) -> EgoController | None:
     if not spec:
         return None
     module_name, _, name = spec.partition(":")
+    if os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
     try:
         module = importlib.import_module(module_name)
     except Exception as error:

@@ -246,7 +246,7 @@ def summary(result: RunResult) -> str:
     """A few lines for the terminal: ego speed profile, counts, fidelity, speed."""
     m = result.metrics
     ego, counts, physics = m["ego"], m["counts"], m["physics"]
-    profile = " ".join(f"{v:.0f}" for v in result.ego_speed)
+    profile = " ".join(f"{round(v):d}" for v in result.ego_speed)
     lines = [
         f"run folder: {result.folder}",
         f"ego {ego['record_id']} (lane {ego['selected']['lane']}, x {ego['selected']['x_m']:.0f} m)"
