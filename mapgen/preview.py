@@ -4,7 +4,6 @@ Rendered headless with pybullet's CPU renderer (TinyRenderer) from the same OBJ 
 the cameras use, so what the picture shows is what the twin's cameras will see.
 """
 
-import os
 from pathlib import Path
 
 import cv2
@@ -13,6 +12,7 @@ import pybullet as p
 
 from mapgen.build import MapBundle
 from mapgen.road import mile_marker_of
+from twin.atomic import atomic_file
 from twin.data.i24 import Road, lane_center
 from twin.physics.map_bodies import load_map_bodies
 
@@ -57,14 +57,9 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
         _titled(eye, "Driver's eye: eastbound lane -2, 140 m before the overpass"),
     ]
     picture = cv2.cvtColor(np.concatenate(panels, axis=0), cv2.COLOR_RGB2BGR)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}.png")
-    try:
+    with atomic_file(out) as tmp:
         if not cv2.imwrite(str(tmp), picture):
             raise OSError(f"could not write {out}")
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return out
 
 

@@ -10,6 +10,13 @@ def test_bench_query_prints_one_json_line(wave_store, capsys):
     assert line["vehicles_in_window"] > 20
 
 
+def test_bench_run_prints_the_loop_figures(wave_store, capsys):
+    assert main(["bench", "run", "--data", str(wave_store.path), "--repeats", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["bench"] == "run" and line["real_time_factor"] > 0
+    assert 0 < line["ghost_reload_ms"] < line["step_ms"] and line["vehicles_mean"] > 10
+
+
 def test_synth_command_writes_a_day(tmp_path, capsys):
     out = tmp_path / "day.json"
     assert (

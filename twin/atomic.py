@@ -8,7 +8,8 @@ and never destroys the previous one.
 import json
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from twin.errors import TwinError
@@ -67,6 +68,21 @@ class AtomicFolder:
             shutil.rmtree(old)
         else:
             os.rename(self.tmp, self.out)
+
+
+@contextmanager
+def atomic_file(out: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``out`` (same suffix, so writers pick the format
+    by it); on success it is renamed to ``out``, on any error it is removed and
+    ``out`` is left as it was."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def marked_as(folder: Path, marker: str, fmt: str) -> bool:

@@ -194,7 +194,7 @@ def traffic_bench(*, vehicles: int = 100, steps: int = 3000, repeats: int = 3) -
     }
 
 
-def run_bench(*, scenario: str = "B", repeats: int = 3) -> dict:
+def run_bench(store=None, *, scenario: str = "B", repeats: int = 3) -> dict:
     """The whole cosimulation loop of a paper scenario on the embedded data, without
     cameras or output files: data queries, desired speeds, traffic manager, physics,
     despawns, spawns, ghost reload and the trajectory log, per step (medians of the
@@ -204,7 +204,7 @@ def run_bench(*, scenario: str = "B", repeats: int = 3) -> dict:
     from twin.cosim.cosimulator import Cosimulator
     from twin.data.default import default_store
 
-    traffic = EmpiricalTraffic(default_store(progress=False))
+    traffic = EmpiricalTraffic(store if store is not None else default_store(progress=False))
     bundle = default_map()
     figures = []
     for repeat in range(repeats):

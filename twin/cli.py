@@ -170,6 +170,7 @@ def _parser() -> argparse.ArgumentParser:
         "run", help="the whole cosimulation loop of scenario B (no outputs written)"
     )
     p.add_argument("--scenario", choices=["A", "B"], default="B")
+    p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_run)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
@@ -346,7 +347,8 @@ def _bench_traffic(args) -> int:
 def _bench_run(args) -> int:
     from twin.bench import run_bench
 
-    return _emit("run", run_bench(scenario=args.scenario, repeats=args.repeats))
+    store = _store(args.data)
+    return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats))
 
 
 def _bench_ingest(args) -> int:

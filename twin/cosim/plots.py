@@ -1,7 +1,6 @@
 """Pictures of a run: the time-space diagram (the paper's Figure c) and the bird's-eye
 view of the windows (its Figure a), as PNG and optionally MP4."""
 
-import os
 from pathlib import Path
 
 import cv2
@@ -12,8 +11,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from twin.atomic import atomic_file
 from twin.data import i24
-from twin.data.plot import SPEED_RANGE
+from twin.data.plot import SPEED_RANGE, save_figure
 
 BEV_WIDTH = 1600  # [px]
 BEV_PX_PER_M_Y = 12.0  # [px/m] lateral; the longitudinal scale follows the window span
@@ -94,7 +94,7 @@ def timespace_plot(
     axes[-1].set_xlim(0.0, t_end)
     fig.colorbar(points, ax=axes, label="recorded speed [m/s]", shrink=0.5)
     fig.suptitle(title)
-    return _save(fig, out)
+    return save_figure(fig, out)
 
 
 def bev_frame(
@@ -157,48 +157,28 @@ def bev_frame(
 
 def write_png(image: np.ndarray, out: Path) -> Path:
     """Write an image to a temporary name and rename it into place."""
-    out = Path(out)
-    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
-    try:
+    with atomic_file(out) as tmp:
         if not cv2.imwrite(str(tmp), image):
             raise OSError(f"OpenCV could not write {out}")
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return out
+    return Path(out)
 
 
 def write_mp4(frames, out: Path, fps: float) -> Path:
     """Write BGR frames (an iterable of equal-size images) as an MP4 (mp4v)."""
-    out = Path(out)
-    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
-    writer = None
-    try:
-        for frame in frames:
-            if writer is None:
-                size = (frame.shape[1], frame.shape[0])
-                writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
-                if not writer.isOpened():
-                    raise OSError(f"OpenCV cannot write MP4 video to {out}")
-            writer.write(frame)
-        if writer is not None:
-            writer.release()
-            writer = None
-            os.replace(tmp, out)
-    finally:
-        if writer is not None:
-            writer.release()
-        tmp.unlink(missing_ok=True)
-    return out
-
-
-def _save(fig, out: Path) -> Path:
-    out = Path(out)
-    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
-    try:
-        fig.savefig(tmp, dpi=100)
-        os.replace(tmp, out)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return out
+    with atomic_file(out) as tmp:
+        writer = None
+        try:
+            for frame in frames:
+                if writer is None:
+                    size = (frame.shape[1], frame.shape[0])
+                    fourcc = cv2.VideoWriter_fourcc(*"mp4v")
+                    writer = cv2.VideoWriter(str(tmp), fourcc, fps, size)
+                    if not writer.isOpened():
+                        raise OSError(f"OpenCV cannot write MP4 video to {out}")
+                writer.write(frame)
+        finally:
+            if writer is not None:
+                writer.release()
+        if writer is None:
+            raise ValueError(f"no frames to write to {out}")
+    return Path(out)

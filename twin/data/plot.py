@@ -10,6 +10,7 @@ import matplotlib.dates as mdates
 import matplotlib.pyplot as plt
 import numpy as np
 
+from twin.atomic import atomic_file
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.data.store import TrajectoryStore
@@ -75,13 +76,14 @@ def time_space_plot(
     axes[-1].set_xlabel("local time (CST)")
     fig.colorbar(points, ax=axes, label="speed [m/s]", shrink=0.6)
     fig.suptitle(f"I-24 {road.value}, {len(np.unique(samples['tid'])):,} trajectories")
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.partial-{os.getpid()}{out.suffix}")
+    return save_figure(fig, out, dpi=110)
+
+
+def save_figure(fig, out: str | os.PathLike, *, dpi: int = 100) -> Path:
+    """Save a matplotlib figure as ``out`` (temporary name, then renamed) and close it."""
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, out)
+        with atomic_file(out) as tmp:
+            fig.savefig(tmp, dpi=dpi)
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return out
+    return Path(out)
