@@ -159,7 +159,6 @@ class Cosimulator:
         self.ego: RecordedVehicle | None = None
         self.ego_id = -1
         self.t0 = math.nan
-        self.t = math.nan
         self.step_index = 0
         self.windows: Windows | None = None
         self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
@@ -190,6 +189,11 @@ class Cosimulator:
         return self.step_index >= self.config.steps or bool(self.counters.ended)
 
     @property
+    def t(self) -> float:
+        """[s] unix time now."""
+        return self.t0 + self.step_index * self.config.dt
+
+    @property
     def sim_time(self) -> float:
         """[s] since t0."""
         return self.step_index * self.config.dt
@@ -218,7 +222,7 @@ class Cosimulator:
                 f"the episode would run to unix {ego.t + cfg.t_max:.2f} but the data on "
                 f"{self.road.value} end at {t_last:.2f}; start earlier or shorten t_max"
             )
-        self.ego, self.t0, self.t = ego, ego.t, ego.t
+        self.ego, self.t0 = ego, ego.t
         self.traffic.preload(self.road, self.t0, self.t0 + cfg.t_max)
         self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
         ego_state = _recorded_states(
@@ -255,7 +259,6 @@ class Cosimulator:
         self.times.physics += time.perf_counter() - tock
         self.times.manager += tock - tick
         self.step_index += 1
-        self.t = self.t0 + self.step_index * cfg.dt
         states = self.world.states()
         self._check_spawn_speeds(states, commands)
         self._check_contacts(states)
