@@ -9,6 +9,10 @@ A map folder::
       visual/<part>.obj         one mesh per part for the renderer (world frame, +Z up)
       collision/road.obj        the drivable pavement for the physics (concave)
       collision/obstacles.obj   median barrier and overpass for the physics (concave)
+      tiles/<part>-<k>.obj      the visual parts cut into 100 m tiles along the road,
+                                so the cameras skip what lies behind or beyond them
+      vehicles/<class>.obj      a model per vehicle class for the cameras, unit box
+                                (mapgen.vehicles), with its material and palette
 
 All meshes are in the world frame of :mod:`mapgen.road` (east-north-up metres); the
 GLB alone turns it to glTF's +Y up. The folder is written whole (temporary name,
@@ -30,16 +34,19 @@ from mapgen.meshes import SceneMeshes, build_meshes
 from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
+from mapgen.vehicles import write_vehicle_models
 from twin.atomic import AtomicFolder, marked_as
 from twin.data import i24
 from twin.errors import MapError
 from twin.paths import asset, cache_dir
 
 FORMAT = "i24-twin-map"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 ROAD_JSON = "road.json"
+VEHICLE_CSV = "vehicle_classes.csv"  # the vehicle models take the classes' mean sizes
 SCENE_GLB = "scene.glb"
 DEFAULT_SEED = 0
+TILE_LENGTH = 100.0  # [m] along the road
 SMOOTH_PARTS = ("terrain",)  # shaded with shared vertex normals; the rest is flat
 CITATION = (
     "Gloudemans, D., Wang, Y., Ji, J., Zachar, G., Barbour, W., Hall, E., Cebelak, M., "
@@ -62,6 +69,21 @@ class MapPart:
     triangles: int
 
 
+@dataclass(frozen=True)
+class MapTile:
+    """A piece of a visual part: the faces whose centres lie in one tile of the road.
+
+    Attributes:
+        part: the part it belongs to (class and colour are the part's).
+        visual: OBJ file (world frame).
+        bounds: (2, 3) [m] its axis-aligned box in the world, min then max corner.
+    """
+
+    part: MapPart
+    visual: Path
+    bounds: np.ndarray
+
+
 @dataclass(frozen=True, eq=False)
 class MapBundle:
     """A built map folder, loaded.
@@ -71,6 +93,8 @@ class MapBundle:
         road: the road model (transforms between road frame and world).
         parts: the visual parts, in a fixed order.
         collision: ``road`` and ``obstacles`` OBJ paths.
+        vehicles: vehicle class name -> OBJ path of its model (unit box).
+        tiles: the visual parts in tiles, for the cameras.
         description: the whole of ``road.json``.
     """
 
@@ -78,6 +102,8 @@ class MapBundle:
     road: RoadModel
     parts: tuple[MapPart, ...]
     collision: dict[str, Path]
+    vehicles: dict[str, Path]
+    tiles: tuple[MapTile, ...]
     description: dict
 
     @property
@@ -91,7 +117,8 @@ def map_key(seed: int = DEFAULT_SEED) -> str:
     digest = hashlib.sha256()
     for path in sorted(Path(__file__).parent.glob("*.py")):
         digest.update(path.name.encode() + path.read_bytes())
-    for path in (asset(MAP_TOML), asset(SEMANTIC_CSV), *sources_module.source_paths()):
+    inputs = (asset(MAP_TOML), asset(SEMANTIC_CSV), asset(VEHICLE_CSV))
+    for path in (*inputs, *sources_module.source_paths()):
         digest.update(path.name.encode() + path.read_bytes())
     digest.update(f"{FORMAT_VERSION}:{trimesh.__version__}:{int(seed)}".encode())
     return digest.hexdigest()[:16]
@@ -126,14 +153,19 @@ def build_map(out: Path, *, seed: int = DEFAULT_SEED) -> MapBundle:
     sources = sources_module.load_sources()
     road = RoadModel.from_sources(sources, params)
     meshes = build_meshes(road, params, sources, np.random.default_rng(int(seed)))
-    description = _describe(road, params, meshes, int(seed))
+    tiles = _tiles(meshes, road)
+    description = _describe(road, params, meshes, int(seed), tiles)
     with AtomicFolder(out, recognise=is_map, kind="map", error=MapError) as folder:
         (folder.tmp / "visual").mkdir()
         (folder.tmp / "collision").mkdir()
+        (folder.tmp / "tiles").mkdir()
         for name, mesh in meshes.parts.items():
             _write_obj(_shaded(name, mesh), folder.tmp / "visual" / f"{name}.obj", normals=True)
+        for entry, mesh in tiles:
+            _write_obj(mesh, folder.tmp / entry["visual"], normals=True)
         for name, mesh in meshes.collision.items():
             _write_obj(mesh, folder.tmp / "collision" / f"{name}.obj", normals=False)
+        write_vehicle_models(folder.tmp / "vehicles")
         (folder.tmp / SCENE_GLB).write_bytes(_glb(meshes, params, description))
         (folder.tmp / ROAD_JSON).write_text(json.dumps(description, indent=1) + "\n")
     return load_map(out)
@@ -169,7 +201,15 @@ def load_map(folder: Path) -> MapBundle:
         for p in description["parts"]
     )
     collision = {name: folder / path for name, path in description["collision"].items()}
-    for path in [p.visual for p in parts] + list(collision.values()) + [folder / SCENE_GLB]:
+    vehicles = {name: folder / path for name, path in description["vehicles"].items()}
+    by_name = {part.name: part for part in parts}
+    tiles = tuple(
+        MapTile(part=by_name[t["part"]], visual=folder / t["visual"], bounds=np.array(t["bounds"]))
+        for t in description["tiles"]
+    )
+    files = [p.visual for p in parts] + [*collision.values(), *vehicles.values()]
+    files += [t.visual for t in tiles]
+    for path in [*files, folder / SCENE_GLB]:
         if not path.is_file():
             raise MapError(f"map {folder} lacks {path.relative_to(folder)}; rebuild it")
     return MapBundle(
@@ -177,11 +217,34 @@ def load_map(folder: Path) -> MapBundle:
         road=RoadModel.from_dict(description["road"]),
         parts=parts,
         collision=collision,
+        vehicles=vehicles,
+        tiles=tiles,
         description=description,
     )
 
 
-def _describe(road: RoadModel, params: MapParams, meshes: SceneMeshes, seed: int) -> dict:
+def _tiles(meshes: SceneMeshes, road: RoadModel) -> list[tuple[dict, trimesh.Trimesh]]:
+    """Each visual part cut by face centre into TILE_LENGTH tiles of road station, as
+    (description entry, shaded mesh) pairs in part then station order."""
+    tiles = []
+    for name, mesh in meshes.parts.items():
+        shaded = _shaded(name, mesh)
+        station = shaded.triangles_center[:, :2] @ road.direction_vector[:2]
+        index = np.floor(station / TILE_LENGTH).astype(np.int64)
+        for k in np.unique(index):
+            piece = shaded.submesh([np.flatnonzero(index == k)], append=True, repair=False)
+            entry = {
+                "part": name,
+                "visual": f"tiles/{name}-{int(k) - int(index.min()):03d}.obj",
+                "bounds": np.round(piece.bounds, 3).tolist(),
+            }
+            tiles.append((entry, piece))
+    return tiles
+
+
+def _describe(
+    road: RoadModel, params: MapParams, meshes: SceneMeshes, seed: int, tiles: list
+) -> dict:
     lane_width = i24.LANE_WIDTH
     return {
         "format": FORMAT,
@@ -227,6 +290,8 @@ def _describe(road: RoadModel, params: MapParams, meshes: SceneMeshes, seed: int
             for name, mesh in meshes.parts.items()
         ],
         "collision": {name: f"collision/{name}.obj" for name in meshes.collision},
+        "vehicles": {name: f"vehicles/{name}.obj" for name in i24.VEHICLE_CLASSES},
+        "tiles": [entry for entry, _ in tiles],
         "triangles": {
             "visual": sum(len(m.faces) for m in meshes.parts.values()),
             "collision": sum(len(m.faces) for m in meshes.collision.values()),

@@ -238,6 +238,96 @@ def run_bench(store=None, *, scenario: str = "B", repeats: int = 3) -> dict:
     }
 
 
+def camera_bench(
+    *, renderer: str = "tiny", vehicles: int = 100, frames: int = 30, repeats: int = 3
+) -> dict:
+    """Frames per second of the default front camera (640x480 RGB, depth, semantic and
+    instance) on an ego in the middle of ``vehicles`` vehicles (the ego included) in
+    the four eastbound lanes, nose to tail over about 300 m, at 27 m/s; 0.1 s of physics
+    between frames, so the camera sees the scene from a new place each frame.
+
+    Two passes of ``frames`` frames each repeat: the capture alone (renderer, labels,
+    depth, poses), then the whole pipeline with the files written (PNGs, JSON, MP4; the
+    writer runs on a thread, so it is measured as throughput: wall time including the
+    final flush, over frames). Each pass also times the raw renderer
+    (``getCameraImage``) on its own frames, and the overhead of labels and writing is
+    the pipeline's time over the raw renderer's in the same pass. Means per frame
+    within a pass, medians over the repeats.
+    """
+    from mapgen.build import default_map
+    from sensors.camera import CameraRig, CameraSpec
+    from sensors.writer import FrameWriter
+    from twin.data.i24 import LANE_WIDTH
+    from twin.physics.world import PhysicsWorld, SpawnStates
+    from twin.vehicle_classes import vehicle_classes
+
+    table = vehicle_classes()
+    bundle = default_map()
+    capture, pipeline = [], []
+    for repeat in range(repeats):
+        rng = np.random.default_rng(repeat)
+        lane = np.arange(vehicles) % 4
+        classes = rng.choice(7, vehicles, p=table.column("share"))
+        ego = (vehicles // 2) // 4 * 4 + 1  # lane -2, in the middle of its lane
+        classes[ego] = 0
+        sizes = [table.column(c)[classes] for c in ("length_m", "width_m", "height_m")]
+        x = np.empty(vehicles)
+        for k in range(4):  # nose to tail with 4 to 8 m gaps, centred on x = 400 m
+            mine = np.flatnonzero(lane == k)
+            room = sizes[0][mine] + rng.uniform(4.0, 8.0, mine.size)
+            x[mine] = np.concatenate([[0.0], np.cumsum(room)[:-1]])  # backs
+        x += 400.0 - x[ego]
+        speed = np.full(vehicles, 27.0)  # one speed: the scene drives with the ego
+        states = SpawnStates.make(1, x, (1.5 + lane) * LANE_WIDTH, speed, classes, *sizes)
+        with (
+            PhysicsWorld(bundle) as world,
+            tempfile.TemporaryDirectory(prefix="twin-bench-camera-") as tmp,
+        ):
+            ids = world.spawn(states)
+            world.set_controls(accel=np.zeros(vehicles))
+            rig = CameraRig(world, bundle, (CameraSpec(),), renderer=renderer)
+            try:
+                for with_files in (False, True):
+                    writer = FrameWriter(Path(tmp), rig.cameras) if with_files else None
+                    rig.view.raw_s = 0.0
+                    busy = 0.0
+                    for k in range(frames):
+                        for _ in range(10):
+                            world.step()
+                        start = time.perf_counter()
+                        (frame,) = rig.capture(int(ids[ego]), time=0.1 * k, sim_time=0.1 * k)
+                        if writer is not None:
+                            writer.write(frame)
+                        busy += time.perf_counter() - start
+                    if writer is None:
+                        capture.append((busy / frames, rig.view.raw_s / frames))
+                    else:
+                        start = time.perf_counter()
+                        writer.close()
+                        busy += time.perf_counter() - start
+                        pipeline.append((busy / frames, rig.view.raw_s / frames))
+            finally:
+                rig.close()
+    capture = np.median(np.array(capture), axis=0)  # (capture, raw) per frame [s]
+    pipeline = np.median(np.array(pipeline), axis=0)  # (pipeline, raw) per frame [s]
+    return {
+        "renderer": renderer,
+        "vehicles": vehicles,
+        "size": "640x480",
+        "frames": frames,
+        "repeats": repeats,
+        "raw_ms": round(float(pipeline[1]) * 1e3, 2),
+        "raw_fps": round(1.0 / float(pipeline[1]), 2),
+        "capture_ms": round(float(capture[0]) * 1e3, 2),
+        "capture_raw_ms": round(float(capture[1]) * 1e3, 2),
+        "pipeline_ms": round(float(pipeline[0]) * 1e3, 2),
+        "pipeline_fps": round(1.0 / float(pipeline[0]), 2),
+        "labels_and_writing_overhead_percent": round(
+            100.0 * float(pipeline[0] / pipeline[1] - 1), 1
+        ),
+    }
+
+
 def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
     """Ingest throughput and peak memory on a synthetic day of at least ``size_mb``.
 

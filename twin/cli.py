@@ -72,9 +72,42 @@ def _parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="any other setting, e.g. --set traffic.hov_share=0.2 (repeatable)",
     )
+    p.add_argument(
+        "--camera",
+        action="store_true",
+        default=None,
+        help="render the ego's cameras into <out>/cameras (settings: --set camera.KEY=V)",
+    )
     p.add_argument("--out", type=Path, default=None, help="run folder (default runs/<scenario>)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_run)
+
+    p = commands.add_parser(
+        "render",
+        help="one camera frame of a scenario at a time, for a quick look",
+        description="Run the cosimulation (nothing written) to --t seconds after t0 and "
+        "write one frame of the ego's camera as PNG: RGB, or with --labels RGB, depth, "
+        "semantic and instance side by side.",
+    )
+    p.add_argument("--scenario", choices=["A", "B"], default="B", help="paper preset")
+    p.add_argument("--config", type=Path, default=None, help="TOML configuration file")
+    p.add_argument(
+        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
+    )
+    p.add_argument("--t", type=float, default=0.0, help="time of the frame [s after t0]")
+    p.add_argument("--camera", default=None, help="camera name (default: the rig's first)")
+    p.add_argument("--renderer", choices=["auto", "tiny", "egl"], default=None)
+    p.add_argument("--labels", action="store_true", help="add depth and segmentation panels")
+    p.add_argument(
+        "--set",
+        dest="assignments",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any setting, e.g. --set camera.hfov_deg=60 (repeatable)",
+    )
+    p.add_argument("--out", type=Path, default=Path("frame.png"), help="PNG file")
+    p.set_defaults(handler=_render)
 
     data = commands.add_parser("data", help="I-24 MOTION data: ingest, inspect, synthesize, plot")
     data_commands = data.add_subparsers(title="data commands")
@@ -173,6 +206,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_run)
+    p = bench_commands.add_parser(
+        "camera", help="camera frames per second, 640x480, 100 vehicles, with and without files"
+    )
+    p.add_argument("--renderer", choices=["tiny", "egl"], default="tiny")
+    p.add_argument("--frames", type=int, default=30)
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_camera)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -206,6 +246,8 @@ def _run_config(args):
     }
     values = parse_assignments(args.assignments)
     values.update({k: v for k, v in flags.items() if v is not None})
+    if args.camera:
+        values.setdefault("camera", {})["enabled"] = True
     return override(config, values, source="command line")
 
 
@@ -217,6 +259,26 @@ def _run(args) -> int:
     out = args.out if args.out is not None else Path("runs") / config.scenario
     result = run_episode(config, store, out, progress=not args.quiet)
     print(summary(result))
+    return 0
+
+
+def _render(args) -> int:
+    from sensors.preview import frame_picture, frame_vehicles
+    from twin.cosim.config import PRESETS, load_config, override, parse_assignments
+    from twin.cosim.run import open_data, render_at
+
+    base = PRESETS[args.scenario]
+    config = load_config(args.config, base=base) if args.config is not None else base
+    values = parse_assignments(args.assignments)
+    if args.renderer is not None:
+        values.setdefault("camera", {})["renderer"] = args.renderer
+    config = override(config, values, source="command line")
+    frame = render_at(config, open_data(args.data), args.t, camera=args.camera)
+    out = frame_picture(frame, args.out, labels=args.labels)
+    print(
+        f"wrote {out}: camera {frame.camera.name} ({frame.renderer}), "
+        f"{frame.sim_time:.2f} s after t0, {len(frame_vehicles(frame))} vehicles in view"
+    )
     return 0
 
 
@@ -349,6 +411,15 @@ def _bench_run(args) -> int:
 
     store = _store(args.data)
     return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats))
+
+
+def _bench_camera(args) -> int:
+    from twin.bench import camera_bench
+
+    return _emit(
+        "camera",
+        camera_bench(renderer=args.renderer, frames=args.frames, repeats=args.repeats),
+    )
 
 
 def _bench_ingest(args) -> int:

@@ -96,3 +96,32 @@ def vehicle_classes() -> VehicleClassTable:
     if abs(frame["share"].sum() - 1.0) > 1e-6:
         raise ValueError(f"{path}: shares sum to {frame['share'].sum()}, not 1")
     return VehicleClassTable(frame.set_index("class_id", drop=False))
+
+
+@cache
+def vehicle_paints() -> tuple[np.ndarray, ...]:
+    """Paint colours per class from ``assets/vehicle_paints.csv``: a (k, 3) float array
+    of RGB in 0..1 for each class id, in id order.
+
+    Raises:
+        ValueError: naming the file and the problem (missing column, unknown class, a
+            class without paint, a colour outside 0..255).
+    """
+    path = asset("vehicle_paints.csv")
+    frame = pd.read_csv(path)
+    missing = {"vehicle_class", "r", "g", "b"} - set(frame.columns)
+    if missing:
+        raise ValueError(f"{path}: missing columns {sorted(missing)}")
+    unknown = set(frame["vehicle_class"]) - set(VEHICLE_CLASSES)
+    if unknown:
+        raise ValueError(f"{path}: unknown vehicle classes {sorted(unknown)}")
+    rgb = frame[["r", "g", "b"]].to_numpy(dtype=float)
+    if not np.all(np.isfinite(rgb)) or (rgb < 0).any() or (rgb > 255).any():
+        raise ValueError(f"{path}: colours must be in 0..255")
+    paints = []
+    for name in VEHICLE_CLASSES:
+        rows = (frame["vehicle_class"] == name).to_numpy()
+        if not rows.any():
+            raise ValueError(f"{path}: no paint for class {name!r}")
+        paints.append(rgb[rows] / 255.0)
+    return tuple(paints)

@@ -11,6 +11,7 @@ from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from sensors.camera import CameraError, CameraSettings, check_rig
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
@@ -54,6 +55,7 @@ class CosimConfig:
         bev_video: also write ``bev.mp4`` of the whole episode.
         seed: seed of every random choice of the run (drivers, HOV eligibility).
         traffic: traffic-manager settings; its ``dt`` and ``seed`` are the run's.
+        camera: the ego's cameras (off by default; ``twin run --camera``).
     """
 
     scenario: str = "custom"
@@ -75,6 +77,7 @@ class CosimConfig:
     bev_video: bool = False
     seed: int = 0
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
+    camera: CameraSettings = field(default_factory=CameraSettings)
 
     def __post_init__(self):
         try:
@@ -136,6 +139,10 @@ class CosimConfig:
         except ValueError as error:
             raise ConfigError(f"traffic: {error}") from None
         object.__setattr__(self, "traffic", traffic)
+        try:
+            check_rig(self.camera.rig(), self.dt)
+        except CameraError as error:
+            raise ConfigError(f"camera: {error}") from None
 
     @property
     def steps(self) -> int:
@@ -172,7 +179,8 @@ def from_toml(
 
     Keys override the fields of ``base``; without a base, a top-level ``scenario = "A"``
     or ``"B"`` starts from that preset, anything else from the defaults. Nested
-    settings go in ``[traffic]``, ``[traffic.drivers]`` and ``[traffic.mobil]`` tables.
+    settings go in ``[traffic]``, ``[traffic.drivers]``, ``[traffic.mobil]`` and
+    ``[camera]`` tables.
 
     Raises:
         ConfigError: malformed TOML, an unknown key, a value of the wrong type or an
@@ -249,7 +257,7 @@ def override(config: Any, values: dict, *, source: str = "override", prefix: str
         return replace(config, **changes)
     except ConfigError as error:
         raise ConfigError(f"{source}: {error}") from None
-    except (ValueError, TypeError) as error:
+    except (ValueError, TypeError) as error:  # CameraError is a ValueError
         raise ConfigError(f"{source}: {prefix.rstrip('.') or 'settings'}: {error}") from None
 
 

@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -302,12 +303,15 @@ class Cosimulator:
         self.times.steps += 1
         self.times.total += time.perf_counter() - start
 
-    def run(self, progress: bool = False) -> None:
-        """Reset (if not done yet) and step to the end, with a progress bar if asked."""
+    def run(self, progress: bool = False, on_step: Callable[["Cosimulator"], None] | None = None):
+        """Reset (if not done yet) and step to the end, with a progress bar if asked;
+        ``on_step(self)`` is called after each step (and after a reset made here)."""
         from tqdm import tqdm
 
         if self.log is None:
             self.reset()
+            if on_step is not None:
+                on_step(self)
         with tqdm(
             total=self.config.steps,
             initial=self.step_index,
@@ -317,6 +321,8 @@ class Cosimulator:
         ) as bar:
             while not self.done:
                 self.step()
+                if on_step is not None:
+                    on_step(self)
                 bar.update(1)
 
     # -- the paper's steps, in parts --------------------------------------------------

@@ -9,6 +9,8 @@ The folder (written under a temporary name and renamed when complete)::
       timespace.png          recorded traffic with the simulated ego over it
       bev.png                bird's-eye view of the windows at ``bev_time``
       bev.mp4                the same for the whole episode (``bev_video``)
+      cameras/               the ego's camera frames (``camera.enabled``; see
+                             :mod:`sensors.writer` for the layout)
 """
 
 import hashlib
@@ -21,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from sensors.camera import CameraRig, Frame
+from sensors.writer import FrameWriter
 from twin import __version__
 from twin.atomic import AtomicFolder, marked_as
 from twin.cosim import metrics, plots
-from twin.cosim.config import CosimConfig, to_toml
+from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
 from twin.data.store import TrajectoryStore, is_store
@@ -36,6 +40,49 @@ from twin.traffic.manager import EgoController
 RUN_FORMAT = "i24-twin-run"
 METRICS = "metrics.json"
 COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
+CAMERAS = "cameras"
+
+
+class Cameras:
+    """The ego's camera rig during a run: frames at each camera's rate, written by a
+    :class:`FrameWriter`; called with the cosimulator after every step."""
+
+    def __init__(self, sim: Cosimulator, bundle, folder: Path):
+        settings = sim.config.camera
+        self.rig = CameraRig(
+            sim.world, bundle, settings.rig(), renderer=settings.renderer, dt=sim.config.dt
+        )
+        self.writer = FrameWriter(folder, self.rig.cameras, video=settings.video)
+        self.render_s = 0.0
+        self.frames = 0
+
+    def __call__(self, sim: Cosimulator) -> None:
+        due = self.rig.due(sim.step_index)
+        if due:
+            start = time.perf_counter()
+            frames = self.rig.capture(sim.ego_id, due, time=sim.t, sim_time=sim.sim_time)
+            self.render_s += time.perf_counter() - start
+            for frame in frames:
+                self.writer.write(frame)
+            self.frames += len(frames)
+
+    def summary(self) -> dict:
+        return {
+            "renderer": self.rig.view.renderer.value,
+            "cameras": [c.name for c in self.rig.cameras],
+            "frames": self.frames,
+            "render_s": round(self.render_s, 3),
+            "frames_per_s": round(self.frames / self.render_s, 2) if self.render_s else None,
+        }
+
+    def __enter__(self) -> "Cameras":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.writer.close()
+        finally:
+            self.rig.close()
 
 
 @dataclass(frozen=True)
@@ -101,23 +148,66 @@ def run_episode(
     traffic = EmpiricalTraffic(store)
     folder = AtomicFolder(Path(out), recognise=is_run, kind="run folder")
     folder.check_replaceable()
-    with Cosimulator(config, traffic, bundle, controller=controller) as sim:
+    with Cosimulator(config, traffic, bundle, controller=controller) as sim, folder:
         setup = time.perf_counter()
         sim.reset()
         start = time.perf_counter()
-        sim.run(progress=progress)
+        cameras = None
+        if config.camera.enabled:
+            with Cameras(sim, bundle, folder.tmp / CAMERAS) as cameras:
+                cameras(sim)
+                sim.run(progress=progress, on_step=cameras)
+        else:
+            sim.run(progress=progress)
         loop_s = time.perf_counter() - start
-        with folder:
-            figures = _write_folder(folder.tmp, sim, store, bundle, loop_s, start - setup)
+        figures = _write_folder(folder.tmp, sim, store, bundle, loop_s, start - setup, cameras)
     ego = figures.pop("_ego_speed")
     return RunResult(folder.out, figures, ego)
+
+
+def render_at(
+    config: CosimConfig,
+    store: TrajectoryStore,
+    t: float,
+    *,
+    camera: str | None = None,
+    bundle=None,
+) -> Frame:
+    """One frame of the ego's camera ``camera`` (default: the rig's first) ``t`` seconds
+    after t0 of ``config``'s episode; nothing is written.
+
+    Raises:
+        ConfigError: ``t`` outside the episode or an unknown camera.
+        NoVehicleNearError, ScenarioError: the scenario cannot start on these data.
+    """
+    from mapgen.build import default_map
+
+    rig = config.camera.rig()
+    chosen = [c for c in rig if camera is None or c.name == camera]
+    if not chosen:
+        raise ConfigError(f"no camera {camera!r} in the rig {[c.name for c in rig]}")
+    if not 0.0 <= t <= config.t_max:
+        raise ConfigError(f"--t must be in [0, t_max = {config.t_max}] s, got {t}")
+    bundle = bundle or default_map()
+    with Cosimulator(config, EmpiricalTraffic(store), bundle) as sim:
+        sim.reset()
+        while sim.step_index < round(t / config.dt) and not sim.done:
+            sim.step()
+        cameras = CameraRig(sim.world, bundle, tuple(chosen[:1]), config.camera.renderer, config.dt)
+        try:
+            (frame,) = cameras.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time)
+        finally:
+            cameras.close()
+    return frame
 
 
 def is_run(path: Path) -> bool:
     return marked_as(path, METRICS, RUN_FORMAT)
 
 
-def _write_folder(tmp: Path, sim: Cosimulator, store, bundle, loop_s: float, reset_s: float):
+def _write_folder(
+    tmp: Path, sim: Cosimulator, store, bundle, loop_s: float, reset_s: float, cameras=None
+):
     cfg, log = sim.config, sim.log
     arrays = store.trajectory_arrays
     table = log.table(arrays["id"], bundle.road, arrays)
@@ -199,6 +289,8 @@ def _write_folder(tmp: Path, sim: Cosimulator, store, bundle, loop_s: float, res
             **{k: round(v, 4) for k, v in sim.times.per_step().items()},
         },
     }
+    if cameras is not None:
+        figures["cameras"] = cameras.summary()
     (tmp / METRICS).write_text(json.dumps(figures, indent=2) + "\n")
 
     title = (

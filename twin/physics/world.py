@@ -441,7 +441,7 @@ class PhysicsWorld:
                 quaternion,
                 twist[:, :3],
                 twist[:, 3:],
-                _rotation(quaternion),
+                rotation_matrices(quaternion),
             )
         return self._read
 
@@ -479,6 +479,8 @@ class PhysicsWorld:
             p.changeDynamics(
                 body, -1, linearDamping=0.0, angularDamping=0.0, physicsClientId=self.client
             )
+            # drawn by twin.physics.render's models; the box itself is never seen
+            p.changeVisualShape(body, -1, rgbaColor=[1, 1, 1, 0], physicsClientId=self.client)
         self._group(body, VEHICLE_GROUP, VEHICLE_GROUP | OBSTACLE_GROUP)
         return body
 
@@ -508,7 +510,7 @@ def _quaternion(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
     return np.stack([-sy * sp, cy * sp, sy * cp, cy * cp], axis=1)
 
 
-def _rotation(q: np.ndarray) -> np.ndarray:
+def rotation_matrices(q: np.ndarray) -> np.ndarray:
     """(n, 3, 3) rotation matrices (body to world) of (n, 4) quaternions (x, y, z, w)."""
     x, y, z, w = q.T
     return np.stack(

@@ -1,0 +1,334 @@
+"""What the cameras see of a physics world: the map's visual parts, a drawn model of
+every vehicle, and pybullet's renderers (TinyRenderer on the CPU, EGL on a GPU).
+
+The physics bodies of vehicles are boxes and stay invisible; each active vehicle is
+drawn by a proxy body without collision that carries its class's model
+(``mapgen.vehicles``) scaled to the vehicle's size, painted from the class's paints
+(``assets/vehicle_paints.csv``), and posed at the vehicle's pose before each
+picture. Proxies are pooled by class and size like the physics bodies. Body ids
+never leave this module: a picture comes back with semantic classes and twin
+vehicle ids per pixel.
+
+EGL pitfalls (PYBULLET_FACTS.md), handled here: the plugin is found through
+``pkgutil`` and loaded into this world's client before any visual body; every mesh
+comes from an OBJ file (with the plugin loaded, in-memory meshes crash
+``createMultiBody``); pictures are taken with ``ER_BULLET_HARDWARE_OPENGL``; the
+plugin is unloaded on close.
+"""
+
+import pkgutil
+import time
+from dataclasses import dataclass, fields
+from enum import StrEnum
+from functools import cache
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pybullet as p
+
+from mapgen.build import MapBundle, MapTile
+from mapgen.semantics import class_id
+from twin.data.i24 import VEHICLE_CLASSES
+from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld, rotation_matrices
+from twin.vehicle_classes import vehicle_paints
+
+SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
+SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)
+LIGHT = {
+    "lightDirection": [0.25, -0.35, 1.0],  # sun high in the south: the paper's "high noon"
+    "lightColor": [1.0, 1.0, 1.0],
+    "lightAmbientCoeff": 0.55,
+    "lightDiffuseCoeff": 0.55,
+    "lightSpecularCoeff": 0.05,
+    "shadow": 0,
+}
+SKY_CLASS = class_id("sky")
+NO_VEHICLE = -1
+PAINT_HASH = 2654435761  # Knuth's multiplicative hash: paints spread over ids
+
+
+class Renderer(StrEnum):
+    TINY = "tiny"  # pybullet's TinyRenderer: CPU, no display, no GPU
+    EGL = "egl"  # pybullet's EGL plugin: the GPU where one is, else Mesa's llvmpipe
+
+
+def gpu_present() -> bool:
+    """True when an NVIDIA GPU is visible to this process (a device node exists)."""
+    return Path("/dev/nvidia0").exists() or any(Path("/proc/driver/nvidia/gpus").glob("*"))
+
+
+def resolve_renderer(name: str) -> Renderer:
+    """``"auto"`` (EGL when a GPU is present, else TinyRenderer), ``"tiny"`` or ``"egl"``.
+
+    Raises:
+        ValueError: any other name.
+    """
+    if name == "auto":
+        return Renderer.EGL if gpu_present() else Renderer.TINY
+    try:
+        return Renderer(name)
+    except ValueError:
+        raise ValueError(f"renderer must be auto, tiny or egl, got {name!r}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class Picture:
+    """One rendered picture.
+
+    Attributes:
+        rgb: (h, w, 3) uint8.
+        depth_buffer: (h, w) float32, pybullet's non-linear depth in [0, 1] (1: nothing).
+        semantic: (h, w) uint8 class ids (``assets/semantic_classes.csv``).
+        instance: (h, w) int64 twin vehicle ids, -1 where no vehicle is.
+    """
+
+    rgb: np.ndarray
+    depth_buffer: np.ndarray
+    semantic: np.ndarray
+    instance: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class DrawnVehicles:
+    """The vehicles as drawn: their 3D boxes, struct-of-arrays.
+
+    Attributes:
+        id: (n,) twin ids. vehicle_class: (n,) I-24 class ids.
+        size: (n, 3) [m] length, width, height of the drawn model (its bounding box).
+        position: (n, 3) [m] world position of the box's bottom centre.
+        rotation: (n, 3, 3) body-to-world rotation (x forward, y left, z up).
+        shown: (n,) bool, False for the vehicles hidden from this picture.
+    """
+
+    id: np.ndarray
+    vehicle_class: np.ndarray
+    size: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+    shown: np.ndarray
+
+    def take(self, index) -> "DrawnVehicles":
+        return DrawnVehicles(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+
+class SceneView:
+    """The visual scene of ``world`` (same client), rendered on demand.
+
+    Raises:
+        RuntimeError: the EGL plugin or a map or vehicle model cannot be loaded.
+    """
+
+    def __init__(self, world: PhysicsWorld, bundle: MapBundle, renderer: Renderer):
+        self.world = world
+        self.renderer = Renderer(renderer)
+        self.client = world.client
+        self._plugin = None
+        if self.renderer is Renderer.EGL:
+            loader = pkgutil.get_loader("eglRenderer")
+            if loader is None:
+                raise RuntimeError("pybullet's eglRenderer plugin is not installed")
+            plugin = p.loadPlugin(
+                loader.get_filename(), "_eglRendererPlugin", physicsClientId=self.client
+            )
+            if plugin < 0:
+                raise RuntimeError("pybullet could not load its EGL renderer plugin")
+            self._plugin = plugin
+        self._tiles = [_load_tile(self.client, tile) for tile in bundle.tiles]
+        lo = np.array([t.bounds[0] for t in bundle.tiles])
+        hi = np.array([t.bounds[1] for t in bundle.tiles])
+        pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], bool)
+        corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (tiles, 8, 3)
+        self._corners = np.concatenate([corners, np.ones((*corners.shape[:2], 1))], axis=2)
+        self._shown = np.ones(len(self._tiles), dtype=bool)
+        self._models = [str(bundle.vehicles[name]) for name in VEHICLE_CLASSES]
+        self._vehicle_semantic = np.array([class_id(n) for n in VEHICLE_CLASSES], np.uint8)
+        self._paints = vehicle_paints()
+        self._semantic_lut = np.full(1, SKY_CLASS, dtype=np.uint8)  # index: body + 1
+        self._instance_lut = np.full(1, NO_VEHICLE, dtype=np.int64)
+        for body, tile in zip(self._tiles, bundle.tiles, strict=True):
+            self._label(body, tile.part.class_id, NO_VEHICLE)
+        self._colors = [list(tile.part.color) for tile in bundle.tiles]
+        self._shapes: dict[tuple, int] = {}
+        self._free: dict[tuple, list[int]] = {}
+        self._proxies: dict[int, tuple[int, tuple]] = {}  # twin id -> (body, key)
+        self.raw_s = 0.0  # [s] spent in pybullet's renderer, for benchmarks
+
+    def close(self) -> None:
+        if self._plugin is not None and self.world.client is not None:
+            p.unloadPlugin(self._plugin, physicsClientId=self.client)
+        self._plugin = None
+
+    def vehicles(self, hide=()) -> DrawnVehicles:
+        """Pose a proxy on every active vehicle of the world (those in ``hide`` are
+        parked out of sight) and return all active vehicles with their drawn boxes."""
+        states = self.world.states()
+        params = self.world.params
+        for gone in set(self._proxies) - set(states.id.tolist()):
+            self._release(gone)
+        keys = [
+            (int(k), *(max(1, round(v / SIZE_STEP)) for v in size))
+            for k, size in zip(
+                params.vehicle_class,
+                np.column_stack([params.length, params.width, params.height]),
+                strict=True,
+            )
+        ]
+        rotation = rotation_matrices(states.orientation)
+        ground = states.position - rotation[:, :, 2] * params.cg_height[:, None]
+        hidden = set(np.atleast_1d(np.asarray(hide, dtype=np.int64)).tolist())
+        shown = ~np.isin(states.id, list(hidden))
+        for i, twin_id in enumerate(states.id.tolist()):
+            body = self._proxy(twin_id, keys[i])
+            place = ground[i].tolist() if shown[i] else [0.0, 0.0, PARK_DEPTH]
+            p.resetBasePositionAndOrientation(
+                body, place, states.orientation[i].tolist(), physicsClientId=self.client
+            )
+        size = np.asarray([k[1:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
+        return DrawnVehicles(
+            id=states.id,
+            vehicle_class=params.vehicle_class.astype(np.int64),
+            size=size,
+            position=ground,
+            rotation=rotation,
+            shown=shown,
+        )
+
+    def render(self, view: list, projection: list, width: int, height: int) -> Picture:
+        """Render the scene as posed by the last :meth:`vehicles` call.
+
+        ``view`` and ``projection`` are OpenGL column-major 4x4 matrices (16 floats).
+        """
+        renderer = (
+            p.ER_BULLET_HARDWARE_OPENGL if self.renderer is Renderer.EGL else p.ER_TINY_RENDERER
+        )
+        self._cull(np.reshape(projection, (4, 4)).T @ np.reshape(view, (4, 4)).T)
+        start = time.perf_counter()
+        _, _, rgba, depth, seg = p.getCameraImage(
+            width,
+            height,
+            view,
+            projection,
+            renderer=renderer,
+            physicsClientId=self.client,
+            **LIGHT,
+        )
+        self.raw_s += time.perf_counter() - start
+        rgba = np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))
+        seg = np.reshape(np.asarray(seg, dtype=np.int32), (height, width)) + 1
+        nothing = (seg == 0).view(np.uint8)
+        rgb = cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
+        cv2.copyTo(_sky(height, width), nothing, rgb)  # OpenCV: 0.1 ms, numpy: 4 ms
+        # the cleared buffer reads a little under 1 (the far plane): mark it exactly
+        depth = np.reshape(np.asarray(depth, dtype=np.float32), (height, width)).copy()
+        depth[nothing.view(bool)] = 1.0
+        return Picture(
+            rgb=rgb,
+            depth_buffer=depth,
+            semantic=np.take(self._semantic_lut, seg),
+            instance=np.take(self._instance_lut, seg),
+        )
+
+    def _cull(self, clip_from_world: np.ndarray) -> None:
+        """Hide the map tiles whose boxes lie wholly outside the view frustum.
+
+        TinyRenderer does not clip: a triangle behind the camera is still scanned over
+        its screen box, so a whole map drawn from inside costs about twice as much.
+        """
+        clip = self._corners @ clip_from_world.T  # (tiles, 8, 4)
+        x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
+        outside = (
+            (x < -w).all(1)
+            | (x > w).all(1)
+            | (y < -w).all(1)
+            | (y > w).all(1)
+            | (z < -w).all(1)
+            | (z > w).all(1)
+        )
+        for k in np.flatnonzero(outside == self._shown).tolist():
+            color = [1.0, 1.0, 1.0, 0.0] if outside[k] else self._colors[k]
+            p.changeVisualShape(self._tiles[k], -1, rgbaColor=color, physicsClientId=self.client)
+        self._shown = ~outside
+
+    # -- proxies ----------------------------------------------------------------------
+
+    def _proxy(self, twin_id: int, key: tuple) -> int:
+        """The proxy body drawing vehicle ``twin_id``, taken from the pool on first use."""
+        held = self._proxies.get(twin_id)
+        if held is not None:
+            return held[0]
+        free = self._free.setdefault(key, [])
+        if free:
+            body = free.pop()
+        else:
+            if key not in self._shapes:
+                shape = p.createVisualShape(
+                    p.GEOM_MESH,
+                    fileName=self._models[key[0]],
+                    meshScale=[v * SIZE_STEP for v in key[1:]],
+                    physicsClientId=self.client,
+                )
+                if shape < 0:
+                    raise RuntimeError(f"pybullet could not load {self._models[key[0]]}")
+                self._shapes[key] = shape
+            body = p.createMultiBody(
+                baseMass=0.0,
+                baseCollisionShapeIndex=-1,
+                baseVisualShapeIndex=self._shapes[key],
+                physicsClientId=self.client,
+            )
+        paints = self._paints[key[0]]
+        paint = paints[(twin_id * PAINT_HASH) % 2**32 % len(paints)]
+        p.changeVisualShape(body, -1, rgbaColor=[*paint, 1.0], physicsClientId=self.client)
+        self._label(body, self._vehicle_semantic[key[0]], twin_id)
+        self._proxies[twin_id] = (body, key)
+        return body
+
+    def _release(self, twin_id: int) -> None:
+        body, key = self._proxies.pop(twin_id)
+        p.resetBasePositionAndOrientation(
+            body, [0.0, 0.0, PARK_DEPTH], [0, 0, 0, 1], physicsClientId=self.client
+        )
+        self._label(body, SKY_CLASS, NO_VEHICLE)
+        self._free[key].append(body)
+
+    def _label(self, body: int, semantic: int, instance: int) -> None:
+        if body + 1 >= self._semantic_lut.size:
+            grow = body + 2 - self._semantic_lut.size + 64
+            self._semantic_lut = np.concatenate(
+                [self._semantic_lut, np.full(grow, SKY_CLASS, np.uint8)]
+            )
+            self._instance_lut = np.concatenate(
+                [self._instance_lut, np.full(grow, NO_VEHICLE, np.int64)]
+            )
+        self._semantic_lut[body + 1] = semantic
+        self._instance_lut[body + 1] = instance
+
+
+def _load_tile(client: int, tile: MapTile) -> int:
+    """A static visual body of one map tile (from its OBJ file, as EGL needs)."""
+    shape = p.createVisualShape(
+        p.GEOM_MESH,
+        fileName=str(tile.visual),
+        rgbaColor=list(tile.part.color),
+        specularColor=[0.05, 0.05, 0.05],
+        physicsClientId=client,
+    )
+    if shape < 0:
+        raise RuntimeError(f"pybullet could not load the map tile {tile.visual}")
+    return p.createMultiBody(
+        baseMass=0.0,
+        baseCollisionShapeIndex=-1,
+        baseVisualShapeIndex=shape,
+        physicsClientId=client,
+    )
+
+
+@cache
+def _sky(height: int, width: int) -> np.ndarray:
+    """(height, width, 3) uint8: a clear noon sky, deep blue above, pale at the horizon."""
+    rows = np.minimum(np.linspace(0.0, 2.0, height), 1.0)[:, None]
+    colour = (SKY_TOP + (SKY_HORIZON - SKY_TOP) * rows).astype(np.uint8)
+    sky = np.ascontiguousarray(np.broadcast_to(colour[:, None, :], (height, width, 3)))
+    sky.flags.writeable = False
+    return sky
