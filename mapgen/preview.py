@@ -15,18 +15,9 @@ from mapgen.road import mile_marker_of
 from twin.atomic import atomic_file
 from twin.data.i24 import Road, lane_center
 from twin.physics.map_bodies import load_map_bodies
+from twin.physics.render import LIGHT, SKY_HORIZON, SKY_TOP
 
 WIDTH = 1600  # [px] of the picture
-SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
-SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)
-LIGHT = {
-    "lightDirection": [0.25, -0.35, 1.0],  # sun high in the south: the paper's "high noon"
-    "lightColor": [1.0, 1.0, 1.0],
-    "lightAmbientCoeff": 0.55,
-    "lightDiffuseCoeff": 0.55,
-    "lightSpecularCoeff": 0.05,
-    "shadow": 0,
-}
 
 
 def render_preview(bundle: MapBundle, out: Path) -> Path:

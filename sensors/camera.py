@@ -375,12 +375,12 @@ class CameraSettings:
     renderer: str = "auto"
     cameras: tuple[str, ...] = ("front",)
     mounts: str = ""
-    width: int = 640
-    height: int = 480
-    hfov_deg: float = 80.0
-    near: float = 0.5
-    far: float = 300.0
-    rate_hz: float = 10.0
+    width: int = CameraSpec.width
+    height: int = CameraSpec.height
+    hfov_deg: float = CameraSpec.hfov_deg
+    near: float = CameraSpec.near
+    far: float = CameraSpec.far
+    rate_hz: float = CameraSpec.rate_hz
     video: bool = True
 
     def __post_init__(self):

@@ -64,14 +64,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--bev-time", type=float, default=None, help="time of bev.png [s after t0]")
     p.add_argument("--bev-video", action="store_true", default=None, help="also write bev.mp4")
-    p.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="any other setting, e.g. --set traffic.hov_share=0.2 (repeatable)",
-    )
+    _add_set(p, "any other setting, e.g. --set traffic.hov_share=0.2 (repeatable)")
     p.add_argument(
         "--camera",
         action="store_true",
@@ -98,14 +91,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--camera", default=None, help="camera name (default: the rig's first)")
     p.add_argument("--renderer", choices=["auto", "tiny", "egl"], default=None)
     p.add_argument("--labels", action="store_true", help="add depth and segmentation panels")
-    p.add_argument(
-        "--set",
-        dest="assignments",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="any setting, e.g. --set camera.hfov_deg=60 (repeatable)",
-    )
+    _add_set(p, "any setting, e.g. --set camera.hfov_deg=60 (repeatable)")
     p.add_argument("--out", type=Path, default=Path("frame.png"), help="PNG file")
     p.set_defaults(handler=_render)
 
@@ -218,6 +204,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_ingest)
     return parser
+
+
+def _add_set(parser: argparse.ArgumentParser, help: str) -> None:
+    parser.add_argument(
+        "--set", dest="assignments", action="append", default=[], metavar="KEY=VALUE", help=help
+    )
 
 
 def _run_config(args):

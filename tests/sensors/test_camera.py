@@ -9,7 +9,7 @@ import pybullet as p
 import pytest
 
 from mapgen.build import MapBundle
-from sensors.camera import CameraError, CameraRig, CameraSpec, CameraSettings
+from sensors.camera import CameraError, CameraRig, CameraSettings, CameraSpec
 from twin.data.i24 import VEHICLE_CLASSES, Road, lane_center
 from twin.physics.world import PhysicsWorld, SpawnStates
 from twin.vehicle_classes import vehicle_classes
@@ -126,9 +126,8 @@ def test_depth_equals_bullet_ray_tests_within_one_percent(scene):
                 flags=flags,
                 physicsClientId=client,
             )
-            rotation = v.rotation[i]
-            quaternion = _quaternion(rotation)
-            p.createMultiBody(0, shape, -1, v.position[i].tolist(), quaternion, physicsClientId=client)
+            pose = v.position[i].tolist(), _quaternion(v.rotation[i])
+            p.createMultiBody(0, shape, -1, *pose, physicsClientId=client)
         rng = np.random.default_rng(0)
         u = rng.integers(2, frame.camera.width - 2, 3000)
         r = rng.integers(2, frame.camera.height - 2, 3000)
@@ -235,4 +234,3 @@ def _quaternion(rotation):
         (rotation[1, 0] - rotation[0, 1]) / (4 * w),
         w,
     ]
-
