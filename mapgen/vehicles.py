@@ -80,26 +80,23 @@ def vehicle_prisms(name: str) -> list[Prism]:
     half_track = 0.5 * width
     f, b = 0.5 * length, -0.5 * length  # front and back
     w = 0.5 * width
-    body = SHAPES[name](f, b, w, height, radius)
+    body = SHAPES[name](f, b, w, height)
     axles = AXLES.get(name, lambda f, b, hb: (hb, -hb))(f, b, half_base)
+    if name == "motorcycle":  # one narrow wheel on the centre line
+        sides = [(-0.25 * WHEEL_WIDTH, 0.25 * WHEEL_WIDTH)]
+    else:  # the tyres' outer faces flush with the body's sides
+        sides = [(-half_track, WHEEL_WIDTH - half_track), (half_track - WHEEL_WIDTH, half_track)]
     wheels = []
-    wheel_y = (half_track - WHEEL_WIDTH, half_track)
-    if name == "motorcycle":
-        wheel_y = (-0.5 * WHEEL_WIDTH * 0.5, 0.5 * WHEEL_WIDTH * 0.5)
     for x in axles:
         circle = tuple(
             (x + radius * np.cos(a), radius + radius * np.sin(a))
             for a in np.linspace(0.0, 2.0 * np.pi, WHEEL_SECTIONS, endpoint=False)
         )
-        if name == "motorcycle":
-            wheels.append(Prism(circle, *wheel_y, TYRE))
-        else:
-            wheels.append(Prism(circle, -wheel_y[1], -wheel_y[0], TYRE))
-            wheels.append(Prism(circle, *wheel_y, TYRE))
+        wheels += [Prism(circle, y0, y1, TYRE) for y0, y1 in sides]
     return body + wheels
 
 
-def _sedan(f, b, w, h, r):
+def _sedan(f, b, w, h):
     return [
         Prism(((b, 0.45), (f, 0.45), (f, 0.62), (f - 0.35, 0.8), (b, 0.86)), -w, w, PAINT),
         Prism(
@@ -112,7 +109,7 @@ def _sedan(f, b, w, h, r):
     ]
 
 
-def _midsize(f, b, w, h, r):
+def _midsize(f, b, w, h):
     return [
         Prism(((b, 0.52), (f, 0.52), (f, 0.8), (f - 0.5, 1.02), (b, 1.05)), -w, w, PAINT),
         Prism(
@@ -122,7 +119,7 @@ def _midsize(f, b, w, h, r):
     ]
 
 
-def _pickup(f, b, w, h, r):
+def _pickup(f, b, w, h):
     return [
         Prism(((b, 0.62), (f, 0.62), (f, 1.0), (f - 0.6, 1.15), (b, 1.15)), -w, w, PAINT),
         Prism(
@@ -135,7 +132,7 @@ def _pickup(f, b, w, h, r):
     ]
 
 
-def _van(f, b, w, h, r):
+def _van(f, b, w, h):
     return [
         Prism(((b, 0.35), (f, 0.35), (f, 1.05), (f - 0.8, 1.3), (b, 1.3)), -w, w, PAINT),
         Prism(
@@ -148,7 +145,7 @@ def _van(f, b, w, h, r):
     ]
 
 
-def _semi(f, b, w, h, r):
+def _semi(f, b, w, h):
     cab_back = f - 2.6
     return [
         Prism(((b, 1.2), (cab_back - 0.6, 1.2), (cab_back - 0.6, h), (b, h)), -w, w, PAINT),
@@ -174,7 +171,7 @@ def _semi(f, b, w, h, r):
     ]
 
 
-def _truck(f, b, w, h, r):
+def _truck(f, b, w, h):
     cab_back = f - 2.3
     return [
         Prism(((b, 0.95), (cab_back - 0.15, 0.95), (cab_back - 0.15, h), (b, h)), -w, w, PAINT),
@@ -194,7 +191,7 @@ def _truck(f, b, w, h, r):
     ]
 
 
-def _motorcycle(f, b, w, h, r):
+def _motorcycle(f, b, w, h):
     return [
         Prism(
             ((b + 0.2, 0.45), (f - 0.25, 0.45), (f - 0.35, 0.95), (b + 0.35, 0.85)),

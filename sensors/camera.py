@@ -28,6 +28,7 @@ from mapgen.build import MapBundle
 from twin.paths import asset
 from twin.physics.render import DrawnVehicles, SceneView, resolve_renderer
 from twin.physics.world import PhysicsWorld
+from twin.timeutil import steps_per_sample
 
 MOUNTS_CSV = "camera_mounts.csv"
 REFERENCES = {"front": 0.5, "centre": 0.0, "rear": -0.5}  # of the vehicle's length
@@ -264,7 +265,7 @@ class CameraRig:
 
     def due(self, step: int) -> tuple[CameraSpec, ...]:
         """The cameras that take a frame at simulation step ``step`` (0 at reset)."""
-        return tuple(c for c in self.cameras if step % _every(c, self.dt) == 0)
+        return tuple(c for c in self.cameras if step % steps_per_sample(c.rate_hz, self.dt) == 0)
 
     def capture(
         self,
@@ -329,16 +330,10 @@ def check_rig(cameras: tuple[CameraSpec, ...], dt: float) -> None:
     if len(set(names)) != len(names):
         raise CameraError(f"camera names must be unique, got {names}")
     for camera in cameras:
-        every = 1.0 / (camera.rate_hz * dt)
-        if abs(every - round(every)) > 1e-6 or round(every) < 1:
-            raise CameraError(
-                f"camera {camera.name}: rate {camera.rate_hz} Hz must divide the step rate "
-                f"{1 / dt:g} Hz"
-            )
-
-
-def _every(camera: CameraSpec, dt: float) -> int:
-    return round(1.0 / (camera.rate_hz * dt))
+        try:
+            steps_per_sample(camera.rate_hz, dt)
+        except ValueError as error:
+            raise CameraError(f"camera {camera.name}: rate {error}") from None
 
 
 def _rot_x(a: float) -> np.ndarray:

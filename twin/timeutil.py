@@ -53,3 +53,15 @@ def local_days(t: np.ndarray) -> list[str]:
     offset = CST.utcoffset(None).total_seconds()
     days = np.unique(np.floor((np.asarray(t, dtype=np.float64) + offset) / 86400.0))
     return [format_local(day * 86400.0 - offset)[:10] for day in days]
+
+
+def steps_per_sample(rate_hz: float, dt: float) -> int:
+    """Simulation steps of ``dt`` [s] between two samples at ``rate_hz`` [Hz].
+
+    Raises:
+        ValueError: the rate does not divide the step rate ``1 / dt``.
+    """
+    every = 1.0 / (rate_hz * dt)
+    if abs(every - round(every)) > 1e-6 or round(every) < 1:
+        raise ValueError(f"{rate_hz} Hz must divide the step rate {1 / dt:g} Hz")
+    return round(every)

@@ -17,6 +17,7 @@ from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
 from twin.errors import TwinError
 from twin.physics.world import MAX_SPEED, PhysicsConfig
+from twin.timeutil import steps_per_sample
 from twin.traffic.manager import TrafficConfig
 
 MPH = 0.44704  # [m/s per mph]
@@ -118,12 +119,10 @@ class CosimConfig:
             PhysicsConfig(dt=self.dt)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-        every = 1.0 / (self.ghost_log_rate * self.dt)
-        if abs(every - round(every)) > 1e-6 or round(every) < 1:
-            raise ConfigError(
-                f"ghost_log_rate {self.ghost_log_rate} Hz must divide the step rate "
-                f"{1 / self.dt:g} Hz"
-            )
+        try:
+            steps_per_sample(self.ghost_log_rate, self.dt)
+        except ValueError as error:
+            raise ConfigError(f"ghost_log_rate {error}") from None
         if self.bev_time is not None and not 0 <= self.bev_time <= self.t_max:
             raise ConfigError(
                 f"bev_time must be in [0, t_max = {self.t_max}] s, got {self.bev_time}"
@@ -152,7 +151,7 @@ class CosimConfig:
     @property
     def ghost_log_every(self) -> int:
         """Steps between two ghost-set records."""
-        return round(1.0 / (self.ghost_log_rate * self.dt))
+        return steps_per_sample(self.ghost_log_rate, self.dt)
 
 
 #: Scenario A of the paper: eastbound, lane -2, x = 300 m, light traffic.

@@ -58,23 +58,33 @@ def load_map_bodies(
             collision_bodies[name] = body
     if visual:
         for part in bundle.parts:
-            shape = p.createVisualShape(
-                p.GEOM_MESH,
-                fileName=str(part.visual),
-                rgbaColor=list(part.color),
-                specularColor=[0.05, 0.05, 0.05],
-                physicsClientId=client,
-            )
-            _check(shape, part.visual)
-            body = p.createMultiBody(
-                baseMass=0.0,
-                baseCollisionShapeIndex=-1,
-                baseVisualShapeIndex=shape,
-                physicsClientId=client,
-            )
+            body = visual_body(client, part.visual, part.color)
             visual_bodies[part.name] = body
             semantic[body] = part.class_id
     return MapBodies(collision=collision_bodies, visual=visual_bodies, semantic=semantic)
+
+
+def visual_body(client: int, path, color) -> int:
+    """A static body drawn from the OBJ file ``path`` in ``color`` (RGBA), without
+    collision.
+
+    Raises:
+        RuntimeError: pybullet could not load the file.
+    """
+    shape = p.createVisualShape(
+        p.GEOM_MESH,
+        fileName=str(path),
+        rgbaColor=list(color),
+        specularColor=[0.05, 0.05, 0.05],
+        physicsClientId=client,
+    )
+    _check(shape, path)
+    return p.createMultiBody(
+        baseMass=0.0,
+        baseCollisionShapeIndex=-1,
+        baseVisualShapeIndex=shape,
+        physicsClientId=client,
+    )
 
 
 def _check(shape: int, path) -> None:

@@ -27,9 +27,10 @@ import cv2
 import numpy as np
 import pybullet as p
 
-from mapgen.build import MapBundle, MapTile
+from mapgen.build import MapBundle
 from mapgen.semantics import class_id
 from twin.data.i24 import VEHICLE_CLASSES
+from twin.physics.map_bodies import visual_body
 from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld, rotation_matrices
 from twin.vehicle_classes import vehicle_paints
 
@@ -134,7 +135,7 @@ class SceneView:
             if plugin < 0:
                 raise RuntimeError("pybullet could not load its EGL renderer plugin")
             self._plugin = plugin
-        self._tiles = [_load_tile(self.client, tile) for tile in bundle.tiles]
+        self._tiles = [visual_body(self.client, t.visual, t.part.color) for t in bundle.tiles]
         lo = np.array([t.bounds[0] for t in bundle.tiles])
         hi = np.array([t.bounds[1] for t in bundle.tiles])
         pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], bool)
@@ -303,25 +304,6 @@ class SceneView:
             )
         self._semantic_lut[body + 1] = semantic
         self._instance_lut[body + 1] = instance
-
-
-def _load_tile(client: int, tile: MapTile) -> int:
-    """A static visual body of one map tile (from its OBJ file, as EGL needs)."""
-    shape = p.createVisualShape(
-        p.GEOM_MESH,
-        fileName=str(tile.visual),
-        rgbaColor=list(tile.part.color),
-        specularColor=[0.05, 0.05, 0.05],
-        physicsClientId=client,
-    )
-    if shape < 0:
-        raise RuntimeError(f"pybullet could not load the map tile {tile.visual}")
-    return p.createMultiBody(
-        baseMass=0.0,
-        baseCollisionShapeIndex=-1,
-        baseVisualShapeIndex=shape,
-        physicsClientId=client,
-    )
 
 
 @cache
