@@ -35,6 +35,57 @@ PNG = [cv2.IMWRITE_PNG_COMPRESSION, 1]  # fast; PNG is lossless at every level
 QUEUE_FRAMES = 8
 
 
+class BackgroundWriter:
+    """Calls ``write(item)`` for every item put, in order, on one background thread.
+
+    The first error stops the writing (later items are dropped) and is raised, as an
+    ``OSError`` naming ``what``, by the next :meth:`put` or by :meth:`close`.
+    """
+
+    def __init__(self, write, *, what: str, maxsize: int = QUEUE_FRAMES):
+        self._write = write
+        self._what = what
+        self._queue: queue.Queue = queue.Queue(maxsize=maxsize)
+        self._error: BaseException | None = None
+        self.written = 0
+        self._thread = threading.Thread(target=self._work, name=what, daemon=True)
+        self._thread.start()
+
+    def put(self, item) -> None:
+        """Queue ``item`` (blocks while the queue is full).
+
+        Raises:
+            OSError: an earlier item could not be written.
+        """
+        self._raise()
+        self._queue.put(item)
+
+    def close(self) -> None:
+        """Write what is queued and raise the first error."""
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
+        self._raise()
+
+    def _raise(self) -> None:
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise OSError(f"{self._what} could not be written: {error}") from error
+
+    def _work(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self._error is not None:
+                continue  # drain; the error is raised on the caller's thread
+            try:
+                self._write(item)
+                self.written += 1
+            except Exception as error:
+                self._error = error
+
+
 class FrameWriter:
     """Writes frames under ``folder`` (see the module's layout), in a thread.
 
@@ -51,15 +102,15 @@ class FrameWriter:
         self.folder.mkdir(parents=True, exist_ok=True)
         self.video = video
         self._videos: dict[str, cv2.VideoWriter] = {}
-        self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
-        self._error: BaseException | None = None
-        self.frames_written = 0
         for camera in cameras:
             for kind in ("rgb", "depth", "semantic", "instance", "meta"):
                 (self.folder / camera.name / kind).mkdir(parents=True, exist_ok=True)
         (self.folder / "rig.json").write_text(json.dumps(rig_description(cameras), indent=1))
-        self._thread = threading.Thread(target=self._work, name="frame-writer", daemon=True)
-        self._thread.start()
+        self._background = BackgroundWriter(self._write, what="camera frames")
+
+    @property
+    def frames_written(self) -> int:
+        return self._background.written
 
     def write(self, frame: Frame) -> None:
         """Queue ``frame`` for writing (blocks while the queue is full).
@@ -67,42 +118,22 @@ class FrameWriter:
         Raises:
             OSError: an earlier frame could not be written.
         """
-        self._raise()
-        self._queue.put(frame)
+        self._background.put(frame)
 
     def close(self) -> None:
         """Write what is queued, finish the videos, and raise the first error."""
-        if self._thread.is_alive():
-            self._queue.put(None)
-            self._thread.join()
-        for video in self._videos.values():
-            video.release()
-        self._videos.clear()
-        self._raise()
+        try:
+            self._background.close()
+        finally:
+            for video in self._videos.values():
+                video.release()
+            self._videos.clear()
 
     def __enter__(self) -> "FrameWriter":
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-    def _raise(self) -> None:
-        if self._error is not None:
-            error, self._error = self._error, None
-            raise OSError(f"camera frames could not be written: {error}") from error
-
-    def _work(self) -> None:
-        while True:
-            frame = self._queue.get()
-            if frame is None:
-                return
-            if self._error is not None:
-                continue  # drain; the error is raised on the caller's thread
-            try:
-                self._write(frame)
-                self.frames_written += 1
-            except Exception as error:
-                self._error = error
 
     def _write(self, frame: Frame) -> None:
         camera = frame.camera

@@ -49,9 +49,7 @@ class AtomicFolder:
     def __enter__(self):
         self.check_replaceable()
         self.out.parent.mkdir(parents=True, exist_ok=True)
-        for stale in self.out.parent.glob(f".{self.out.name}.partial-*"):
-            if not _pid_alive(stale.name.rsplit("-", 1)[-1]):
-                shutil.rmtree(stale, ignore_errors=True)
+        remove_stale(self.out.parent, self.out.name)
         shutil.rmtree(self.tmp, ignore_errors=True)
         self.tmp.mkdir()
         return self
@@ -83,6 +81,14 @@ def atomic_file(out: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def remove_stale(parent: Path, name: str = "*") -> None:
+    """Remove the temporary folders that writers of ``parent/name`` (a glob) left
+    behind when they were killed (their process is gone)."""
+    for stale in Path(parent).glob(f".{name}.partial-*"):
+        if stale.is_dir() and not _pid_alive(stale.name.rsplit("-", 1)[-1]):
+            shutil.rmtree(stale, ignore_errors=True)
 
 
 def marked_as(folder: Path, marker: str, fmt: str) -> bool:

@@ -153,6 +153,11 @@ class CosimConfig:
         """Steps between two ghost-set records."""
         return steps_per_sample(self.ghost_log_rate, self.dt)
 
+    @property
+    def camera_every(self) -> int:
+        """Steps between two frames of the cameras."""
+        return steps_per_sample(self.camera.rate_hz, self.dt)
+
 
 #: Scenario A of the paper: eastbound, lane -2, x = 300 m, light traffic.
 SCENARIO_A = CosimConfig(scenario="A", road=Road.EASTBOUND, lane=-2, x=300.0)
@@ -164,9 +169,10 @@ PRESETS = {"A": SCENARIO_A, "B": SCENARIO_B}
 # -- TOML ----------------------------------------------------------------------------
 
 
-def to_toml(config: CosimConfig) -> str:
-    """The configuration as TOML (``None`` values are left out; they are the default)."""
-    lines = ["# i24-twin cosimulation configuration (resolved; loads back with --config)"]
+def to_toml(config, *, header: str = "cosimulation") -> str:
+    """A configuration dataclass as TOML (``None`` values are left out; they are the
+    default), nested dataclasses as tables."""
+    lines = [f"# i24-twin {header} configuration (resolved; loads back with --config)"]
     _table(config, [], lines)
     return "\n".join(lines) + "\n"
 

@@ -153,7 +153,7 @@ class Cosimulator:
         self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
-        self.limits = _limits(bundle, traffic, config.road)
+        self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()
         self.log: TrajectoryLog | None = None
@@ -543,7 +543,7 @@ def _no_ghosts() -> Ghosts:
     return Ghosts(empty.astype(np.int32), empty.astype(np.int8), empty, empty, empty, empty)
 
 
-def _limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:
+def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:
     """[m] the x range where the map has road and the data have vehicles on ``road``."""
     m0, m1 = bundle.road.x_range(road)
     table = traffic.store.trajectories

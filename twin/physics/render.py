@@ -99,6 +99,7 @@ class DrawnVehicles:
         size: (n, 3) [m] length, width, height of the drawn model (its bounding box).
         position: (n, 3) [m] world position of the box's bottom centre.
         rotation: (n, 3, 3) body-to-world rotation (x forward, y left, z up).
+        speed: (n,) [m/s] along the vehicle's heading.
         shown: (n,) bool, False for the vehicles hidden from this picture.
     """
 
@@ -107,6 +108,7 @@ class DrawnVehicles:
     size: np.ndarray
     position: np.ndarray
     rotation: np.ndarray
+    speed: np.ndarray
     shown: np.ndarray
 
     def take(self, index) -> "DrawnVehicles":
@@ -192,6 +194,7 @@ class SceneView:
             size=size,
             position=ground,
             rotation=rotation,
+            speed=states.speed,
             shown=shown,
         )
 

@@ -1,0 +1,871 @@
+"""``twin dataset``: labelled camera datasets from many cosimulation episodes.
+
+Episodes are drawn from the recorded traffic (:mod:`sensors.episodes`); each is a
+cosimulation whose ego cameras take ``frames_per_episode`` frames at the camera
+rate after ``warmup_s``. Every frame of every camera is one sample, labelled by
+:mod:`sensors.labels` and written in KITTI's object layout and as COCO instances.
+
+The dataset folder::
+
+    DIR/
+      dataset.json            what the dataset is made of: configuration, data, version
+                              (a rerun with other settings is refused)
+      config.toml             the resolved configuration (loads back with --config)
+      manifest.json           episodes, samples, statistics; written last
+      coco.json               COCO instances of the kept vehicles (images are
+                              training/image_2/NNNNNN.png)
+      training/               KITTI object layout, samples numbered 000000, 000001, ...
+        image_2/NNNNNN.png    8-bit RGB
+        label_2/NNNNNN.txt    KITTI labels (sensors.kitti)
+        calib/NNNNNN.txt      KITTI calibration
+        depth_2/NNNNNN.png    KITTI depth map: uint16, metres x 256, 0: none
+        semantic_2/NNNNNN.png 8-bit semantic class ids (assets/semantic_classes.csv)
+        instance_2/NNNNNN.png 16-bit twin vehicle id + 1, 0: no vehicle
+        labels/NNNNNN.json    every visible vehicle with all its labels (sensors.labels)
+      episodes/EEEEEE/        one folder per episode, written under a temporary name
+                              and renamed when complete: episode.json and the same
+                              sub-folders, samples numbered within the episode
+
+The ``training/`` files are hard links to the episodes' files (copies where the
+file system has no links), numbered in episode order; ``training/``, ``coco.json``
+and ``manifest.json`` are rebuilt from the complete episodes at the end of a run.
+A rerun of the same command skips the complete episodes, so an interrupted run
+resumes where it stopped and ends with the same dataset as an uninterrupted one.
+"""
+
+import json
+import math
+import os
+import shutil
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field, replace
+from functools import cache
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sensors.camera import CameraRig, CameraSettings, Frame
+from sensors.coco import coco_bbox, rle_counts, rle_string
+from sensors.episodes import EpisodeSampling, EpisodeSpec, SamplingError, draw_episode
+from sensors.episodes import measure_cells as _measure_cells
+from sensors.kitti import calibration_text, categories, encode_depth, label_lines
+from sensors.labels import VehicleLabels, frame_labels
+from sensors.writer import PNG, BackgroundWriter, encode_instance
+from twin import __version__
+from twin.atomic import AtomicFolder, atomic_file, marked_as, remove_stale
+from twin.cosim.config import ConfigError, CosimConfig, to_toml
+from twin.data.store import TrajectoryStore
+from twin.errors import NoVehicleNearError, TwinError
+
+FORMAT = "i24-twin-dataset"
+FORMAT_VERSION = 1
+EPISODE_FORMAT = "i24-twin-dataset-episode"
+IDENTITY = "dataset.json"
+MANIFEST = "manifest.json"
+EPISODE = "episode.json"
+COCO = "coco.json"
+EPISODES = "episodes"
+SPLIT = "training"
+# sub-folder -> file suffix of each sample's files
+KINDS = {
+    "image_2": ".png",
+    "label_2": ".txt",
+    "calib": ".txt",
+    "depth_2": ".png",
+    "semantic_2": ".png",
+    "instance_2": ".png",
+    "labels": ".json",
+}
+ENGINES = ("local", "ray")
+POLL_S = 0.2  # [s] how often the local engine's progress bar is updated
+
+
+class DatasetError(TwinError):
+    """A dataset cannot be made as asked, or its folder holds something else."""
+
+
+@dataclass(frozen=True)
+class LabelFilters:
+    """Which labelled vehicles a dataset keeps (``[filters]``); the others become
+    KITTI ``DontCare`` regions and are left out of COCO.
+
+    Attributes:
+        min_height_px: [px] least height of the visible 2D box.
+        max_occlusion: highest KITTI occlusion level kept (0, 1 or 2).
+        max_distance_m: [m] farthest distance from the camera to the box centre.
+    """
+
+    min_height_px: float = 10.0
+    max_occlusion: int = 2
+    max_distance_m: float = 150.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.min_height_px) and self.min_height_px >= 0):
+            raise DatasetError(f"min_height_px must be >= 0, got {self.min_height_px!r}")
+        if self.max_occlusion not in (0, 1, 2) or isinstance(self.max_occlusion, bool):
+            raise DatasetError(f"max_occlusion must be 0, 1 or 2, got {self.max_occlusion!r}")
+        if not self.max_distance_m > 0:
+            raise DatasetError(f"max_distance_m must be > 0, got {self.max_distance_m!r}")
+
+    def keep(self, labels: VehicleLabels) -> np.ndarray:
+        """(n,) bool: the vehicles that pass every filter."""
+        return (
+            (labels.height_px >= self.min_height_px)
+            & (labels.occlusion_level <= self.max_occlusion)
+            & (labels.distance <= self.max_distance_m)
+        )
+
+
+def _dataset_cosim() -> CosimConfig:
+    return CosimConfig(
+        scenario="dataset", camera=CameraSettings(enabled=True, rate_hz=5.0, video=False)
+    )
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """What a dataset is made of (a dataset's TOML).
+
+    Attributes:
+        seed: the dataset's seed: episode ``i`` is drawn and simulated from
+            ``(seed, i)`` alone.
+        frames_per_episode: frames each camera takes per episode (at the camera rate).
+        warmup_s: [s] simulated before the first frame.
+        sampling: where episodes start (``[sampling]``).
+        filters: which vehicles are kept (``[filters]``).
+        cosim: the cosimulation of every episode (``[cosim]``, ``[cosim.camera]``, ...);
+            its road, lane, x, time, seed and t_max are set per episode.
+    """
+
+    seed: int = 0
+    frames_per_episode: int = 20
+    warmup_s: float = 0.5
+    sampling: EpisodeSampling = field(default_factory=EpisodeSampling)
+    filters: LabelFilters = field(default_factory=LabelFilters)
+    cosim: CosimConfig = field(default_factory=_dataset_cosim)
+
+    def __post_init__(self):
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise DatasetError(f"seed must be a non-negative integer, got {self.seed!r}")
+        k = self.frames_per_episode
+        if not isinstance(k, int) or isinstance(k, bool) or k < 1:
+            raise DatasetError(f"frames_per_episode must be an integer >= 1, got {k!r}")
+        if not (math.isfinite(self.warmup_s) and self.warmup_s >= 0):
+            raise DatasetError(f"warmup_s must be >= 0, got {self.warmup_s!r}")
+        object.__setattr__(
+            self, "cosim", replace(self.cosim, camera=replace(self.cosim.camera, enabled=True))
+        )
+
+    @property
+    def warmup_steps(self) -> int:
+        return round(self.warmup_s / self.cosim.dt)
+
+    @property
+    def frame_every(self) -> int:
+        """Steps between two frames."""
+        return self.cosim.camera_every
+
+    @property
+    def last_step(self) -> int:
+        """The step of the last frame."""
+        return self.warmup_steps + (self.frames_per_episode - 1) * self.frame_every
+
+    @property
+    def duration(self) -> float:
+        """[s] simulated per episode."""
+        return self.last_step * self.cosim.dt
+
+    def episode_config(self, spec: EpisodeSpec) -> CosimConfig:
+        """The cosimulation of episode ``spec``."""
+        return replace(
+            self.cosim,
+            scenario=f"dataset-{spec.index:06d}",
+            road=spec.road,
+            lane=spec.lane,
+            x=spec.x,
+            time=spec.time,
+            seed=spec.seed,
+            t_max=max(self.duration, self.cosim.dt),
+            bev_time=None,
+        )
+
+    def to_toml(self) -> str:
+        return to_toml(self, header="dataset")
+
+
+@dataclass(frozen=True)
+class DatasetResult:
+    """What :func:`generate` made and measured.
+
+    Attributes:
+        folder: the dataset. manifest: its ``manifest.json``.
+        episodes_rendered, samples_rendered: in this run (complete episodes are skipped).
+        render_s: [s] wall time of the rendering; total_s: of the whole run.
+    """
+
+    folder: Path
+    manifest: dict
+    episodes_rendered: int
+    samples_rendered: int
+    render_s: float
+    total_s: float
+
+
+# -- the whole dataset --------------------------------------------------------------
+
+
+def generate(
+    config: DatasetConfig,
+    store: TrajectoryStore,
+    out: str | os.PathLike,
+    episodes: int,
+    *,
+    workers: int = 1,
+    engine: str = "local",
+    ray_address: str | None = None,
+    progress: bool = True,
+) -> DatasetResult:
+    """Make (or complete) the dataset ``out`` of ``episodes`` episodes.
+
+    Raises:
+        DatasetError: bad arguments, ``out`` holds something else or a dataset made
+            with other settings, Ray is missing, or an episode failed (the complete
+            episodes are kept; rerun to resume).
+        SamplingError: episodes cannot be drawn from the data.
+    """
+    from tqdm import tqdm
+
+    from mapgen.build import default_map
+
+    start = time.perf_counter()
+    if not isinstance(episodes, int) or episodes < 1:
+        raise DatasetError(f"--episodes must be an integer >= 1, got {episodes!r}")
+    if not isinstance(workers, int) or workers < 1:
+        raise DatasetError(f"--workers must be an integer >= 1, got {workers!r}")
+    if engine not in ENGINES:
+        raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
+    out = Path(out)
+    _claim(out, config, store)
+    bundle = default_map(progress=progress)
+    specs = draw_episodes(config, store, bundle, episodes)
+    remove_stale(out / EPISODES)
+    todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
+    cameras = len(config.cosim.camera.cameras)
+    render_start = time.perf_counter()
+    with tqdm(
+        total=len(todo) * config.frames_per_episode * cameras,
+        unit="frame",
+        disable=None if progress else True,
+        desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
+    ) as bar:
+        if engine == "ray":
+            rendered = _run_ray(config, todo, store, out, workers, ray_address, bar)
+        else:
+            rendered = _run_local(config, todo, store, out, workers, bar)
+    render_s = time.perf_counter() - render_start
+    manifest = assemble(out, config, specs)
+    return DatasetResult(
+        folder=out,
+        manifest=manifest,
+        episodes_rendered=len(todo),
+        samples_rendered=rendered,
+        render_s=render_s,
+        total_s=time.perf_counter() - start,
+    )
+
+
+def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int):
+    """The first ``n`` episodes of the dataset ``config`` on ``store``.
+
+    Raises:
+        SamplingError: no cell of the data can hold an episode.
+    """
+    from twin.cosim.cosimulator import road_limits
+    from twin.data.i24 import Road
+    from twin.data.traffic import EmpiricalTraffic
+
+    traffic = EmpiricalTraffic(store)
+    roads = [Road.parse(r) for r in config.sampling.roads]
+    try:
+        limits = {r: road_limits(bundle, traffic, r) for r in roads}
+    except TwinError as error:
+        raise SamplingError(str(error)) from None
+    cells = _measure_cells(store, config.sampling, limits, config.duration)
+    return [draw_episode(cells, config.sampling, config.seed, i) for i in range(n)]
+
+
+def episode_folder(out: Path, index: int) -> Path:
+    return Path(out) / EPISODES / f"{index:06d}"
+
+
+def is_episode(path: Path) -> bool:
+    return marked_as(path, EPISODE, EPISODE_FORMAT)
+
+
+def is_dataset(path: Path) -> bool:
+    return marked_as(path, IDENTITY, FORMAT)
+
+
+def _identity(config: DatasetConfig, store: TrajectoryStore) -> dict:
+    data = {k: v for k, v in store.metadata.items() if k in ("format", "version", "roads")}
+    data["sources"] = [
+        {k: s.get(k) for k in ("name", "bytes")} for s in store.metadata.get("sources", [])
+    ]
+    return {
+        "format": FORMAT,
+        "version": FORMAT_VERSION,
+        "software": __version__,
+        "config": config.to_toml(),
+        "data": data,
+    }
+
+
+def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore) -> None:
+    """Make ``out`` this dataset's folder, or check that it already is."""
+    identity = _identity(config, store)
+    if out.exists() and not out.is_dir():
+        raise DatasetError(f"--out {out} is a file, not a dataset folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not is_dataset(out):
+            raise DatasetError(
+                f"{out} exists and is not an i24-twin dataset; refusing to write into it "
+                "(choose another --out or remove it yourself)"
+            )
+        held = json.loads((out / IDENTITY).read_text())
+        differ = sorted(k for k in identity if held.get(k) != identity[k])
+        if differ:
+            raise DatasetError(
+                f"{out} holds a dataset made with another {', '.join(differ)}; its episodes "
+                "would not match. Use another --out, or the same settings to resume it "
+                f"({out / 'config.toml'} loads back with --config)"
+            )
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_file(out / "config.toml") as tmp:
+        tmp.write_text(identity["config"])
+    with atomic_file(out / IDENTITY) as tmp:
+        tmp.write_text(json.dumps(identity, indent=1) + "\n")
+
+
+# -- one episode ---------------------------------------------------------------------
+
+
+def render_episode(
+    config: DatasetConfig,
+    spec: EpisodeSpec,
+    store: TrajectoryStore,
+    bundle,
+    folder: Path,
+    on_frames: Callable[[int], None] | None = None,
+) -> dict:
+    """Simulate episode ``spec`` and write its samples and ``episode.json`` into
+    ``folder`` (which must exist); ``on_frames(n)`` is called as frames are taken.
+
+    An episode whose ego cannot be placed (no recorded vehicle near the request) is
+    written with no samples and the reason in ``skipped``.
+
+    Returns:
+        the content of ``episode.json``.
+    """
+    from twin.cosim.cosimulator import Cosimulator, ScenarioError
+    from twin.data.traffic import EmpiricalTraffic
+
+    cosim = config.episode_config(spec)
+    cameras = cosim.camera.rig()
+    for kind in KINDS:
+        (folder / kind).mkdir()
+    samples: list[dict] = []
+    description = {
+        "format": EPISODE_FORMAT,
+        "version": __version__,
+        "episode": spec.to_dict(),
+        "cameras": [c.name for c in cameras],
+        "skipped": None,
+        "ended_early": None,
+        "ego": None,
+        "samples": samples,
+    }
+    writer = BackgroundWriter(lambda item: _write_sample(folder, *item), what="dataset samples")
+    try:
+        with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
+            try:
+                sim.reset()
+            except (NoVehicleNearError, ScenarioError) as error:
+                description["skipped"] = str(error)
+            else:
+                ego = sim.ego
+                description["ego"] = {
+                    "record_id": ego.id,
+                    "lane": ego.lane,
+                    "x_m": round(ego.x, 3),
+                    "time": ego.t,
+                    "speed_mps": round(ego.speed, 3),
+                }
+                rig = CameraRig(sim.world, bundle, cameras, cosim.camera.renderer, cosim.dt)
+                try:
+                    _take_frames(config, sim, rig, spec, samples, writer, on_frames)
+                finally:
+                    rig.close()
+                description["ended_early"] = sim.counters.ended or None
+    finally:
+        writer.close()
+    (folder / EPISODE).write_text(json.dumps(description, indent=1) + "\n")
+    return description
+
+
+def _take_frames(config, sim, rig, spec, samples, writer, on_frames) -> None:
+    warmup, every = config.warmup_steps, config.frame_every
+    frames = 0
+    while frames < config.frames_per_episode:
+        step = sim.step_index
+        if step >= warmup and (step - warmup) % every == 0:
+            for frame in rig.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time):
+                labels = frame_labels(frame)
+                kept = config.filters.keep(labels)
+                stem = f"{len(samples):06d}"
+                samples.append(
+                    {
+                        "sample": len(samples),
+                        "frame": frame.index,
+                        "camera": frame.camera.name,
+                        "time": frame.time,
+                        "sim_time": round(frame.sim_time, 9),
+                        "vehicles": len(labels),
+                        "kept": int(np.count_nonzero(kept)),
+                    }
+                )
+                writer.put((stem, spec.index, frame, labels, kept))
+            frames += 1
+            if on_frames is not None:
+                on_frames(len(rig.cameras))
+        if sim.done or frames >= config.frames_per_episode:
+            return
+        sim.step()
+
+
+def _write_sample(
+    folder: Path, stem: str, episode: int, frame: Frame, labels: VehicleLabels, kept: np.ndarray
+) -> None:
+    camera = frame.camera
+    images = {
+        "image_2": cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR),
+        "depth_2": encode_depth(frame.depth),
+        "semantic_2": frame.semantic,
+        "instance_2": encode_instance(frame.instance),
+    }
+    for kind, image in images.items():
+        path = folder / kind / f"{stem}.png"
+        if not cv2.imwrite(str(path), image, PNG):
+            raise OSError(f"OpenCV could not write {path}")
+    lines = label_lines(labels, kept, camera.width, camera.height)
+    (folder / "label_2" / f"{stem}.txt").write_text("".join(f"{line}\n" for line in lines))
+    camera_from_ego = np.linalg.inv(frame.ego_from_camera)
+    (folder / "calib" / f"{stem}.txt").write_text(calibration_text(frame.K, camera_from_ego))
+    record = sample_labels(frame, labels, kept, episode)
+    (folder / "labels" / f"{stem}.json").write_text(json.dumps(record) + "\n")
+
+
+def sample_labels(frame: Frame, labels: VehicleLabels, kept: np.ndarray, episode: int) -> dict:
+    """The JSON record of one sample: its frame, calibration and vehicles."""
+    camera = frame.camera
+    names = [c.name for c in categories()]
+    kitti = [c.kitti_type for c in categories()]
+    coco = [c.coco_id for c in categories()]
+    vehicles = []
+    for i in range(len(labels)):
+        left, top, right, bottom = labels.visible_box[i].tolist()
+        crop = frame.instance[top : bottom + 1, left : right + 1] == labels.id[i]
+        counts = rle_counts(crop, top, left, camera.height, camera.width)
+        k = int(labels.vehicle_class[i])
+        vehicles.append(
+            {
+                "id": int(labels.id[i]),
+                "class": names[k],
+                "kitti_type": kitti[k],
+                "category_id": coco[k],
+                "kept": bool(kept[i]),
+                "pixels": int(labels.pixels[i]),
+                "visible_box": labels.visible_box[i].tolist(),
+                "amodal_box": _rounded(labels.amodal_box[i], 3),
+                "location_m": _rounded(labels.location[i], 4),
+                "dimensions_m": _rounded(labels.dimensions[i], 4),
+                "rotation_y": round(float(labels.rotation_y[i]), 5),
+                "alpha": round(float(labels.alpha[i]), 5),
+                "truncation": round(float(labels.truncation[i]), 4),
+                "occlusion": round(float(labels.occlusion[i]), 4),
+                "occlusion_level": int(labels.occlusion_level[i]),
+                "distance_m": round(float(labels.distance[i]), 3),
+                "speed_mps": round(float(labels.speed[i]), 3),
+                "mask": {"size": [camera.height, camera.width], "counts": rle_string(counts)},
+            }
+        )
+    return {
+        "episode": episode,
+        "camera": camera.name,
+        "frame": frame.index,
+        "time": frame.time,
+        "sim_time": round(frame.sim_time, 9),
+        "renderer": frame.renderer,
+        "width": camera.width,
+        "height": camera.height,
+        "K": frame.K.tolist(),
+        "world_from_camera": frame.world_from_camera.tolist(),
+        "ego_from_camera": frame.ego_from_camera.tolist(),
+        "ego_id": frame.ego_id,
+        "vehicles": vehicles,
+    }
+
+
+def _rounded(values: np.ndarray, digits: int) -> list[float]:
+    return [round(float(v), digits) for v in values]
+
+
+# -- engines -------------------------------------------------------------------------
+
+
+def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> int:
+    """Render episode ``spec`` into ``out``'s episodes, atomically; its sample count."""
+    target = episode_folder(out, spec.index)
+    folder = AtomicFolder(target, recognise=is_episode, kind="dataset episode")
+    with folder:
+        description = render_episode(config, spec, store, bundle, folder.tmp, on_frames)
+    return len(description["samples"])
+
+
+def _run_local(config, specs, store, out: Path, workers: int, bar) -> int:
+    """Render ``specs`` in this process (one worker) or a pool of processes."""
+    from mapgen.build import default_map
+
+    if workers == 1 or len(specs) <= 1:
+        bundle = default_map()
+        return sum(
+            _episode_or_error(_write_episode, spec, config, spec, store, bundle, out, bar.update)
+            for spec in specs
+        )
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")  # no fork of threads or pybullet
+    ticks = context.SimpleQueue()
+    rendered = 0
+    pool = ProcessPoolExecutor(
+        max_workers=min(workers, len(specs)),
+        mp_context=context,
+        initializer=_start_worker,
+        initargs=(ticks,),
+    )
+    try:
+        futures = {
+            pool.submit(_pool_episode, config, spec, str(store.path), str(out)): spec
+            for spec in specs
+        }
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
+            while not ticks.empty():
+                bar.update(ticks.get())
+            for future in done:
+                rendered += _episode_or_error(future.result, futures[future])
+    finally:
+        # on an error the episodes running finish (complete and correct) and the
+        # others are cancelled; on Ctrl-C the workers are interrupted with the run
+        pool.shutdown(wait=False, cancel_futures=True)
+    while not ticks.empty():
+        bar.update(ticks.get())
+    return rendered
+
+
+def _episode_or_error(call, spec: EpisodeSpec, *args):
+    try:
+        return call(*args)
+    except TwinError:
+        raise
+    except Exception as error:
+        raise DatasetError(
+            f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix "
+            f"{spec.time:.2f}) failed: {type(error).__name__}: {error}; the complete "
+            "episodes are kept, rerun the same command to resume"
+        ) from error
+
+
+_TICKS = None  # a pool worker's queue of frame counts for the progress bar
+
+
+def _start_worker(ticks) -> None:
+    """Pool worker set-up: report progress to ``ticks``; die with the parent."""
+    global _TICKS
+    _TICKS = ticks
+    _die_with_parent()
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent dies (a killed run must not
+    leave workers writing into the dataset)."""
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return  # not Linux: workers end when they find the pool gone
+    if os.getppid() == 1:
+        os._exit(1)
+
+
+@cache
+def _worker_data(store_path: str):
+    from mapgen.build import default_map
+
+    return TrajectoryStore(store_path), default_map()
+
+
+def _pool_episode(config, spec, store_path: str, out: str) -> int:
+    store, bundle = _worker_data(store_path)
+    return _write_episode(config, spec, store, bundle, Path(out), _TICKS.put)
+
+
+def _episode_files(config, spec, store_path: str) -> dict[str, bytes]:
+    """A Ray task: render episode ``spec`` in a scratch folder; its files by path."""
+    store, bundle = _worker_data(store_path)
+    scratch = Path(tempfile.mkdtemp(prefix="i24-twin-episode-"))
+    try:
+        render_episode(config, spec, store, bundle, scratch)
+        return {
+            str(path.relative_to(scratch)): path.read_bytes()
+            for path in sorted(scratch.rglob("*"))
+            if path.is_file()
+        }
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _run_ray(config, specs, store, out: Path, workers: int, address, bar) -> int:
+    """Render ``specs`` as Ray tasks (a local Ray instance of ``workers`` CPUs, or the
+    cluster at ``address``); the driver writes each episode's files atomically."""
+    try:
+        import ray
+    except ImportError:
+        raise DatasetError(
+            "--engine ray needs Ray: pip install 'i24-twin[ray]' (or use --engine local)"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        ray.init(
+            address=address,
+            num_cpus=None if address else workers,
+            include_dashboard=False,
+            log_to_driver=False,
+        )
+    try:
+        task = ray.remote(num_cpus=1)(_episode_files)
+        refs = {task.remote(config, spec, str(store.path)): spec for spec in specs}
+        rendered = 0
+        while refs:
+            (ready,), _ = ray.wait(list(refs), num_returns=1)
+            spec = refs.pop(ready)
+            files = _episode_or_error(ray.get, spec, ready)
+            target = episode_folder(out, spec.index)
+            with AtomicFolder(target, recognise=is_episode, kind="dataset episode") as folder:
+                for name, content in files.items():
+                    path = folder.tmp / name
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    path.write_bytes(content)
+            samples = len(json.loads(files[EPISODE])["samples"])
+            rendered += samples
+            bar.update(samples)
+    finally:
+        if started:
+            ray.shutdown()
+    return rendered
+
+
+# -- the dataset from its episodes ---------------------------------------------------
+
+
+def assemble(out: Path, config: DatasetConfig, specs: list[EpisodeSpec]) -> dict:
+    """Number the samples of the episodes ``specs`` (all complete) in order and write
+    ``training/``, ``coco.json`` and ``manifest.json``; returns the manifest.
+
+    Raises:
+        DatasetError: an episode is missing or was made from another draw.
+    """
+    out = Path(out)
+    episodes, records = [], []
+    for spec in specs:
+        folder = episode_folder(out, spec.index)
+        if not is_episode(folder):
+            raise DatasetError(f"episode {spec.index} is not complete in {out}")
+        description = json.loads((folder / EPISODE).read_text())
+        if description["episode"] != spec.to_dict():
+            raise DatasetError(
+                f"{folder} was drawn as {description['episode']}, not {spec.to_dict()}: the "
+                "dataset folder was changed by hand; remove the episode to render it again"
+            )
+        episodes.append(description)
+        for sample in description["samples"]:
+            records.append((folder, sample))
+    with AtomicFolder(out / SPLIT, recognise=Path.is_dir, kind="dataset split") as split:
+        for kind in KINDS:
+            (split.tmp / kind).mkdir()
+        for index, (folder, sample) in enumerate(records):
+            for kind, suffix in KINDS.items():
+                source = folder / kind / f"{sample['sample']:06d}{suffix}"
+                _link(source, split.tmp / kind / f"{index:06d}{suffix}")
+    labels = [
+        json.loads((out / SPLIT / "labels" / f"{i:06d}.json").read_text())
+        for i in range(len(records))
+    ]
+    with atomic_file(out / COCO) as tmp:
+        tmp.write_text(json.dumps(coco_document(labels, config)) + "\n")
+    manifest = {
+        "format": FORMAT,
+        "version": FORMAT_VERSION,
+        "software": __version__,
+        "config": config.to_toml(),
+        "layout": {
+            "kitti": f"{SPLIT}/ (image_2, label_2, calib, depth_2, semantic_2, instance_2)",
+            "coco": COCO,
+            "labels": f"{SPLIT}/labels/NNNNNN.json",
+        },
+        "statistics": statistics(episodes, labels),
+        "episodes": [
+            {
+                **e["episode"],
+                "skipped": e["skipped"],
+                "ended_early": e["ended_early"],
+                "ego": e["ego"],
+                "samples": len(e["samples"]),
+            }
+            for e in episodes
+        ],
+        "samples": [
+            {
+                "sample": i,
+                "episode": label["episode"],
+                "camera": label["camera"],
+                "frame": label["frame"],
+                "time": label["time"],
+            }
+            for i, label in enumerate(labels)
+        ],
+    }
+    with atomic_file(out / MANIFEST) as tmp:
+        tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    return manifest
+
+
+def _link(source: Path, target: Path) -> None:
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copyfile(source, target)
+
+
+def coco_document(labels: list[dict], config: DatasetConfig) -> dict:
+    """The COCO instances document of the samples ``labels`` (kept vehicles only)."""
+    images, annotations = [], []
+    for index, record in enumerate(labels):
+        images.append(
+            {
+                "id": index,
+                "file_name": f"{SPLIT}/image_2/{index:06d}.png",
+                "width": record["width"],
+                "height": record["height"],
+                "episode": record["episode"],
+                "camera": record["camera"],
+                "frame": record["frame"],
+                "time": record["time"],
+            }
+        )
+        for vehicle in record["vehicles"]:
+            if not vehicle["kept"]:
+                continue
+            annotations.append(
+                {
+                    "id": len(annotations) + 1,
+                    "image_id": index,
+                    "category_id": vehicle["category_id"],
+                    "bbox": coco_bbox(vehicle["visible_box"]),
+                    "area": vehicle["pixels"],
+                    "iscrowd": 0,
+                    "segmentation": vehicle["mask"],
+                    "track_id": vehicle["id"],
+                    "occlusion_level": vehicle["occlusion_level"],
+                    "truncation": vehicle["truncation"],
+                    "distance_m": vehicle["distance_m"],
+                    "speed_mps": vehicle["speed_mps"],
+                }
+            )
+    return {
+        "info": {
+            "description": "i24-twin synthetic camera dataset of I-24 (MM 60.6-61.6)",
+            "version": __version__,
+            "seed": config.seed,
+        },
+        "licenses": [],
+        "images": images,
+        "annotations": annotations,
+        "categories": [
+            {"id": c.coco_id, "name": c.name, "supercategory": "vehicle"} for c in categories()
+        ],
+    }
+
+
+def statistics(episodes: list[dict], labels: list[dict]) -> dict:
+    """Counts and distributions of a dataset's episodes and labelled vehicles."""
+    vehicles = [v for record in labels for v in record["vehicles"]]
+    kept = [v for v in vehicles if v["kept"]]
+
+    def quantiles(values) -> dict | None:
+        if not values:
+            return None
+        q = np.quantile(np.asarray(values, dtype=np.float64), [0.0, 0.5, 0.9, 1.0])
+        return dict(
+            zip(("min", "median", "p90", "max"), [round(float(v), 2) for v in q], strict=True)
+        )
+
+    levels = Counter(v["occlusion_level"] for v in kept)
+    return {
+        "episodes": len(episodes),
+        "episodes_congested": sum(e["episode"]["congested"] for e in episodes),
+        "episodes_skipped": sum(e["skipped"] is not None for e in episodes),
+        "episodes_ended_early": sum(e["ended_early"] is not None for e in episodes),
+        "samples": len(labels),
+        "vehicles_visible": len(vehicles),
+        "vehicles_kept": len(kept),
+        "vehicles_dont_care": len(vehicles) - len(kept),
+        "kept_per_sample": round(len(kept) / len(labels), 3) if labels else None,
+        "per_class": {c.name: sum(v["class"] == c.name for v in kept) for c in categories()},
+        "occlusion_levels": {str(k): levels.get(k, 0) for k in (0, 1, 2)},
+        "truncated": sum(v["truncation"] > 0 for v in kept),
+        "distance_m": quantiles([v["distance_m"] for v in kept]),
+        "height_px": quantiles([v["visible_box"][3] - v["visible_box"][1] + 1 for v in kept]),
+        "speed_mps": quantiles([v["speed_mps"] for v in kept]),
+    }
+
+
+def load_dataset_config(
+    text: str, *, source: str = "dataset configuration", base: DatasetConfig | None = None
+) -> DatasetConfig:
+    """Parse a dataset's TOML over ``base`` (default: the defaults).
+
+    Raises:
+        ConfigError: malformed TOML, an unknown key or an impossible value.
+    """
+    import tomllib
+
+    from twin.cosim.config import override
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{source} is not valid TOML: {error}") from None
+    try:
+        return override(base or DatasetConfig(), data, source=source)
+    except (DatasetError, SamplingError) as error:
+        raise ConfigError(f"{source}: {error}") from None
