@@ -54,7 +54,7 @@ from sensors.coco import coco_bbox, rle_counts, rle_string
 from sensors.episodes import EpisodeSampling, EpisodeSpec, SamplingError, draw_episode
 from sensors.episodes import measure_cells as _measure_cells
 from sensors.kitti import calibration_text, categories, encode_depth, label_lines
-from sensors.labels import VehicleLabels, frame_labels
+from sensors.labels import VehicleLabels, frame_labels, model_triangles
 from sensors.writer import PNG, BackgroundWriter, encode_instance
 from twin import __version__
 from twin.atomic import AtomicFolder, atomic_file, marked_as, remove_stale
@@ -228,9 +228,11 @@ def generate(
     workers: int = 1,
     engine: str = "local",
     ray_address: str | None = None,
+    bundle=None,
     progress: bool = True,
 ) -> DatasetResult:
-    """Make (or complete) the dataset ``out`` of ``episodes`` episodes.
+    """Make (or complete) the dataset ``out`` of ``episodes`` episodes on the map
+    ``bundle`` (default: the default map).
 
     Raises:
         DatasetError: bad arguments, ``out`` holds something else or a dataset made
@@ -250,8 +252,8 @@ def generate(
     if engine not in ENGINES:
         raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
     out = Path(out)
-    _claim(out, config, store)
-    bundle = default_map(progress=progress)
+    bundle = bundle or default_map(progress=progress)
+    _claim(out, config, store, bundle)
     specs = draw_episodes(config, store, bundle, episodes)
     remove_stale(out / EPISODES)
     todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
@@ -264,9 +266,9 @@ def generate(
         desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
     ) as bar:
         if engine == "ray":
-            rendered = _run_ray(config, todo, store, out, workers, ray_address, bar)
+            rendered = _run_ray(config, todo, store, bundle, out, workers, ray_address, bar)
         else:
-            rendered = _run_local(config, todo, store, out, workers, bar)
+            rendered = _run_local(config, todo, store, bundle, out, workers, bar)
     render_s = time.perf_counter() - render_start
     manifest = assemble(out, config, specs)
     return DatasetResult(
@@ -311,7 +313,7 @@ def is_dataset(path: Path) -> bool:
     return marked_as(path, IDENTITY, FORMAT)
 
 
-def _identity(config: DatasetConfig, store: TrajectoryStore) -> dict:
+def _identity(config: DatasetConfig, store: TrajectoryStore, bundle) -> dict:
     data = {k: v for k, v in store.metadata.items() if k in ("format", "version", "roads")}
     data["sources"] = [
         {k: s.get(k) for k in ("name", "bytes")} for s in store.metadata.get("sources", [])
@@ -322,12 +324,13 @@ def _identity(config: DatasetConfig, store: TrajectoryStore) -> dict:
         "software": __version__,
         "config": config.to_toml(),
         "data": data,
+        "map": bundle.key,
     }
 
 
-def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore) -> None:
+def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore, bundle) -> None:
     """Make ``out`` this dataset's folder, or check that it already is."""
-    identity = _identity(config, store)
+    identity = _identity(config, store, bundle)
     if out.exists() and not out.is_dir():
         raise DatasetError(f"--out {out} is a file, not a dataset folder")
     if out.is_dir() and any(out.iterdir()):
@@ -337,12 +340,13 @@ def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore) -> None:
                 "(choose another --out or remove it yourself)"
             )
         held = json.loads((out / IDENTITY).read_text())
-        differ = sorted(k for k in identity if held.get(k) != identity[k])
+        differ = [k for k in identity if k != "config" and held.get(k) != identity[k]]
+        differ += _settings_differ(held.get("config", ""), identity["config"])
         if differ:
             raise DatasetError(
-                f"{out} holds a dataset made with another {', '.join(differ)}; its episodes "
-                "would not match. Use another --out, or the same settings to resume it "
-                f"({out / 'config.toml'} loads back with --config)"
+                f"{out} holds a dataset made with other settings ({'; '.join(differ[:5])}); "
+                "its episodes would not match. Use another --out, or the same settings to "
+                f"resume it ({out / 'config.toml'} loads back with --config)"
             )
         return
     out.mkdir(parents=True, exist_ok=True)
@@ -350,6 +354,29 @@ def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore) -> None:
         tmp.write_text(identity["config"])
     with atomic_file(out / IDENTITY) as tmp:
         tmp.write_text(json.dumps(identity, indent=1) + "\n")
+
+
+def _settings_differ(held: str, wanted: str) -> list[str]:
+    """``"key: dataset has A, asked B"`` for each setting in which two TOMLs differ."""
+    import tomllib
+
+    def flat(text: str) -> dict:
+        out, stack = {}, [("", tomllib.loads(text))]
+        while stack:
+            prefix, table = stack.pop()
+            for key, value in table.items():
+                if isinstance(value, dict):
+                    stack.append((f"{prefix}{key}.", value))
+                else:
+                    out[f"{prefix}{key}"] = value
+        return out
+
+    a, b = flat(held), flat(wanted)
+    return [
+        f"{key}: dataset has {a.get(key)!r}, asked {b.get(key)!r}"
+        for key in sorted(a.keys() | b.keys())
+        if a.get(key) != b.get(key)
+    ]
 
 
 # -- one episode ---------------------------------------------------------------------
@@ -408,7 +435,9 @@ def render_episode(
                 }
                 rig = CameraRig(sim.world, bundle, cameras, cosim.camera.renderer, cosim.dt)
                 try:
-                    _take_frames(config, sim, rig, spec, samples, writer, on_frames)
+                    _take_frames(
+                        config, sim, rig, model_triangles(bundle), spec, samples, writer, on_frames
+                    )
                 finally:
                     rig.close()
                 description["ended_early"] = sim.counters.ended or None
@@ -418,14 +447,14 @@ def render_episode(
     return description
 
 
-def _take_frames(config, sim, rig, spec, samples, writer, on_frames) -> None:
+def _take_frames(config, sim, rig, models, spec, samples, writer, on_frames) -> None:
     warmup, every = config.warmup_steps, config.frame_every
     frames = 0
     while frames < config.frames_per_episode:
         step = sim.step_index
         if step >= warmup and (step - warmup) % every == 0:
             for frame in rig.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time):
-                labels = frame_labels(frame)
+                labels = frame_labels(frame, models)
                 kept = config.filters.keep(labels)
                 stem = f"{len(samples):06d}"
                 samples.append(
@@ -537,12 +566,9 @@ def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> in
     return len(description["samples"])
 
 
-def _run_local(config, specs, store, out: Path, workers: int, bar) -> int:
+def _run_local(config, specs, store, bundle, out: Path, workers: int, bar) -> int:
     """Render ``specs`` in this process (one worker) or a pool of processes."""
-    from mapgen.build import default_map
-
     if workers == 1 or len(specs) <= 1:
-        bundle = default_map()
         return sum(
             _episode_or_error(_write_episode, spec, config, spec, store, bundle, out, bar.update)
             for spec in specs
@@ -560,7 +586,7 @@ def _run_local(config, specs, store, out: Path, workers: int, bar) -> int:
     )
     try:
         futures = {
-            pool.submit(_pool_episode, config, spec, str(store.path), str(out)): spec
+            pool.submit(_pool_episode, config, spec, _where(store, bundle), str(out)): spec
             for spec in specs
         }
         pending = set(futures)
@@ -617,21 +643,32 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
+def _where(store: TrajectoryStore, bundle) -> tuple[str, str, str]:
+    """How a worker finds the data and the map: store folder, map folder and key."""
+    return str(store.path), str(bundle.folder), bundle.key
+
+
 @cache
-def _worker_data(store_path: str):
-    from mapgen.build import default_map
+def _worker_data(where: tuple[str, str, str]):
+    """The store and map of a worker. On a node without the map folder the default
+    map is built there, and used if it is the same map (same key)."""
+    from mapgen.build import default_map, is_map, load_map
 
-    return TrajectoryStore(store_path), default_map()
+    store_path, map_folder, key = where
+    bundle = load_map(Path(map_folder)) if is_map(Path(map_folder)) else default_map()
+    if bundle.key != key:
+        raise DatasetError(f"this node has no map {key} (looked in {map_folder})")
+    return TrajectoryStore(store_path), bundle
 
 
-def _pool_episode(config, spec, store_path: str, out: str) -> int:
-    store, bundle = _worker_data(store_path)
+def _pool_episode(config, spec, where, out: str) -> int:
+    store, bundle = _worker_data(where)
     return _write_episode(config, spec, store, bundle, Path(out), _TICKS.put)
 
 
-def _episode_files(config, spec, store_path: str) -> dict[str, bytes]:
+def _episode_files(config, spec, where) -> dict[str, bytes]:
     """A Ray task: render episode ``spec`` in a scratch folder; its files by path."""
-    store, bundle = _worker_data(store_path)
+    store, bundle = _worker_data(where)
     scratch = Path(tempfile.mkdtemp(prefix="i24-twin-episode-"))
     try:
         render_episode(config, spec, store, bundle, scratch)
@@ -644,7 +681,7 @@ def _episode_files(config, spec, store_path: str) -> dict[str, bytes]:
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _run_ray(config, specs, store, out: Path, workers: int, address, bar) -> int:
+def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar) -> int:
     """Render ``specs`` as Ray tasks (a local Ray instance of ``workers`` CPUs, or the
     cluster at ``address``); the driver writes each episode's files atomically."""
     try:
@@ -663,7 +700,8 @@ def _run_ray(config, specs, store, out: Path, workers: int, address, bar) -> int
         )
     try:
         task = ray.remote(num_cpus=1)(_episode_files)
-        refs = {task.remote(config, spec, str(store.path)): spec for spec in specs}
+        where = _where(store, bundle)
+        refs = {task.remote(config, spec, where): spec for spec in specs}
         rendered = 0
         while refs:
             (ready,), _ = ray.wait(list(refs), num_returns=1)
@@ -847,6 +885,35 @@ def statistics(episodes: list[dict], labels: list[dict]) -> dict:
         "height_px": quantiles([v["visible_box"][3] - v["visible_box"][1] + 1 for v in kept]),
         "speed_mps": quantiles([v["speed_mps"] for v in kept]),
     }
+
+
+def summary(result: DatasetResult) -> str:
+    """A few lines for the terminal: what was rendered, how fast, what the dataset holds."""
+    stats = result.manifest["statistics"]
+    per_class = ", ".join(f"{name} {n}" for name, n in stats["per_class"].items() if n)
+    levels = stats["occlusion_levels"]
+    lines = [
+        f"dataset folder: {result.folder}",
+        f"episodes: {stats['episodes']} ({stats['episodes_congested']} congested, "
+        f"{stats['episodes_skipped']} skipped, {stats['episodes_ended_early']} ended early); "
+        f"rendered now: {result.episodes_rendered}",
+        f"samples: {stats['samples']}; vehicles kept {stats['vehicles_kept']} "
+        f"({stats['kept_per_sample']} a sample), DontCare {stats['vehicles_dont_care']}",
+        f"kept by class: {per_class or 'none'}; occlusion levels 0/1/2: "
+        f"{levels['0']}/{levels['1']}/{levels['2']}; truncated {stats['truncated']}",
+    ]
+    if stats["distance_m"]:
+        d, h = stats["distance_m"], stats["height_px"]
+        lines.append(
+            f"distance median {d['median']} m (max {d['max']}), box height median {h['median']} px"
+        )
+    if result.samples_rendered:
+        lines.append(
+            f"rendered {result.samples_rendered} samples in {result.render_s:.1f} s: "
+            f"{result.samples_rendered / result.render_s:.1f} labelled frames/s "
+            f"({result.total_s:.1f} s in all)"
+        )
+    return "\n".join(lines)
 
 
 def load_dataset_config(

@@ -16,26 +16,33 @@ Conventions (the camera's, :mod:`sensors.camera`: x right, y down, z forward; pi
 * truncation: the share of the amodal box outside the image, 0 to 1 (KITTI: "the
   object leaving image boundaries");
 * occlusion: the share of the vehicle's silhouette in the image that something nearer
-  hides. The silhouette is taken as the pixels whose rays pass through the vehicle's
-  3D box: a pixel there is hidden when it shows a vehicle, barrier, pole, post or
-  overpass (not road or terrain) nearer than the ray's entry into the box, and visible
-  when it shows the vehicle. Levels as KITTI's: 0 fully visible (under
-  ``PARTLY_OCCLUDED``), 1 partly occluded, 2 largely occluded (``LARGELY_OCCLUDED``
-  or more);
+  hides. The silhouette is the vehicle's drawn model rasterised on its own (its
+  triangles projected and filled); a pixel of it is hidden when it shows a vehicle,
+  barrier, pole, post or overpass (not road or terrain) nearer than where the pixel's
+  ray enters the vehicle's 3D box, and visible when it shows the vehicle. (A vehicle
+  reaching behind the camera's near plane has the box's silhouette instead.) Levels
+  as KITTI's: 0 fully visible (under ``PARTLY_OCCLUDED``), 1 partly occluded, 2
+  largely occluded (``LARGELY_OCCLUDED`` or more);
 * distance: [m] from the camera to the centre of the 3D box; speed: [m/s] along the
   vehicle's heading.
 """
 
 from dataclasses import dataclass, fields
+from functools import cache
 
+import cv2
 import numpy as np
+import trimesh
 
+from mapgen.build import MapBundle
 from mapgen.semantics import class_id, semantic_classes
 from sensors.camera import Frame
+from twin.data.i24 import VEHICLE_CLASSES
 
 PARTLY_OCCLUDED = 0.1  # hidden share from which a vehicle is "partly occluded" (level 1)
 LARGELY_OCCLUDED = 0.5  # hidden share from which it is "largely occluded" (level 2)
 DEPTH_TOLERANCE = 0.1  # [m] an occluder must lie this much nearer than the box
+SUBPIXEL_BITS = 4  # fixed-point bits of the rasterised silhouettes
 NOT_OCCLUDERS = ("sky", "road", "shoulder", "lane_marking", "terrain")
 # the 12 edges of a box whose corners are numbered by bits (x, y, z)
 BOX_EDGES = np.array(
@@ -89,8 +96,25 @@ class VehicleLabels:
         return self.visible_box[:, 3] - self.visible_box[:, 1] + 1
 
 
-def frame_labels(frame: Frame) -> VehicleLabels:
-    """Label every vehicle with at least one pixel in ``frame``, ordered by id."""
+def model_triangles(bundle: MapBundle) -> tuple[np.ndarray, ...]:
+    """(m, 3, 3) triangles of each vehicle class's drawn model (in the unit box), by
+    I-24 class id."""
+    return tuple(_load_triangles(str(bundle.vehicles[name])) for name in VEHICLE_CLASSES)
+
+
+@cache
+def _load_triangles(path: str) -> np.ndarray:
+    mesh = trimesh.load(path, force="mesh", process=False)
+    return np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces)]
+
+
+def frame_labels(frame: Frame, models: tuple[np.ndarray, ...]) -> VehicleLabels:
+    """Label every vehicle with at least one pixel in ``frame``, ordered by id.
+
+    Args:
+        frame: a camera frame.
+        models: the vehicle models' triangles (:func:`model_triangles` of the map).
+    """
     camera = frame.camera
     width, height = camera.width, camera.height
     counts = np.bincount(frame.instance.reshape(-1) + 1)
@@ -129,9 +153,10 @@ def frame_labels(frame: Frame) -> VehicleLabels:
     )
     occluders = _occluder_classes()
     for i in range(n):
+        model = models[labels.vehicle_class[i]] * size[i]  # (m, 3, 3) vehicle frame
         labels.visible_box[i], labels.occlusion[i] = _visible_and_hidden(
             frame, labels, i, camera_from_world, vehicles.rotation[i], vehicles.position[i],
-            size[i], occluders,
+            size[i], model, occluders,
         )  # fmt: skip
     labels.occlusion_level[:] = np.digitize(labels.occlusion, [PARTLY_OCCLUDED, LARGELY_OCCLUDED])
     return labels
@@ -174,6 +199,7 @@ def _visible_and_hidden(
     world_rotation: np.ndarray,
     world_bottom: np.ndarray,
     size: np.ndarray,
+    model: np.ndarray,
     occluders: np.ndarray,
 ) -> tuple[np.ndarray, float]:
     """Visible box and hidden share of vehicle ``i``, looked for inside its amodal box."""
@@ -212,10 +238,19 @@ def _visible_and_hidden(
     t_lo, t_hi = (lo - origin) / direction, (hi - origin) / direction
     enter = np.minimum(t_lo, t_hi).max(axis=-1)
     leave = np.maximum(t_lo, t_hi).min(axis=-1)
-    through = (leave >= np.maximum(enter, 0.0)) & (leave > 0.0)
+    silhouette = (leave >= np.maximum(enter, 0.0)) & (leave > 0.0)  # the box's
+    camera_from_box = np.linalg.inv(box_from_camera)
+    points = model.reshape(-1, 3) @ camera_from_box[:3, :3].T + camera_from_box[:3, 3]
+    if points[:, 2].min() > camera.near:  # the model's own silhouette
+        u = K[0, 0] * points[:, 0] / points[:, 2] + K[0, 2] - c0
+        v = K[1, 1] * points[:, 1] / points[:, 2] + K[1, 2] - r0
+        corners = np.rint(np.column_stack([u, v]) * (1 << SUBPIXEL_BITS)).astype(np.int32)
+        drawn = np.zeros(mine.shape, np.uint8)
+        cv2.fillPoly(drawn, list(corners.reshape(-1, 3, 2)), 1, shift=SUBPIXEL_BITS)
+        silhouette = drawn.view(bool)
     depth = frame.depth[r0 : r1 + 1, c0 : c1 + 1]
     semantic = frame.semantic[r0 : r1 + 1, c0 : c1 + 1]
-    hidden = through & ~mine & occluders[semantic] & (depth < enter - DEPTH_TOLERANCE)
+    hidden = silhouette & ~mine & occluders[semantic] & (depth < enter - DEPTH_TOLERANCE)
     n_hidden = int(np.count_nonzero(hidden))
     return box, n_hidden / (n_hidden + int(labels.pixels[i]))
 

@@ -328,6 +328,62 @@ def camera_bench(
     }
 
 
+def dataset_bench(
+    store=None,
+    *,
+    episodes: int = 16,
+    frames: int = 20,
+    workers: tuple[int, ...] | None = None,
+    repeats: int = 3,
+) -> dict:
+    """Labelled frames per second of ``twin dataset`` with the local engine, by the
+    number of workers (default 1 up to the cores available).
+
+    Each repeat makes a fresh dataset of ``episodes`` episodes of ``frames`` frames
+    (the default front camera, 640x480, labels and every KITTI/COCO file) from the
+    embedded data. Two rates: over the rendering (pool start, episodes, files) and
+    over the whole command (also drawing the episodes and assembling KITTI, COCO
+    and the manifest). Medians over the repeats; scaling is the rendering rate of the
+    most workers over that of one.
+    """
+    from dataclasses import replace as with_values
+
+    from sensors.dataset import DatasetConfig, generate
+    from twin.cosim.run import open_data
+
+    store = store or open_data(None, progress=False)
+    cores = len(os.sched_getaffinity(0))
+    workers = workers or tuple(range(1, cores + 1))
+    config = with_values(DatasetConfig(), frames_per_episode=frames)
+    figures = {}
+    for count in workers:
+        render, total = [], []
+        for _ in range(repeats):
+            with tempfile.TemporaryDirectory(prefix="twin-bench-dataset-") as tmp:
+                result = generate(
+                    config, store, Path(tmp) / "ds", episodes, workers=count, progress=False
+                )
+            render.append(result.samples_rendered / result.render_s)
+            total.append(result.samples_rendered / result.total_s)
+        figures[str(count)] = {
+            "render_fps": round(float(np.median(render)), 2),
+            "overall_fps": round(float(np.median(total)), 2),
+            "render_fps_runs": [round(v, 2) for v in render],
+        }
+    most = str(max(workers))
+    return {
+        "size": "640x480",
+        "camera_rate_hz": config.cosim.camera.rate_hz,
+        "episodes": episodes,
+        "frames_per_episode": frames,
+        "repeats": repeats,
+        "by_workers": figures,
+        "scaling": round(figures[most]["render_fps"] / figures["1"]["render_fps"], 2)
+        if "1" in figures and most != "1"
+        else None,
+    }
+
+
 def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:
     """Ingest throughput and peak memory on a synthetic day of at least ``size_mb``.
 

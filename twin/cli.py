@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -161,6 +162,40 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="terrain seed of the cached map")
     p.set_defaults(handler=_map_preview)
 
+    p = commands.add_parser(
+        "dataset",
+        help="labelled camera datasets (KITTI, COCO) from many episodes of recorded traffic",
+        description="Draw episodes from the recorded traffic (congested and free flow), run "
+        "each as a cosimulation with the ego's cameras, and write every frame with its labels "
+        "in KITTI's object layout and as COCO instances. Complete episodes are kept: rerun the "
+        "same command to resume an interrupted run. Settings: defaults < --config file < flags "
+        "< --set.",
+    )
+    p.add_argument("--episodes", type=int, required=True, help="episodes in the dataset")
+    p.add_argument("--out", type=Path, required=True, help="dataset folder")
+    p.add_argument(
+        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
+    )
+    p.add_argument("--seed", type=int, default=None, help="dataset seed (default 0)")
+    p.add_argument(
+        "--camera", default=None, help="cameras of the rig, comma-separated (default: front)"
+    )
+    p.add_argument(
+        "--frames-per-episode", type=int, default=None, help="frames per camera (default 20)"
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="processes (local) or CPUs (Ray) to use (default: the cores available)",
+    )
+    p.add_argument("--engine", choices=["local", "ray"], default="local")
+    p.add_argument("--ray-address", default=None, help="Ray cluster to join (--engine ray)")
+    p.add_argument("--config", type=Path, default=None, help="dataset TOML configuration")
+    _add_set(p, "any other setting, e.g. --set filters.min_height_px=25 (repeatable)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_dataset)
+
     bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
     bench_commands = bench.add_subparsers(title="benchmarks")
     p = bench_commands.add_parser("query", help="snapshot latency of EmpiricalTraffic")
@@ -199,6 +234,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_camera)
+    p = bench_commands.add_parser(
+        "dataset", help="labelled 640x480 frames per second of twin dataset, by workers"
+    )
+    p.add_argument("--episodes", type=int, default=16)
+    p.add_argument("--frames", type=int, default=20, help="frames per episode")
+    p.add_argument(
+        "--workers", default=None, help="worker counts, comma-separated (default: 1 to cores)"
+    )
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_dataset)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -271,6 +316,43 @@ def _render(args) -> int:
         f"wrote {out}: camera {frame.camera.name} ({frame.renderer}), "
         f"{frame.sim_time:.2f} s after t0, {len(frame_vehicles(frame))} vehicles in view"
     )
+    return 0
+
+
+def _dataset(args) -> int:
+    from sensors.dataset import DatasetConfig, generate, load_dataset_config, summary
+    from twin.cosim.config import ConfigError, override, parse_assignments
+    from twin.cosim.run import open_data
+
+    config = DatasetConfig()
+    if args.config is not None:
+        try:
+            text = args.config.read_text()
+        except OSError as error:
+            raise ConfigError(f"cannot read {args.config}: {error.strerror}") from None
+        config = load_dataset_config(text, source=str(args.config))
+    flags = {"seed": args.seed, "frames_per_episode": args.frames_per_episode}
+    values = {k: v for k, v in flags.items() if v is not None}
+    if args.camera is not None:
+        names = [name.strip() for name in args.camera.split(",") if name.strip()]
+        values["cosim"] = {"camera": {"cameras": names}}
+    config = override(config, values, source="command line")
+    config = override(config, parse_assignments(args.assignments), source="--set")
+    if args.ray_address is not None and args.engine != "ray":
+        raise ConfigError("--ray-address needs --engine ray")
+    workers = args.workers if args.workers is not None else len(os.sched_getaffinity(0))
+    store = open_data(args.data, progress=not args.quiet)
+    result = generate(
+        config,
+        store,
+        args.out,
+        args.episodes,
+        workers=workers,
+        engine=args.engine,
+        ray_address=args.ray_address,
+        progress=not args.quiet,
+    )
+    print(summary(result))
     return 0
 
 
@@ -411,6 +493,23 @@ def _bench_camera(args) -> int:
     return _emit(
         "camera",
         camera_bench(renderer=args.renderer, frames=args.frames, repeats=args.repeats),
+    )
+
+
+def _bench_dataset(args) -> int:
+    from twin.bench import dataset_bench
+
+    workers = None
+    if args.workers is not None:
+        try:
+            workers = tuple(int(w) for w in args.workers.split(","))
+        except ValueError:
+            raise ValueError(f"--workers must be integers like 1,2, got {args.workers!r}") from None
+    return _emit(
+        "dataset",
+        dataset_bench(
+            episodes=args.episodes, frames=args.frames, workers=workers, repeats=args.repeats
+        ),
     )
 
 

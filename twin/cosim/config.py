@@ -262,7 +262,7 @@ def override(config: Any, values: dict, *, source: str = "override", prefix: str
         return replace(config, **changes)
     except ConfigError as error:
         raise ConfigError(f"{source}: {error}") from None
-    except (ValueError, TypeError) as error:  # CameraError is a ValueError
+    except (ValueError, TypeError, TwinError) as error:  # CameraError is a ValueError
         raise ConfigError(f"{source}: {prefix.rstrip('.') or 'settings'}: {error}") from None
 
 
