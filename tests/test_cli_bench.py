@@ -17,6 +17,15 @@ def test_bench_run_prints_the_loop_figures(wave_store, capsys):
     assert 0 < line["ghost_reload_ms"] < line["step_ms"] and line["vehicles_mean"] > 10
 
 
+def test_bench_dataset_prints_frames_per_second_by_workers(wave_store, capsys):
+    argv = ["bench", "dataset", "--data", str(wave_store.path), "--episodes", "2"]
+    assert main([*argv, "--frames", "2", "--workers", "1,2", "--repeats", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["bench"] == "dataset" and line["size"] == "640x480"
+    assert line["by_workers"]["1"]["render_fps"] > 0 and line["by_workers"]["2"]["render_fps"] > 0
+    assert line["scaling"] > 0
+
+
 def test_synth_command_writes_a_day(tmp_path, capsys):
     out = tmp_path / "day.json"
     assert (

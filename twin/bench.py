@@ -340,11 +340,11 @@ def dataset_bench(
     number of workers (default 1 up to the cores available).
 
     Each repeat makes a fresh dataset of ``episodes`` episodes of ``frames`` frames
-    (the default front camera, 640x480, labels and every KITTI/COCO file) from the
-    embedded data. Two rates: over the rendering (pool start, episodes, files) and
-    over the whole command (also drawing the episodes and assembling KITTI, COCO
-    and the manifest). Medians over the repeats; scaling is the rendering rate of the
-    most workers over that of one.
+    (the default front camera, 640x480, labels and every KITTI/COCO file) from
+    ``store`` (default: the embedded data), drawn from all its roads. Two rates: over
+    the rendering (pool start, episodes, files) and over the whole command (also
+    drawing the episodes and assembling KITTI, COCO and the manifest). Medians over
+    the repeats; scaling is the rendering rate of the most workers over that of one.
     """
     from dataclasses import replace as with_values
 
@@ -354,7 +354,11 @@ def dataset_bench(
     store = store or open_data(None, progress=False)
     cores = len(os.sched_getaffinity(0))
     workers = workers or tuple(range(1, cores + 1))
-    config = with_values(DatasetConfig(), frames_per_episode=frames)
+    config = DatasetConfig()
+    roads = tuple(road.value for road in store.roads)
+    config = with_values(
+        config, frames_per_episode=frames, sampling=with_values(config.sampling, roads=roads)
+    )
     figures = {}
     for count in workers:
         render, total = [], []

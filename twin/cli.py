@@ -237,6 +237,7 @@ def _parser() -> argparse.ArgumentParser:
     p = bench_commands.add_parser(
         "dataset", help="labelled 640x480 frames per second of twin dataset, by workers"
     )
+    p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
     p.add_argument("--episodes", type=int, default=16)
     p.add_argument("--frames", type=int, default=20, help="frames per episode")
     p.add_argument(
@@ -508,7 +509,11 @@ def _bench_dataset(args) -> int:
     return _emit(
         "dataset",
         dataset_bench(
-            episodes=args.episodes, frames=args.frames, workers=workers, repeats=args.repeats
+            _store(args.data) if args.data is not None else None,
+            episodes=args.episodes,
+            frames=args.frames,
+            workers=workers,
+            repeats=args.repeats,
         ),
     )
 
