@@ -34,6 +34,7 @@ resumes where it stopped and ends with the same dataset as an uninterrupted one.
 """
 
 import json
+import logging
 import math
 import os
 import shutil
@@ -252,9 +253,10 @@ def generate(
     if engine not in ENGINES:
         raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
     out = Path(out)
+    config = resolved_renderer(config)
     bundle = bundle or default_map(progress=progress)
-    _claim(out, config, store, bundle)
     specs = draw_episodes(config, store, bundle, episodes)
+    _claim(out, config, store, bundle)
     remove_stale(out / EPISODES)
     todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
     cameras = len(config.cosim.camera.cameras)
@@ -265,10 +267,13 @@ def generate(
         disable=None if progress else True,
         desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
     ) as bar:
+        progress_bar = _Progress(bar, config.frames_per_episode * cameras)
         if engine == "ray":
-            rendered = _run_ray(config, todo, store, bundle, out, workers, ray_address, bar)
+            rendered = _run_ray(
+                config, todo, store, bundle, out, workers, ray_address, progress_bar
+            )
         else:
-            rendered = _run_local(config, todo, store, bundle, out, workers, bar)
+            rendered = _run_local(config, todo, store, bundle, out, workers, progress_bar)
     render_s = time.perf_counter() - render_start
     manifest = assemble(out, config, specs)
     return DatasetResult(
@@ -279,6 +284,18 @@ def generate(
         render_s=render_s,
         total_s=time.perf_counter() - start,
     )
+
+
+def resolved_renderer(config: DatasetConfig) -> DatasetConfig:
+    """``config`` with its renderer named: ``auto`` is decided once, here, so every
+    episode of a dataset (on any worker or node) is drawn by the same renderer."""
+    from twin.physics.render import resolve_renderer
+
+    camera = config.cosim.camera
+    if camera.renderer != "auto":
+        return config
+    named = replace(camera, renderer=resolve_renderer("auto").value)
+    return replace(config, cosim=replace(config.cosim, camera=named))
 
 
 def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int):
@@ -566,11 +583,33 @@ def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> in
     return len(description["samples"])
 
 
-def _run_local(config, specs, store, bundle, out: Path, workers: int, bar) -> int:
+class _Progress:
+    """The bar over frames: frames as they are taken; the frames an episode did not
+    take (it ended early, or was skipped) come off the total when it is done."""
+
+    def __init__(self, bar, per_episode: int):
+        self.bar = bar
+        self.per_episode = per_episode
+
+    def frames(self, n: int) -> None:
+        self.bar.update(n)
+
+    def episode(self, samples: int) -> int:
+        if samples < self.per_episode:
+            self.bar.total -= self.per_episode - samples
+            self.bar.refresh()
+        return samples
+
+
+def _run_local(config, specs, store, bundle, out: Path, workers: int, bar: _Progress) -> int:
     """Render ``specs`` in this process (one worker) or a pool of processes."""
     if workers == 1 or len(specs) <= 1:
         return sum(
-            _episode_or_error(_write_episode, spec, config, spec, store, bundle, out, bar.update)
+            bar.episode(
+                _episode_or_error(
+                    _write_episode, spec, config, spec, store, bundle, out, bar.frames
+                )
+            )
             for spec in specs
         )
     import multiprocessing
@@ -593,15 +632,17 @@ def _run_local(config, specs, store, bundle, out: Path, workers: int, bar) -> in
         while pending:
             done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
             while not ticks.empty():
-                bar.update(ticks.get())
+                bar.frames(ticks.get())
             for future in done:
-                rendered += _episode_or_error(future.result, futures[future])
-    finally:
+                rendered += bar.episode(_episode_or_error(future.result, futures[future]))
+    except BaseException:
         # on an error the episodes running finish (complete and correct) and the
         # others are cancelled; on Ctrl-C the workers are interrupted with the run
         pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
     while not ticks.empty():
-        bar.update(ticks.get())
+        bar.frames(ticks.get())
     return rendered
 
 
@@ -681,7 +722,7 @@ def _episode_files(config, spec, where) -> dict[str, bytes]:
         shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar) -> int:
+def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar: _Progress) -> int:
     """Render ``specs`` as Ray tasks (a local Ray instance of ``workers`` CPUs, or the
     cluster at ``address``); the driver writes each episode's files atomically."""
     try:
@@ -692,12 +733,17 @@ def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar
         ) from None
     started = not ray.is_initialized()
     if started:
-        ray.init(
-            address=address,
-            num_cpus=None if address else workers,
-            include_dashboard=False,
-            log_to_driver=False,
-        )
+        try:
+            ray.init(
+                address=address,
+                num_cpus=None if address else workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.WARNING,
+            )
+        except Exception as error:
+            where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+            raise DatasetError(f"cannot start or join {where}: {error}") from None
     try:
         task = ray.remote(num_cpus=1)(_episode_files)
         where = _where(store, bundle)
@@ -714,8 +760,8 @@ def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar
                     path.parent.mkdir(parents=True, exist_ok=True)
                     path.write_bytes(content)
             samples = len(json.loads(files[EPISODE])["samples"])
-            rendered += samples
-            bar.update(samples)
+            bar.frames(samples)
+            rendered += bar.episode(samples)
     finally:
         if started:
             ray.shutdown()

@@ -343,8 +343,11 @@ def dataset_bench(
     (the default front camera, 640x480, labels and every KITTI/COCO file) from
     ``store`` (default: the embedded data), drawn from all its roads. Two rates: over
     the rendering (pool start, episodes, files) and over the whole command (also
-    drawing the episodes and assembling KITTI, COCO and the manifest). Medians over
-    the repeats; scaling is the rendering rate of the most workers over that of one.
+    drawing the episodes and assembling KITTI, COCO and the manifest). Also the
+    cores kept busy (CPU seconds of this process and its workers over the wall time;
+    one worker already keeps more than one core busy, as its files are encoded on a
+    thread) and the frames per busy core. Medians over the repeats; scaling is the
+    rendering rate of the most workers over that of one.
     """
     from dataclasses import replace as with_values
 
@@ -361,18 +364,23 @@ def dataset_bench(
     )
     figures = {}
     for count in workers:
-        render, total = [], []
+        render, total, cores = [], [], []
         for _ in range(repeats):
             with tempfile.TemporaryDirectory(prefix="twin-bench-dataset-") as tmp:
+                cpu = _cpu_seconds()
                 result = generate(
                     config, store, Path(tmp) / "ds", episodes, workers=count, progress=False
                 )
+                cpu = _cpu_seconds() - cpu
             render.append(result.samples_rendered / result.render_s)
             total.append(result.samples_rendered / result.total_s)
+            cores.append(cpu / result.total_s)
         figures[str(count)] = {
             "render_fps": round(float(np.median(render)), 2),
             "overall_fps": round(float(np.median(total)), 2),
             "render_fps_runs": [round(v, 2) for v in render],
+            "cores_busy": round(float(np.median(cores)), 2),
+            "fps_per_busy_core": round(float(np.median(np.divide(total, cores))), 2),
         }
     most = str(max(workers))
     return {
@@ -386,6 +394,15 @@ def dataset_bench(
         if "1" in figures and most != "1"
         else None,
     }
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds of this process and of its children that have ended."""
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def ingest_bench(*, size_mb: float = 300.0, repeats: int = 3) -> dict:

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -25,6 +26,7 @@ from sensors.dataset import (
     draw_episodes,
     generate,
     is_episode,
+    render_episode,
 )
 from sensors.episodes import EpisodeSampling, measure_cells
 from sensors.kitti import decode_depth
@@ -238,6 +240,15 @@ def test_ray_makes_the_same_dataset(dataset, wave_store, built_map, tmp_path):
     )
     assert result.episodes_rendered == EPISODE_COUNT
     assert files_of(result.folder) == files_of(dataset.folder)
+
+
+def test_an_episode_whose_ego_cannot_be_placed_is_kept_empty(wave_store, built_map, tmp_path):
+    spec = draw_episodes(config(), wave_store, built_map, 1)[0]
+    late = replace(spec, time=wave_store.time_range(Road.WESTBOUND)[1] - 1.0)
+    description = render_episode(config(), late, wave_store, built_map, tmp_path)
+    assert "data on westbound end at" in description["skipped"]
+    assert description["samples"] == [] and description["ego"] is None
+    assert json.loads((tmp_path / "episode.json").read_text()) == description
 
 
 def test_a_folder_of_something_else_or_other_settings_is_refused(dataset, wave_store, tmp_path):
