@@ -3,7 +3,8 @@
 Episodes are drawn from the recorded traffic (:mod:`sensors.episodes`); each is a
 cosimulation whose ego cameras take ``frames_per_episode`` frames at the camera
 rate after ``warmup_s``. Every frame of every camera is one sample, labelled by
-:mod:`sensors.labels` and written in KITTI's object layout and as COCO instances.
+:mod:`sensors.labels` and written in KITTI's object layout and as COCO instances;
+:mod:`sensors.runner` runs the episodes (a process pool or Ray) and assembles them.
 
 The dataset folder::
 
@@ -34,17 +35,12 @@ resumes where it stopped and ends with the same dataset as an uninterrupted one.
 """
 
 import json
-import logging
 import math
 import os
 import shutil
-import tempfile
-import time
 from collections import Counter
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
-from functools import cache
 from pathlib import Path
 
 import cv2
@@ -56,9 +52,9 @@ from sensors.episodes import EpisodeSampling, EpisodeSpec, SamplingError, draw_e
 from sensors.episodes import measure_cells as _measure_cells
 from sensors.kitti import calibration_text, categories, encode_depth, label_lines
 from sensors.labels import VehicleLabels, frame_labels, model_triangles
-from sensors.writer import PNG, BackgroundWriter, encode_instance
+from sensors.writer import BackgroundWriter, encode_instance, write_pngs
 from twin import __version__
-from twin.atomic import AtomicFolder, atomic_file, marked_as, remove_stale
+from twin.atomic import AtomicFolder, atomic_file, marked_as
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.data.store import TrajectoryStore
 from twin.errors import NoVehicleNearError, TwinError
@@ -82,8 +78,6 @@ KINDS = {
     "instance_2": ".png",
     "labels": ".json",
 }
-ENGINES = ("local", "ray")
-POLL_S = 0.2  # [s] how often the local engine's progress bar is updated
 
 
 class DatasetError(TwinError):
@@ -199,91 +193,7 @@ class DatasetConfig:
         return to_toml(self, header="dataset")
 
 
-@dataclass(frozen=True)
-class DatasetResult:
-    """What :func:`generate` made and measured.
-
-    Attributes:
-        folder: the dataset. manifest: its ``manifest.json``.
-        episodes_rendered, samples_rendered: in this run (complete episodes are skipped).
-        render_s: [s] wall time of the rendering; total_s: of the whole run.
-    """
-
-    folder: Path
-    manifest: dict
-    episodes_rendered: int
-    samples_rendered: int
-    render_s: float
-    total_s: float
-
-
-# -- the whole dataset --------------------------------------------------------------
-
-
-def generate(
-    config: DatasetConfig,
-    store: TrajectoryStore,
-    out: str | os.PathLike,
-    episodes: int,
-    *,
-    workers: int = 1,
-    engine: str = "local",
-    ray_address: str | None = None,
-    bundle=None,
-    progress: bool = True,
-) -> DatasetResult:
-    """Make (or complete) the dataset ``out`` of ``episodes`` episodes on the map
-    ``bundle`` (default: the default map).
-
-    Raises:
-        DatasetError: bad arguments, ``out`` holds something else or a dataset made
-            with other settings, Ray is missing, or an episode failed (the complete
-            episodes are kept; rerun to resume).
-        SamplingError: episodes cannot be drawn from the data.
-    """
-    from tqdm import tqdm
-
-    from mapgen.build import default_map
-
-    start = time.perf_counter()
-    if not isinstance(episodes, int) or episodes < 1:
-        raise DatasetError(f"--episodes must be an integer >= 1, got {episodes!r}")
-    if not isinstance(workers, int) or workers < 1:
-        raise DatasetError(f"--workers must be an integer >= 1, got {workers!r}")
-    if engine not in ENGINES:
-        raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
-    out = Path(out)
-    config = resolved_renderer(config)
-    bundle = bundle or default_map(progress=progress)
-    specs = draw_episodes(config, store, bundle, episodes)
-    _claim(out, config, store, bundle)
-    remove_stale(out / EPISODES)
-    todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
-    cameras = len(config.cosim.camera.cameras)
-    render_start = time.perf_counter()
-    with tqdm(
-        total=len(todo) * config.frames_per_episode * cameras,
-        unit="frame",
-        disable=None if progress else True,
-        desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
-    ) as bar:
-        progress_bar = _Progress(bar, config.frames_per_episode * cameras)
-        if engine == "ray":
-            rendered = _run_ray(
-                config, todo, store, bundle, out, workers, ray_address, progress_bar
-            )
-        else:
-            rendered = _run_local(config, todo, store, bundle, out, workers, progress_bar)
-    render_s = time.perf_counter() - render_start
-    manifest = assemble(out, config, specs)
-    return DatasetResult(
-        folder=out,
-        manifest=manifest,
-        episodes_rendered=len(todo),
-        samples_rendered=rendered,
-        render_s=render_s,
-        total_s=time.perf_counter() - start,
-    )
+# -- the dataset folder ------------------------------------------------------------
 
 
 def resolved_renderer(config: DatasetConfig) -> DatasetConfig:
@@ -345,7 +255,7 @@ def _identity(config: DatasetConfig, store: TrajectoryStore, bundle) -> dict:
     }
 
 
-def _claim(out: Path, config: DatasetConfig, store: TrajectoryStore, bundle) -> None:
+def claim_folder(out: Path, config: DatasetConfig, store: TrajectoryStore, bundle) -> None:
     """Make ``out`` this dataset's folder, or check that it already is."""
     identity = _identity(config, store, bundle)
     if out.exists() and not out.is_dir():
@@ -504,10 +414,7 @@ def _write_sample(
         "semantic_2": frame.semantic,
         "instance_2": encode_instance(frame.instance),
     }
-    for kind, image in images.items():
-        path = folder / kind / f"{stem}.png"
-        if not cv2.imwrite(str(path), image, PNG):
-            raise OSError(f"OpenCV could not write {path}")
+    write_pngs(folder, stem, images)
     lines = label_lines(labels, kept, camera.width, camera.height)
     (folder / "label_2" / f"{stem}.txt").write_text("".join(f"{line}\n" for line in lines))
     camera_from_ego = np.linalg.inv(frame.ego_from_camera)
@@ -569,203 +476,6 @@ def sample_labels(frame: Frame, labels: VehicleLabels, kept: np.ndarray, episode
 
 def _rounded(values: np.ndarray, digits: int) -> list[float]:
     return [round(float(v), digits) for v in values]
-
-
-# -- engines -------------------------------------------------------------------------
-
-
-def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> int:
-    """Render episode ``spec`` into ``out``'s episodes, atomically; its sample count."""
-    target = episode_folder(out, spec.index)
-    folder = AtomicFolder(target, recognise=is_episode, kind="dataset episode")
-    with folder:
-        description = render_episode(config, spec, store, bundle, folder.tmp, on_frames)
-    return len(description["samples"])
-
-
-class _Progress:
-    """The bar over frames: frames as they are taken; the frames an episode did not
-    take (it ended early, or was skipped) come off the total when it is done."""
-
-    def __init__(self, bar, per_episode: int):
-        self.bar = bar
-        self.per_episode = per_episode
-
-    def frames(self, n: int) -> None:
-        self.bar.update(n)
-
-    def episode(self, samples: int) -> int:
-        if samples < self.per_episode:
-            self.bar.total -= self.per_episode - samples
-            self.bar.refresh()
-        return samples
-
-
-def _run_local(config, specs, store, bundle, out: Path, workers: int, bar: _Progress) -> int:
-    """Render ``specs`` in this process (one worker) or a pool of processes."""
-    if workers == 1 or len(specs) <= 1:
-        return sum(
-            bar.episode(
-                _episode_or_error(
-                    _write_episode, spec, config, spec, store, bundle, out, bar.frames
-                )
-            )
-            for spec in specs
-        )
-    import multiprocessing
-
-    context = multiprocessing.get_context("spawn")  # no fork of threads or pybullet
-    ticks = context.SimpleQueue()
-    rendered = 0
-    pool = ProcessPoolExecutor(
-        max_workers=min(workers, len(specs)),
-        mp_context=context,
-        initializer=_start_worker,
-        initargs=(ticks,),
-    )
-    try:
-        futures = {
-            pool.submit(_pool_episode, config, spec, _where(store, bundle), str(out)): spec
-            for spec in specs
-        }
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
-            while not ticks.empty():
-                bar.frames(ticks.get())
-            for future in done:
-                rendered += bar.episode(_episode_or_error(future.result, futures[future]))
-    except BaseException:
-        # on an error the episodes running finish (complete and correct) and the
-        # others are cancelled; on Ctrl-C the workers are interrupted with the run
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
-    while not ticks.empty():
-        bar.frames(ticks.get())
-    return rendered
-
-
-def _episode_or_error(call, spec: EpisodeSpec, *args):
-    try:
-        return call(*args)
-    except TwinError:
-        raise
-    except Exception as error:
-        raise DatasetError(
-            f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix "
-            f"{spec.time:.2f}) failed: {type(error).__name__}: {error}; the complete "
-            "episodes are kept, rerun the same command to resume"
-        ) from error
-
-
-_TICKS = None  # a pool worker's queue of frame counts for the progress bar
-
-
-def _start_worker(ticks) -> None:
-    """Pool worker set-up: report progress to ``ticks``; die with the parent."""
-    global _TICKS
-    _TICKS = ticks
-    _die_with_parent()
-
-
-def _die_with_parent() -> None:
-    """Ask Linux to kill this process when its parent dies (a killed run must not
-    leave workers writing into the dataset)."""
-    import ctypes
-    import signal
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        return  # not Linux: workers end when they find the pool gone
-    if os.getppid() == 1:
-        os._exit(1)
-
-
-def _where(store: TrajectoryStore, bundle) -> tuple[str, str, str]:
-    """How a worker finds the data and the map: store folder, map folder and key."""
-    return str(store.path), str(bundle.folder), bundle.key
-
-
-@cache
-def _worker_data(where: tuple[str, str, str]):
-    """The store and map of a worker. On a node without the map folder the default
-    map is built there, and used if it is the same map (same key)."""
-    from mapgen.build import default_map, is_map, load_map
-
-    store_path, map_folder, key = where
-    bundle = load_map(Path(map_folder)) if is_map(Path(map_folder)) else default_map()
-    if bundle.key != key:
-        raise DatasetError(f"this node has no map {key} (looked in {map_folder})")
-    return TrajectoryStore(store_path), bundle
-
-
-def _pool_episode(config, spec, where, out: str) -> int:
-    store, bundle = _worker_data(where)
-    return _write_episode(config, spec, store, bundle, Path(out), _TICKS.put)
-
-
-def _episode_files(config, spec, where) -> dict[str, bytes]:
-    """A Ray task: render episode ``spec`` in a scratch folder; its files by path."""
-    store, bundle = _worker_data(where)
-    scratch = Path(tempfile.mkdtemp(prefix="i24-twin-episode-"))
-    try:
-        render_episode(config, spec, store, bundle, scratch)
-        return {
-            str(path.relative_to(scratch)): path.read_bytes()
-            for path in sorted(scratch.rglob("*"))
-            if path.is_file()
-        }
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
-
-
-def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar: _Progress) -> int:
-    """Render ``specs`` as Ray tasks (a local Ray instance of ``workers`` CPUs, or the
-    cluster at ``address``); the driver writes each episode's files atomically."""
-    try:
-        import ray
-    except ImportError:
-        raise DatasetError(
-            "--engine ray needs Ray: pip install 'i24-twin[ray]' (or use --engine local)"
-        ) from None
-    started = not ray.is_initialized()
-    if started:
-        try:
-            ray.init(
-                address=address,
-                num_cpus=None if address else workers,
-                include_dashboard=False,
-                log_to_driver=False,
-                logging_level=logging.WARNING,
-            )
-        except Exception as error:
-            where = f"the Ray cluster at {address}" if address else "a local Ray instance"
-            raise DatasetError(f"cannot start or join {where}: {error}") from None
-    try:
-        task = ray.remote(num_cpus=1)(_episode_files)
-        where = _where(store, bundle)
-        refs = {task.remote(config, spec, where): spec for spec in specs}
-        rendered = 0
-        while refs:
-            (ready,), _ = ray.wait(list(refs), num_returns=1)
-            spec = refs.pop(ready)
-            files = _episode_or_error(ray.get, spec, ready)
-            target = episode_folder(out, spec.index)
-            with AtomicFolder(target, recognise=is_episode, kind="dataset episode") as folder:
-                for name, content in files.items():
-                    path = folder.tmp / name
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    path.write_bytes(content)
-            samples = len(json.loads(files[EPISODE])["samples"])
-            bar.frames(samples)
-            rendered += bar.episode(samples)
-    finally:
-        if started:
-            ray.shutdown()
-    return rendered
 
 
 # -- the dataset from its episodes ---------------------------------------------------
@@ -931,35 +641,6 @@ def statistics(episodes: list[dict], labels: list[dict]) -> dict:
         "height_px": quantiles([v["visible_box"][3] - v["visible_box"][1] + 1 for v in kept]),
         "speed_mps": quantiles([v["speed_mps"] for v in kept]),
     }
-
-
-def summary(result: DatasetResult) -> str:
-    """A few lines for the terminal: what was rendered, how fast, what the dataset holds."""
-    stats = result.manifest["statistics"]
-    per_class = ", ".join(f"{name} {n}" for name, n in stats["per_class"].items() if n)
-    levels = stats["occlusion_levels"]
-    lines = [
-        f"dataset folder: {result.folder}",
-        f"episodes: {stats['episodes']} ({stats['episodes_congested']} congested, "
-        f"{stats['episodes_skipped']} skipped, {stats['episodes_ended_early']} ended early); "
-        f"rendered now: {result.episodes_rendered}",
-        f"samples: {stats['samples']}; vehicles kept {stats['vehicles_kept']} "
-        f"({stats['kept_per_sample']} a sample), DontCare {stats['vehicles_dont_care']}",
-        f"kept by class: {per_class or 'none'}; occlusion levels 0/1/2: "
-        f"{levels['0']}/{levels['1']}/{levels['2']}; truncated {stats['truncated']}",
-    ]
-    if stats["distance_m"]:
-        d, h = stats["distance_m"], stats["height_px"]
-        lines.append(
-            f"distance median {d['median']} m (max {d['max']}), box height median {h['median']} px"
-        )
-    if result.samples_rendered:
-        lines.append(
-            f"rendered {result.samples_rendered} samples in {result.render_s:.1f} s: "
-            f"{result.samples_rendered / result.render_s:.1f} labelled frames/s "
-            f"({result.total_s:.1f} s in all)"
-        )
-    return "\n".join(lines)
 
 
 def load_dataset_config(

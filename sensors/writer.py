@@ -146,10 +146,7 @@ class FrameWriter:
             "semantic": frame.semantic,
             "instance": encode_instance(frame.instance),
         }
-        for kind, image in images.items():
-            path = folder / kind / f"{stem}.png"
-            if not cv2.imwrite(str(path), image, PNG):
-                raise OSError(f"OpenCV could not write {path}")
+        write_pngs(folder, stem, images)
         (folder / "meta" / f"{stem}.json").write_text(json.dumps(frame_meta(frame), indent=1))
         if self.video:
             video = self._videos.get(camera.name)
@@ -163,6 +160,18 @@ class FrameWriter:
                     raise OSError(f"OpenCV cannot write MP4 video to {path}")
                 self._videos[camera.name] = video
             video.write(bgr)
+
+
+def write_pngs(folder: Path, stem: str, images: dict[str, np.ndarray]) -> None:
+    """Write each image as ``folder/<kind>/<stem>.png`` (fast, lossless).
+
+    Raises:
+        OSError: OpenCV could not write one.
+    """
+    for kind, image in images.items():
+        path = folder / kind / f"{stem}.png"
+        if not cv2.imwrite(str(path), image, PNG):
+            raise OSError(f"OpenCV could not write {path}")
 
 
 def encode_depth(depth: np.ndarray) -> np.ndarray:

@@ -351,7 +351,8 @@ def dataset_bench(
     """
     from dataclasses import replace as with_values
 
-    from sensors.dataset import DatasetConfig, generate
+    from sensors.dataset import DatasetConfig
+    from sensors.runner import generate
     from twin.cosim.run import open_data
 
     store = store or open_data(None, progress=False)

@@ -321,7 +321,8 @@ def _render(args) -> int:
 
 
 def _dataset(args) -> int:
-    from sensors.dataset import DatasetConfig, generate, load_dataset_config, summary
+    from sensors.dataset import DatasetConfig, load_dataset_config
+    from sensors.runner import generate, summary
     from twin.cosim.config import ConfigError, override, parse_assignments
     from twin.cosim.run import open_data
 

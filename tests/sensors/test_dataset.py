@@ -24,12 +24,12 @@ from sensors.dataset import (
     DatasetError,
     LabelFilters,
     draw_episodes,
-    generate,
     is_episode,
     render_episode,
 )
 from sensors.episodes import EpisodeSampling, measure_cells
 from sensors.kitti import decode_depth
+from sensors.runner import generate
 from tests.sensors import kitti_devkit
 from twin.cosim.config import override
 from twin.cosim.cosimulator import road_limits
