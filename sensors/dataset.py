@@ -48,7 +48,13 @@ import numpy as np
 
 from sensors.camera import CameraRig, CameraSettings, Frame
 from sensors.coco import coco_bbox, rle_counts, rle_string
-from sensors.episodes import EpisodeSampling, EpisodeSpec, SamplingError, draw_episode
+from sensors.episodes import (
+    EpisodeSampling,
+    EpisodeSpec,
+    SamplingError,
+    check_roads,
+    draw_episode,
+)
 from sensors.episodes import measure_cells as _measure_cells
 from sensors.kitti import calibration_text, categories, encode_depth, label_lines
 from sensors.labels import VehicleLabels, frame_labels, model_triangles
@@ -218,6 +224,7 @@ def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int)
     from twin.data.i24 import Road
     from twin.data.traffic import EmpiricalTraffic
 
+    check_roads(store, config.sampling)
     traffic = EmpiricalTraffic(store)
     roads = [Road.parse(r) for r in config.sampling.roads]
     try:

@@ -54,14 +54,12 @@ class EpisodeSampling:
     cell_m: float = 50.0
 
     def __post_init__(self):
-        roads = tuple(self.roads)
+        try:
+            roads = tuple(Road.parse(road).value for road in self.roads)
+        except ValueError as error:
+            raise SamplingError(f"roads: {error}") from None
         if not roads or len(set(roads)) != len(roads):
-            raise SamplingError(f"roads must name distinct carriageways, got {list(roads)}")
-        for road in roads:
-            try:
-                Road.parse(road)
-            except ValueError as error:
-                raise SamplingError(f"roads: {error}") from None
+            raise SamplingError(f"roads must name distinct carriageways, got {list(self.roads)}")
         object.__setattr__(self, "roads", roads)
         if not 0.0 <= self.congested_share <= 1.0:
             raise SamplingError(f"congested_share must be in [0, 1], got {self.congested_share}")
@@ -115,6 +113,17 @@ class Cells:
     cell_m: float
 
 
+def check_roads(store: TrajectoryStore, sampling: EpisodeSampling) -> None:
+    """Raise :class:`SamplingError` unless ``store`` holds every road of ``sampling``."""
+    have = [road.value for road in store.roads]
+    missing = [road for road in sampling.roads if road not in have]
+    if missing:
+        raise SamplingError(
+            f"the data hold no {' or '.join(missing)} traffic (roads: {have}); "
+            "choose others with sampling.roads"
+        )
+
+
 def measure_cells(
     store: TrajectoryStore,
     sampling: EpisodeSampling,
@@ -128,11 +137,10 @@ def measure_cells(
     Raises:
         SamplingError: a road has no data, or no cell has enough samples.
     """
+    check_roads(store, sampling)
     parts = []
     for name in sampling.roads:
         road = Road.parse(name)
-        if road.value not in store.metadata["roads"]:
-            raise SamplingError(f"the data hold no {road.value} traffic (roads: {store.roads})")
         t_first, t_last = store.time_range(road)
         lo, hi = limits[road]
         hi -= duration * MAX_SPEED  # room to drive the episode without leaving the data

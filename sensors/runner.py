@@ -89,9 +89,9 @@ def generate(
     from mapgen.build import default_map
 
     start = time.perf_counter()
-    if not isinstance(episodes, int) or episodes < 1:
+    if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
         raise DatasetError(f"--episodes must be an integer >= 1, got {episodes!r}")
-    if not isinstance(workers, int) or workers < 1:
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise DatasetError(f"--workers must be an integer >= 1, got {workers!r}")
     if engine not in ENGINES:
         raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
@@ -111,7 +111,9 @@ def generate(
         desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
     ) as bar:
         progress_bar = _Progress(bar, config.frames_per_episode * cameras)
-        if engine == "ray":
+        if not todo:
+            rendered = 0
+        elif engine == "ray":
             rendered = _run_ray(
                 config, todo, store, bundle, out, workers, ray_address, progress_bar
             )

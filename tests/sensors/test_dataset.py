@@ -278,6 +278,14 @@ def test_impossible_settings_are_named(settings, message):
         override(DatasetConfig(), settings)
 
 
+def test_a_road_without_data_is_named(wave_store, built_map, tmp_path):
+    from sensors.episodes import SamplingError
+
+    with pytest.raises(SamplingError, match=r"no eastbound traffic \(roads: \['westbound'\]\)"):
+        generate(DatasetConfig(), wave_store, tmp_path / "ds", 1, bundle=built_map)
+    assert not (tmp_path / "ds").exists()  # nothing was claimed
+
+
 def test_filters_reject_impossible_values():
     with pytest.raises(DatasetError, match="min_height_px"):
         LabelFilters(min_height_px=float("nan"))
