@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sensors import writer
 from sensors.labels import VehicleLabels
 from twin.data.i24 import VEHICLE_CLASSES
 from twin.errors import TwinError
@@ -40,7 +41,6 @@ from twin.paths import asset
 CATEGORIES_CSV = "dataset_categories.csv"
 KITTI_TYPES = ("Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc")
 DEPTH_UNITS = 256.0  # [values per m] of KITTI's depth PNGs
-UINT16_MAX = 65535
 
 
 @dataclass(frozen=True)
@@ -139,16 +139,12 @@ def calibration_text(K: np.ndarray, camera_from_ego: np.ndarray) -> str:
 def encode_depth(depth: np.ndarray) -> np.ndarray:
     """(h, w) uint16 KITTI depth map of planar depth [m]: value = depth * 256, 0 where
     there is no depth (+inf) or the depth does not fit (255.99 m or more)."""
-    values = np.rint(depth * DEPTH_UNITS)
-    values[~np.isfinite(values) | (values > UINT16_MAX)] = 0
-    return values.astype(np.uint16)
+    return writer.encode_depth(depth, DEPTH_UNITS, too_far=0)
 
 
 def decode_depth(image: np.ndarray) -> np.ndarray:
     """Planar depth [m] (float32) of a KITTI depth map; +inf where the value is 0."""
-    depth = image.astype(np.float32) / DEPTH_UNITS
-    depth[image == 0] = np.inf
-    return depth
+    return writer.decode_depth(image, DEPTH_UNITS)
 
 
 def _number(value) -> str:

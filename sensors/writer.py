@@ -174,17 +174,22 @@ def write_pngs(folder: Path, stem: str, images: dict[str, np.ndarray]) -> None:
             raise OSError(f"OpenCV could not write {path}")
 
 
-def encode_depth(depth: np.ndarray) -> np.ndarray:
-    """(h, w) uint16 millimetres of planar depth [m]: 0 where +inf (nothing), clipped
-    to 65535 (65.535 m) beyond."""
-    millimetres = np.minimum(np.rint(depth * DEPTH_SCALE), UINT16_MAX)
-    millimetres[~np.isfinite(depth)] = 0
-    return millimetres.astype(np.uint16)
+def encode_depth(
+    depth: np.ndarray, units: float = DEPTH_SCALE, too_far: int = UINT16_MAX
+) -> np.ndarray:
+    """(h, w) uint16 planar depth [m] in ``units`` per metre (millimetres by default):
+    0 where +inf (nothing), ``too_far`` where the value does not fit 16 bits (by
+    default clipped to 65535, 65.535 m)."""
+    values = np.rint(depth * units)
+    values[values > UINT16_MAX] = too_far
+    values[~np.isfinite(depth)] = 0
+    return values.astype(np.uint16)
 
 
-def decode_depth(image: np.ndarray) -> np.ndarray:
-    """Planar depth [m] (float32) of a depth PNG; +inf where 0 (nothing)."""
-    depth = image.astype(np.float32) / DEPTH_SCALE
+def decode_depth(image: np.ndarray, units: float = DEPTH_SCALE) -> np.ndarray:
+    """Planar depth [m] (float32) of a depth PNG in ``units`` per metre; +inf where 0
+    (nothing)."""
+    depth = image.astype(np.float32) / units
     depth[image == 0] = np.inf
     return depth
 
