@@ -9,9 +9,8 @@ set, and triangle internal edges give sliding bodies bogus contact normals unles
 
 from dataclasses import dataclass
 
-import pybullet as p
-
 from mapgen.build import MapBundle
+from twin.physics.bullet import pybullet as p
 
 CONCAVE_FLAGS = p.GEOM_FORCE_CONCAVE_TRIMESH | p.GEOM_CONCAVE_INTERNAL_EDGE
 

@@ -17,7 +17,9 @@ plugin is unloaded on close.
 """
 
 import pkgutil
+import sys
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, fields
 from enum import StrEnum
 from functools import cache
@@ -25,11 +27,12 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pybullet as p
 
 from mapgen.build import MapBundle
 from mapgen.semantics import class_id
 from twin.data.i24 import VEHICLE_CLASSES
+from twin.physics.bullet import filtered_native_output
+from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import visual_body
 from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld, rotation_matrices
 from twin.vehicle_classes import vehicle_paints
@@ -57,6 +60,24 @@ class Renderer(StrEnum):
 def gpu_present() -> bool:
     """True when an NVIDIA GPU is visible to this process (a device node exists)."""
     return Path("/dev/nvidia0").exists() or any(Path("/proc/driver/nvidia/gpus").glob("*"))
+
+
+def gl_renderer_of(driver_text: str) -> str:
+    """The ``GL_RENDERER=...`` line the EGL plugin prints on loading ("" if absent)."""
+    for line in driver_text.splitlines():
+        if line.startswith("GL_RENDERER="):
+            return line.removeprefix("GL_RENDERER=").strip()
+    return ""
+
+
+@cache
+def _note_cpu_egl(gl_renderer: str) -> None:
+    """Say once per process that EGL found a GPU device but renders on the CPU."""
+    print(
+        f"twin: note: a GPU is present but EGL renders on the CPU ({gl_renderer}); "
+        "frames will be slow. Is the NVIDIA EGL library (libEGL_nvidia) installed?",
+        file=sys.stderr,
+    )
 
 
 def resolve_renderer(name: str) -> Renderer:
@@ -127,16 +148,22 @@ class SceneView:
         self.renderer = Renderer(renderer)
         self.client = world.client
         self._plugin = None
+        self.gl_renderer = ""  # the GL driver's GL_RENDERER, with EGL
         if self.renderer is Renderer.EGL:
             loader = pkgutil.get_loader("eglRenderer")
             if loader is None:
                 raise RuntimeError("pybullet's eglRenderer plugin is not installed")
-            plugin = p.loadPlugin(
-                loader.get_filename(), "_eglRendererPlugin", physicsClientId=self.client
-            )
+            with filtered_native_output() as driver:
+                plugin = p.loadPlugin(
+                    loader.get_filename(), "_eglRendererPlugin", physicsClientId=self.client
+                )
             if plugin < 0:
-                raise RuntimeError("pybullet could not load its EGL renderer plugin")
+                said = " ".join(driver.text.split()) or "it printed nothing"
+                raise RuntimeError(f"pybullet could not load its EGL renderer plugin: {said}")
             self._plugin = plugin
+            self.gl_renderer = gl_renderer_of(driver.text)
+            if gpu_present() and "llvmpipe" in self.gl_renderer.lower():
+                _note_cpu_egl(self.gl_renderer)
         self._tiles = [visual_body(self.client, t.visual, t.part.color) for t in bundle.tiles]
         lo = np.array([t.bounds[0] for t in bundle.tiles])
         hi = np.array([t.bounds[1] for t in bundle.tiles])
@@ -159,7 +186,8 @@ class SceneView:
 
     def close(self) -> None:
         if self._plugin is not None and self.world.client is not None:
-            p.unloadPlugin(self._plugin, physicsClientId=self.client)
+            with filtered_native_output():  # the driver's "Destroy EGL OpenGL window."
+                p.unloadPlugin(self._plugin, physicsClientId=self.client)
         self._plugin = None
 
     def vehicles(self, hide=()) -> DrawnVehicles:
@@ -208,15 +236,16 @@ class SceneView:
         )
         self._cull(np.reshape(projection, (4, 4)).T @ np.reshape(view, (4, 4)).T)
         start = time.perf_counter()
-        _, _, rgba, depth, seg = p.getCameraImage(
-            width,
-            height,
-            view,
-            projection,
-            renderer=renderer,
-            physicsClientId=self.client,
-            **LIGHT,
-        )
+        with filtered_native_output() if self._plugin is not None else nullcontext():
+            _, _, rgba, depth, seg = p.getCameraImage(
+                width,
+                height,
+                view,
+                projection,
+                renderer=renderer,
+                physicsClientId=self.client,
+                **LIGHT,
+            )
         self.raw_s += time.perf_counter() - start
         rgba = np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))
         seg = np.reshape(np.asarray(seg, dtype=np.int32), (height, width)) + 1

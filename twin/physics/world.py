@@ -13,10 +13,10 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet as p
 
 from mapgen.build import MapBundle
 from twin.data.i24 import Road
+from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
 from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
 from twin.vehicle_classes import vehicle_classes
