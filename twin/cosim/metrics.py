@@ -49,8 +49,9 @@ def traffic_speed_error(rows: pd.DataFrame, traffic: EmpiricalTraffic, t0: float
     """Mean absolute speed error of simulated vehicles (``rows``: their log rows, sampled)
     against the recorded vehicle each was spawned from, while both exist."""
     errors, vehicles = [], 0
+    recordings = traffic.store.trajectory_samples(rows["tid"].unique())
     for tid, group in rows.groupby("tid", sort=True):
-        recorded = traffic.store.trajectory(int(tid))
+        recorded = recordings[int(tid)]
         t = t0 + group["time"].to_numpy()
         valid = (t >= recorded["t"][0]) & (t <= recorded["t"][-1])
         if not valid.any():

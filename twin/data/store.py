@@ -197,6 +197,32 @@ class TrajectoryStore:
         rows = s["tid"] == tid
         return {name: col[rows] for name, col in s.items()}
 
+    def trajectory_samples(self, tids) -> dict[int, dict[str, np.ndarray]]:
+        """All samples of each trajectory in ``tids``, read once per road (not per tid).
+
+        Returns:
+            tid -> the arrays :meth:`trajectory` returns for it.
+
+        Raises:
+            KeyError: a tid the store does not have.
+        """
+        arrays = self.trajectory_arrays
+        tids = np.unique(np.asarray(tids, dtype=np.int64))
+        unknown = tids[(tids < 0) | (tids >= len(arrays["tid"]))]
+        if unknown.size:
+            raise KeyError(f"no trajectory with tid {unknown[0]} in {self.path}")
+        out = {}
+        for road in np.unique(arrays["road"][tids]):
+            on_road = tids[arrays["road"][tids] == road]
+            s = self.samples(
+                road, arrays["t_first"][on_road].min(), arrays["t_last"][on_road].max()
+            )
+            starts = np.searchsorted(s["tid"], on_road, side="left")
+            ends = np.searchsorted(s["tid"], on_road, side="right")
+            for tid, a, b in zip(on_road.tolist(), starts, ends, strict=True):
+                out[tid] = {name: col[a:b] for name, col in s.items()}
+        return out
+
     def tid_of(self, oid: str) -> int:
         """The tid of the trajectory whose I-24 MOTION ``_id`` is ``oid``."""
         matches = np.flatnonzero(self.trajectory_arrays["id"] == oid)

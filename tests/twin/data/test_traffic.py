@@ -88,3 +88,23 @@ def test_store_without_the_road_is_a_clear_error(tmp_path):
     traffic = EmpiricalTraffic(TrajectoryStore(tmp_path / "s"))
     with pytest.raises(Exception, match="no eastbound data"):
         traffic.snapshot("eastbound", SCENARIO_TIME, 0.0, 100.0)
+
+
+def test_many_trajectories_in_one_read_equal_each_read_alone(tmp_path):
+    docs = [
+        make_doc("6386d89efb3ff533c12d0001", direction=-1, mm=61.5, n=60),
+        make_doc("6386d89efb3ff533c12d0002", direction=-1, mm=61.2, n=40, t0=SCENARIO_TIME + 3),
+        make_doc("6386d89efb3ff533c12d0003", direction=1, mm=60.7, y_ft=-30.0, n=50),
+    ]
+    ingest([write_day(tmp_path / "day.json", docs)], tmp_path / "store", progress=False)
+    store = TrajectoryStore(tmp_path / "store")
+    together = store.trajectory_samples([2, 0, 1, 0])
+    assert sorted(together) == [0, 1, 2]
+    for tid, arrays in together.items():
+        alone = store.trajectory(tid)
+        assert arrays.keys() == alone.keys()
+        for name in alone:
+            np.testing.assert_array_equal(arrays[name], alone[name])
+    assert store.trajectory_samples([]) == {}
+    with pytest.raises(KeyError, match="no trajectory with tid 3"):
+        store.trajectory_samples([1, 3])
