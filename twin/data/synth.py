@@ -37,6 +37,7 @@ MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
 MIN_GAP = 2.0  # [m] IDM s0 mean
 DRIVERS = DriverDistribution(min_gap=MIN_GAP, comfortable_decel=COMFORT_DECEL)
+IDM_NAMES = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,8 @@ class SynthConfig:
         sample_rate: [Hz] recording rate.
         position_noise: [m] sd of the tracking noise on x and y.
         accel_noise: [m/s^2] sd of the drivers' acceleration noise per step.
+        drivers: how each vehicle's IDM parameters are drawn (data made by other
+            drivers than the twin's defaults, e.g. to test a calibration).
         lane_change_duration: [s] range of lane-change manoeuvre durations.
         politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
             ([-], [m/s^2], [m/s^2], [m/s^2]).
@@ -99,6 +102,7 @@ class SynthConfig:
     sample_rate: float = 25.0
     position_noise: float = 0.03
     accel_noise: float = 0.15
+    drivers: DriverDistribution = DRIVERS
     lane_change_duration: tuple[float, float] = (3.0, 6.0)
     politeness: float = 0.2
     change_threshold: float = 0.3
@@ -188,6 +192,8 @@ class _Vehicles:
     T: np.ndarray
     s0: np.ndarray
     a: np.ndarray
+    b: np.ndarray
+    delta: np.ndarray
     forced_speed: np.ndarray  # [m/s], nan when not braking for a slowdown
     forced_until: np.ndarray  # [s]
     forced_decel: np.ndarray  # [m/s^2]
@@ -205,7 +211,7 @@ class _Vehicles:
 
     @property
     def params(self) -> IDMParams:
-        return IDMParams(self.v0, self.T, self.s0, self.a, COMFORT_DECEL)
+        return IDMParams(self.v0, self.T, self.s0, self.a, self.b, self.delta)
 
 
 @dataclass
@@ -217,6 +223,7 @@ class SynthResult:
     tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
     vehicle_class: np.ndarray
     dimensions: np.ndarray  # (m, 3) [m]
+    drivers: IDMParams  # (m,) each: the IDM parameters each vehicle drove with
     lane_changes: int
     collisions: int
 
@@ -238,6 +245,7 @@ class _Simulation:
         self.next_arrival = np.full(4, np.inf)
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
+        self.registry_drivers: list[IDMParams] = []  # by vid
         self.vehicles = self._new_vehicles(np.zeros(0, np.int8), np.zeros(0), np.zeros(0))
 
     # -- creation ---------------------------------------------------------------------
@@ -260,11 +268,12 @@ class _Simulation:
             rows = lanes == lane
             cls[rows] = rng.choice(7, size=int(rows.sum()), p=self._class_weights(int(lane)))
         dims = self.classes.sample_dimensions(cls, rng)
-        drivers = DRIVERS.draw(self.classes, cls, rng)
+        drivers = self.cfg.drivers.draw(self.classes, cls, rng)
         vid = np.arange(self.next_vid, self.next_vid + n)
         self.next_vid += n
         self.registry_class.append(cls)
         self.registry_dims.append(dims)
+        self.registry_drivers.append(drivers)
         lanes = np.asarray(lanes, dtype=np.int8)
         return _Vehicles(
             vid=vid,
@@ -283,6 +292,8 @@ class _Simulation:
             T=drivers.time_headway,
             s0=drivers.min_gap,
             a=drivers.max_accel,
+            b=np.asarray(drivers.comfortable_decel, dtype=float),
+            delta=np.asarray(drivers.delta, dtype=float),
             forced_speed=np.full(n, np.nan),
             forced_until=np.zeros(n),
             forced_decel=np.zeros(n),
@@ -515,12 +526,19 @@ def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
         ids.append(v)
         tracks.append((t, xs, ys))
     ids = np.array(ids, dtype=np.int64)
+    drivers = IDMParams(
+        *(
+            np.concatenate([getattr(batch, name) for batch in sim.registry_drivers])[ids]
+            for name in IDM_NAMES
+        )
+    )
     return SynthResult(
         config=config,
         vid=ids,
         tracks=tracks,
         vehicle_class=np.concatenate(sim.registry_class)[ids],
         dimensions=np.concatenate(sim.registry_dims)[ids],
+        drivers=drivers,
         lane_changes=sim.lane_changes,
         collisions=sim.collisions,
     )

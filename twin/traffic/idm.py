@@ -1,6 +1,6 @@
 """The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000), vectorised."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -79,6 +79,24 @@ def idm_acceleration(
         (n,) float64 acceleration, unclipped.
     """
     return params.max_accel * (1.0 - _speed_ratio(v, params) - _gap_ratio(v, v_lead, gap, params))
+
+
+def bounded_free_road_term(v: np.ndarray, params: IDMParams) -> np.ndarray:
+    """The free-road term braking at no more than b above the desired speed (so a
+    lowered desired speed is followed comfortably, as in Treiber and Kesting's IIDM);
+    a desired speed of 0 brakes at b to a stop and holds it."""
+    stopping = np.asarray(params.desired_speed) <= 0
+    moving = replace(params, desired_speed=np.where(stopping, 1.0, params.desired_speed))
+    free = np.maximum(free_road_term(v, moving), -np.asarray(params.comfortable_decel))
+    return np.where(stopping, -np.asarray(params.comfortable_decel), free)
+
+
+def twin_idm_acceleration(
+    v: np.ndarray, v_lead: np.ndarray, gap: np.ndarray, params: IDMParams
+) -> np.ndarray:
+    """The IDM the twin's drivers use: :func:`bounded_free_road_term` plus the
+    interaction term (the calibration fits this model, the traffic manager drives it)."""
+    return bounded_free_road_term(v, params) + interaction_term(v, v_lead, gap, params)
 
 
 def _speed_ratio(v, params: IDMParams) -> np.ndarray:

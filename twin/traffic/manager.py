@@ -20,7 +20,7 @@ physical parameters the world gives it.
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -29,7 +29,12 @@ from twin.errors import ControllerError
 from twin.physics.vehicle import GRAVITY, VehicleParams
 from twin.traffic.control import path_shape, required_decel, stanley_steer
 from twin.traffic.drivers import DriverDistribution
-from twin.traffic.idm import IDMParams, free_road_term, interaction_term
+from twin.traffic.idm import (
+    IDMParams,
+    bounded_free_road_term,
+    interaction_term,
+    twin_idm_acceleration,
+)
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
 from twin.vehicle_classes import vehicle_classes
@@ -605,7 +610,7 @@ class TrafficManager:
         v_lead = scene.speed[leader]
 
         idm = d.idm()
-        free = _free(speed, idm)
+        free = bounded_free_road_term(speed, idm)
         interaction = np.zeros(n)
         np.minimum.at(
             interaction, owner, interaction_term(speed[owner], v_lead, gap, idm.take(owner))
@@ -712,7 +717,9 @@ class TrafficManager:
         old_follower_now = np.where(behind_now >= 0, accel_all[behind_now], 0.0)
         old_follower_after = np.where(
             behind_now >= 0,
-            _idm(speed_all[behind_now], speed_all[ahead_now], old_gap, idm_all.take(behind_now)),
+            twin_idm_acceleration(
+                speed_all[behind_now], speed_all[ahead_now], old_gap, idm_all.take(behind_now)
+            ),
             0.0,
         )
 
@@ -730,10 +737,10 @@ class TrafficManager:
             ahead, behind = occupancy.around(road, target, x)
             gap_ahead = np.where(ahead >= 0, x_all[ahead] - x - length_all[cand], np.inf)
             gap_behind = np.where(behind >= 0, x - x_all[behind] - length_all[behind], np.inf)
-            own_after = _idm(speed, speed_all[ahead], gap_ahead, own)
+            own_after = twin_idm_acceleration(speed, speed_all[ahead], gap_ahead, own)
             follower_after = np.where(
                 behind >= 0,
-                _idm(speed_all[behind], speed, gap_behind, idm_all.take(behind)),
+                twin_idm_acceleration(speed_all[behind], speed, gap_behind, idm_all.take(behind)),
                 0.0,
             )
             follower_now = np.where(behind >= 0, accel_all[behind], 0.0)
@@ -875,21 +882,6 @@ class TrafficManager:
         if not found.all():
             raise KeyError(f"not a managed vehicle: {ids[~found].tolist()}")
         return where
-
-
-def _free(v: np.ndarray, params: IDMParams) -> np.ndarray:
-    """IDM free-road term, braking at no more than b above the desired speed (so a
-    lowered desired speed is followed comfortably, as in Treiber and Kesting's IIDM);
-    a desired speed of 0 brakes at b to a stop and holds it."""
-    stopping = params.desired_speed <= 0
-    moving = replace(params, desired_speed=np.where(stopping, 1.0, params.desired_speed))
-    free = np.maximum(free_road_term(v, moving), -params.comfortable_decel)
-    return np.where(stopping, -params.comfortable_decel, free)
-
-
-def _idm(v, v_lead, gap, params: IDMParams) -> np.ndarray:
-    """The manager's IDM: :func:`_free` plus the interaction term."""
-    return _free(v, params) + interaction_term(v, v_lead, gap, params)
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
