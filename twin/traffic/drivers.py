@@ -25,6 +25,8 @@ class DriverDistribution:
         max_accel_sd_log: [-] log-normal spread of a around the class's a.
         comfortable_decel: [m/s^2] b, positive; comfortable_decel_sd: [m/s^2].
         delta: [-] IDM exponent.
+        desired_speed_scale, time_headway_scale, max_accel_scale: [-] factors on the
+            class table's means (drivers unlike the table's, e.g. for test data).
     """
 
     time_headway_sd_log: float = 0.12
@@ -34,8 +36,14 @@ class DriverDistribution:
     comfortable_decel: float = 1.7
     comfortable_decel_sd: float = 0.0
     delta: float = 4.0
+    desired_speed_scale: float = 1.0
+    time_headway_scale: float = 1.0
+    max_accel_scale: float = 1.0
 
     def __post_init__(self):
+        scales = (self.desired_speed_scale, self.time_headway_scale, self.max_accel_scale)
+        if any(not (np.isfinite(s) and s > 0) for s in scales):
+            raise ValueError(f"driver scales must be finite and positive, got {scales}")
         spreads = (
             self.time_headway_sd_log,
             self.min_gap_sd,
@@ -65,16 +73,20 @@ class DriverDistribution:
         def z():
             return np.clip(rng.standard_normal(n), -CLIP_SD, CLIP_SD)
 
-        desired_speed = (
+        desired_speed = self.desired_speed_scale * (
             classes.column("desired_speed_mps")[vehicle_class]
             + classes.column("desired_speed_sd_mps")[vehicle_class] * z()
         )
-        time_headway = classes.column("time_headway_s")[vehicle_class] * np.exp(
-            self.time_headway_sd_log * z()
+        time_headway = (
+            self.time_headway_scale
+            * classes.column("time_headway_s")[vehicle_class]
+            * np.exp(self.time_headway_sd_log * z())
         )
         min_gap = self.min_gap + self.min_gap_sd * z()
-        max_accel = classes.column("max_accel_mps2")[vehicle_class] * np.exp(
-            self.max_accel_sd_log * z()
+        max_accel = (
+            self.max_accel_scale
+            * classes.column("max_accel_mps2")[vehicle_class]
+            * np.exp(self.max_accel_sd_log * z())
         )
         decel = np.full(n, self.comfortable_decel)
         if self.comfortable_decel_sd > 0:
