@@ -196,6 +196,31 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_dataset)
 
+    p = commands.add_parser(
+        "calibrate",
+        help="fit the drivers to a store's recording (writes STORE/calibration.json)",
+        description="Fit the visible traffic's behaviour to the recording: IDM car following "
+        "per follower (replaying its recorded leader, fitted on spacing), its distribution per "
+        "class group, desired speeds per lane from free flow, the lane-change rates and the "
+        "MOBIL threshold that matches them. Writes calibration.json and "
+        "calibration_fits.parquet into the store; the recorded data are not changed.",
+    )
+    p.add_argument("store", nargs="?", type=Path, help="store folder (default: the embedded data)")
+    p.add_argument(
+        "--road",
+        action="append",
+        default=None,
+        help="eastbound or westbound (repeatable; default: all)",
+    )
+    p.add_argument(
+        "--from", dest="t_from", default=None, help="start: unix or ISO 8601 with offset"
+    )
+    p.add_argument(
+        "--until", dest="t_until", default=None, help="end: unix or ISO 8601 with offset"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_calibrate)
+
     bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
     bench_commands = bench.add_subparsers(title="benchmarks")
     p = bench_commands.add_parser("query", help="snapshot latency of EmpiricalTraffic")
@@ -382,7 +407,27 @@ def _ingest(args) -> int:
 
 
 def _info(args) -> int:
-    print(_store(args.store).describe())
+    from twin.data.calibrate import describe_calibration, read_calibration
+
+    store = _store(args.store)
+    print(store.describe())
+    print(describe_calibration(read_calibration(store)))
+    return 0
+
+
+def _calibrate(args) -> int:
+    from twin.data.calibrate import calibrate, describe_calibration, write_calibration
+    from twin.timeutil import parse_time
+
+    store = _store(args.store)
+    t_from = parse_time(args.t_from) if args.t_from is not None else None
+    t_until = parse_time(args.t_until) if args.t_until is not None else None
+    if t_from is not None and t_until is not None and not t_from < t_until:
+        raise TwinError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
+    doc, fits = calibrate(store, args.road, t_from, t_until, progress=not args.quiet)
+    path = write_calibration(store, doc, fits)
+    print(describe_calibration(doc))
+    print(f"written: {path}")
     return 0
 
 

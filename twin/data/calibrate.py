@@ -1,0 +1,322 @@
+"""Calibrating a store: what :mod:`twin.traffic.calibration` fits, run over a store's
+recording and kept beside it.
+
+``twin calibrate STORE`` writes two files into the store folder and changes nothing
+else in it (the recorded data are never touched)::
+
+    STORE/
+      calibration.json            per road: the window used, the car-following
+                                  distributions per class group with fit counts and
+                                  errors, desired speeds per lane, lane-change rates
+                                  and the fitted MOBIL threshold
+      calibration_fits.parquet    one row per fitted follower: its parameters, errors,
+                                  at-bound flags and whether the fit was accepted
+
+Each is written to a temporary file and renamed; the JSON last, so a reader never
+sees a calibration whose fits are missing.
+"""
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from twin import __version__
+from twin.atomic import atomic_file
+from twin.data import following
+from twin.data.following import CalibrationDataError
+from twin.data.i24 import Road
+from twin.data.store import TrajectoryStore
+from twin.errors import StoreError
+from twin.timeutil import format_local
+from twin.traffic import calibration
+from twin.traffic.calibration import PARAMS, START, FitSettings
+from twin.traffic.idm import IDMParams
+from twin.traffic.mobil import MOBILParams
+
+CALIBRATION = "calibration.json"
+FITS = "calibration_fits.parquet"
+FORMAT = "i24-twin-calibration"
+VERSION = 1
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """How a store is calibrated.
+
+    Attributes:
+        min_run, max_run: [s] following runs shorter are not used; longer are cut.
+        fit: the car-following fit's settings.
+        min_fits: accepted fits a road needs for its car following to be calibrated.
+        mobil: the MOBIL parameters kept (politeness, safe deceleration, keep-right
+            bias); the threshold is fitted.
+        decision_every: [s] how often the recorded scenes are judged by MOBIL (the
+            traffic manager's mean decision interval).
+    """
+
+    min_run: float = 20.0
+    max_run: float = 120.0
+    fit: FitSettings = field(default_factory=FitSettings)
+    min_fits: int = 10
+    mobil: MOBILParams = field(default_factory=MOBILParams)
+    decision_every: float = 1.0
+
+
+def calibrate(
+    store: TrajectoryStore,
+    roads: list[Road] | None = None,
+    t_from: float | None = None,
+    t_until: float | None = None,
+    settings: CalibrationSettings = CalibrationSettings(),
+    *,
+    progress: bool = False,
+) -> tuple[dict, dict]:
+    """Calibrate ``roads`` (default: all the store's) on the recording between
+    ``t_from`` and ``t_until`` (unix seconds; default: all of it).
+
+    Returns:
+        (the calibration document, {road: FollowerFits}).
+
+    Raises:
+        CalibrationDataError: a road named in ``roads`` has too few accepted fits, or
+            (when ``roads`` is None) no road has enough; the window holds no data.
+        StoreError: the store lacks a road named.
+    """
+    named = roads is not None
+    roads = [Road.parse(r) for r in (roads if named else store.roads)]
+    doc = {
+        "format": FORMAT,
+        "version": VERSION,
+        "created_by": f"i24-twin {__version__}",
+        "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "settings": _settings_dict(settings),
+        "roads": {},
+    }
+    all_fits, problems = {}, []
+    for road in roads:
+        section, fits = _calibrate_road(store, road, t_from, t_until, settings, progress)
+        doc["roads"][road.value] = section
+        all_fits[road.value] = fits
+        reason = section["car_following"].get("not_calibrated")
+        if reason:
+            problems.append(f"{road.value}: {reason}")
+            if progress:
+                print(f"{road.value}: car following not calibrated: {reason}")
+    calibrated = [
+        r for r, s in doc["roads"].items() if not s["car_following"].get("not_calibrated")
+    ]
+    if (named and problems) or not calibrated:
+        raise CalibrationDataError(
+            "not enough following to calibrate the drivers: " + "; ".join(problems)
+        )
+    return doc, all_fits
+
+
+def _calibrate_road(store, road, t_from, t_until, settings, progress):
+    grid = following.load_grid(store, road, t_from, t_until)
+    runs = following.following_runs(
+        grid, min_duration=settings.min_run, max_duration=settings.max_run
+    )
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=max(np.unique(runs.tid).size, 1), desc=f"fit {road.value}", unit="veh")
+
+    def advance(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+    fits = calibration.fit_followers(runs, settings.fit, progress=advance)
+    if bar is not None:
+        bar.close()
+    distributions = calibration.group_distributions(fits)
+    accepted = int(fits.accepted.sum())
+    car = {
+        "followers": int(np.unique(runs.tid).size),
+        "runs": len(runs),
+        "uninformative": fits.uninformative,
+        "fitted": len(fits),
+        "accepted": accepted,
+        "rejected_poor": int(fits.poor.sum()),
+        "rejected_at_bound": int((~fits.accepted & fits.at_bound[:, 1:].any(axis=1)).sum()),
+        "desired_speed_identified": int((fits.accepted & fits.desired_speed_identified()).sum()),
+        "nrmse": _quantiles(fits.nrmse[fits.accepted]),
+        "rmse_m": _quantiles(fits.rmse[fits.accepted]),
+        "distributions": {name: d.to_dict() for name, d in distributions.items()},
+    }
+    if accepted < settings.min_fits:
+        car["not_calibrated"] = (
+            f"{accepted} accepted fits (need {settings.min_fits}): {car['followers']} "
+            f"followers, {fits.uninformative} of them never crossed a wave (stopped and "
+            f"moved), {car['rejected_poor']} poor fits, {car['rejected_at_bound']} at a bound"
+        )
+    idm = _median_driver(distributions.get("all"))
+    changes = following.lane_changes(grid)
+    incentives = calibration.recorded_incentives(
+        grid, idm, settings.mobil, every=settings.decision_every
+    )
+    mobil = calibration.fit_threshold(incentives, len(changes))
+    mobil.update(
+        politeness=settings.mobil.politeness,
+        safe_decel=settings.mobil.safe_decel,
+        keep_right=settings.mobil.keep_right,
+    )
+    t0, t1 = float(grid.time.min()), float(grid.time.max())
+    section = {
+        "window": {
+            "from": t0,
+            "until": t1,
+            "from_local": format_local(t0),
+            "until_local": format_local(t1),
+        },
+        "trajectories": int(np.unique(grid.tid).size),
+        "car_following": car,
+        "desired_speed": calibration.desired_speeds(following.free_flow_speeds(grid)),
+        "lane_changes": calibration.lane_change_rates(changes),
+        "mobil": mobil,
+    }
+    return section, fits
+
+
+def _median_driver(distribution) -> IDMParams:
+    """The median calibrated driver (the fit's start, a typical car, without one)."""
+    values = distribution.median if distribution is not None else [START[name] for name in PARAMS]
+    return IDMParams(*(float(v) for v in values))
+
+
+def _quantiles(values: np.ndarray) -> dict:
+    if values.size == 0:
+        return {"median": None, "p90": None}
+    return {
+        "median": round(float(np.median(values)), 4),
+        "p90": round(float(np.quantile(values, 0.9)), 4),
+    }
+
+
+def _settings_dict(settings: CalibrationSettings) -> dict:
+    out = asdict(settings)
+    out["mobil"] = {k: float(v) for k, v in out["mobil"].items()}
+    return out
+
+
+def write_calibration(store: TrajectoryStore, doc: dict, fits: dict) -> Path:
+    """Write ``doc`` and the per-follower ``fits`` into the store folder (atomically;
+    the recorded data are not touched). Returns the JSON's path."""
+    table = _fits_table(fits)
+    with atomic_file(store.path / FITS) as tmp:
+        pq.write_table(table, tmp)
+    with atomic_file(store.path / CALIBRATION) as tmp:
+        tmp.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return store.path / CALIBRATION
+
+
+def _fits_table(fits: dict) -> pa.Table:
+    columns = {name: [] for name in ("road", "tid", "vehicle_class", "runs", "seconds")}
+    columns.update({name: [] for name in PARAMS})
+    columns.update({"rmse": [], "nrmse": [], "accepted": []})
+    columns.update({f"{name}_at_bound": [] for name in PARAMS})
+    for road, f in fits.items():
+        columns["road"].append(np.full(len(f), road, dtype=object))
+        columns["tid"].append(f.tid.astype(np.int32))
+        columns["vehicle_class"].append(f.vehicle_class.astype(np.int8))
+        columns["runs"].append(f.runs.astype(np.int32))
+        columns["seconds"].append(f.seconds)
+        for j, name in enumerate(PARAMS):
+            columns[name].append(f.params[:, j])
+            columns[f"{name}_at_bound"].append(f.at_bound[:, j])
+        columns["rmse"].append(f.rmse)
+        columns["nrmse"].append(f.nrmse)
+        columns["accepted"].append(f.accepted)
+    return pa.table(
+        {name: np.concatenate(parts) if parts else [] for name, parts in columns.items()}
+    )
+
+
+def read_calibration(store: TrajectoryStore) -> dict | None:
+    """The store's calibration document, or None when it has none.
+
+    Raises:
+        StoreError: the file is not valid JSON, of another format or version.
+    """
+    path = store.path / CALIBRATION
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+    except ValueError as error:
+        raise StoreError(f"{path} is not valid JSON: {error}; run 'twin calibrate' again") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise StoreError(f"{path} is not an i24-twin calibration")
+    if doc.get("version") != VERSION:
+        raise StoreError(
+            f"{path} has calibration version {doc.get('version')}, this twin reads {VERSION}: "
+            "run 'twin calibrate' again"
+        )
+    return doc
+
+
+def read_fits(store: TrajectoryStore):
+    """The per-follower fits as a pandas DataFrame (empty when there are none)."""
+    path = store.path / FITS
+    if not path.is_file():
+        import pandas as pd
+
+        return pd.DataFrame()
+    return pq.read_table(path).to_pandas()
+
+
+def describe_calibration(doc: dict | None) -> str:
+    """Lines for ``twin data info``: what each road's calibration found."""
+    if doc is None:
+        return "calibration  none (run 'twin calibrate STORE')"
+    lines = [f"calibration  {doc['created']} by {doc['created_by']}"]
+    for road, section in doc["roads"].items():
+        window = section["window"]
+        car = section["car_following"]
+        lines.append(
+            f"  {road}: {window['from_local']} to {window['until_local'][11:]}, "
+            f"{section['trajectories']:,} trajectories"
+        )
+        if car.get("not_calibrated"):
+            lines.append(f"    car following: not calibrated ({car['not_calibrated']})")
+        else:
+            lines.append(
+                f"    car following: {car['accepted']} accepted of {car['fitted']} fitted "
+                f"({car['rejected_poor']} poor, {car['rejected_at_bound']} at a bound, "
+                f"{car['uninformative']} followers never crossed a wave); spacing NRMSE "
+                f"median {car['nrmse']['median']:.3f}"
+            )
+            for group, d in car["distributions"].items():
+                median = d["median"]
+                lines.append(
+                    f"      {group:<5} n={d['count']:<4} v0 {median['desired_speed']:.1f} m/s, "
+                    f"T {median['time_headway']:.2f} s, s0 {median['min_gap']:.2f} m, "
+                    f"a {median['max_accel']:.2f}, b {median['comfortable_decel']:.2f} m/s^2"
+                )
+        speeds = section["desired_speed"]
+        if speeds:
+            per_lane = ", ".join(
+                f"lane {lane} {s['mean']:.1f}" for lane, s in speeds.items() if lane != "all"
+            )
+            pooled = speeds["all"]
+            lines.append(
+                f"    desired speed: {pooled['mean']:.1f} m/s (sd {pooled['sd']:.1f}, "
+                f"{pooled['count']} free vehicles){'; ' + per_lane if per_lane else ''}"
+            )
+        else:
+            lines.append("    desired speed: too few free-flowing vehicles")
+        changes, mobil = section["lane_changes"], section["mobil"]
+        rate = changes["per_km"]
+        lines.append(
+            f"    lane changes: {changes['count']} in {changes['vehicle_km']:.0f} vehicle-km"
+            f" ({rate if rate is not None else 0:.3f} per km); MOBIL threshold "
+            f"{mobil['threshold']:.2f} m/s^2"
+        )
+    return "\n".join(lines)
