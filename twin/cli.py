@@ -55,6 +55,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, default=None, help="step [s] (default 0.01)")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
+    p.add_argument(
+        "--behaviour",
+        choices=["paper", "calibrated", "recorded"],
+        default=None,
+        help="how the visible vehicles drive (default paper; the others need 'twin calibrate')",
+    )
     p.add_argument("--w-visible", type=float, default=None, help="visible window each side [m]")
     p.add_argument("--w-ghost", type=float, default=None, help="ghost window beyond it [m]")
     p.add_argument(
@@ -300,6 +306,7 @@ def _run_config(args):
         "dt": args.dt,
         "seed": args.seed,
         "vel_default": args.vel_default,
+        "behaviour": args.behaviour,
         "w_visible": args.w_visible,
         "w_ghost": args.w_ghost,
         "ghost_smoothing": args.ghost_smoothing,

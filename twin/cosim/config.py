@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sensors.camera import CameraError, CameraSettings, check_rig
+from twin.cosim.behaviour import BEHAVIOURS
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
@@ -55,6 +56,10 @@ class CosimConfig:
         bev_time: [s] after t0 of the bird's-eye picture; ``None``: half the episode.
         bev_video: also write ``bev.mp4`` of the whole episode.
         seed: seed of every random choice of the run (drivers, HOV eligibility).
+        behaviour: how the visible vehicles drive: ``paper`` (the paper's rules),
+            ``calibrated`` (drivers drawn from the store's calibration) or ``recorded``
+            (each vehicle's own fitted drivers and recorded lane changes); see
+            :mod:`twin.cosim.behaviour`.
         traffic: traffic-manager settings; its ``dt`` and ``seed`` are the run's.
         camera: the ego's cameras (off by default; ``twin run --camera``).
     """
@@ -77,6 +82,7 @@ class CosimConfig:
     bev_time: float | None = None
     bev_video: bool = False
     seed: int = 0
+    behaviour: str = "paper"
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
     camera: CameraSettings = field(default_factory=CameraSettings)
 
@@ -130,6 +136,10 @@ class CosimConfig:
         if self.ego_controller and self.ego_controller.count(":") != 1:
             raise ConfigError(
                 f"ego_controller must be 'module:function', got {self.ego_controller!r}"
+            )
+        if self.behaviour not in BEHAVIOURS:
+            raise ConfigError(
+                f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}"
             )
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")

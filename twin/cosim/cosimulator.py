@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
+from twin.cosim.behaviour import PLANNED_LATE, Behaviour
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
 from twin.data.i24 import LANES, lane_of
@@ -153,6 +154,7 @@ class Cosimulator:
         self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
+        self.behaviour = Behaviour(config.behaviour, traffic.store, config.road, config.seed)
         self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()
@@ -163,6 +165,9 @@ class Cosimulator:
         self.step_index = 0
         self.windows: Windows | None = None
         self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
+        self._base_speed = np.empty(0)  # [m/s] each body's own desired speed, by world id
+        self._planned: dict[int, list] = {}  # world id -> recorded lane changes ahead
+        self._requested: dict[int, tuple] = {}  # world id -> the change asked for
         self._ghosts = _no_ghosts()
         self._obstacles_now: Obstacles | None = None
         # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
@@ -225,6 +230,7 @@ class Cosimulator:
             )
         self.ego, self.t0 = ego, ego.t
         self.traffic.preload(self.road, self.t0, self.t0 + cfg.t_max)
+        self.behaviour.plan(self.traffic.store, self.t0, self.t0 + cfg.t_max)
         self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
         ego_state = _recorded_states(
             self.direction, [ego.x], [ego.y], [ego.speed], [ego.vehicle_class], [ego.length],
@@ -250,8 +256,11 @@ class Cosimulator:
         cfg, start = self.config, time.perf_counter()
         states = self.world.states()
 
-        # 3. desired speeds; 4. one step of manager and physics
+        # 3. desired speeds (and the recorded lane changes due); 4. one step of
+        # manager and physics
         self._set_desired_speeds(states)
+        if self._planned and self.step_index % self.manager._decision_every == 0:
+            self._request_recorded_changes(states)
         tick = time.perf_counter()
         commands = self.manager.step(states, self._obstacles_now)
         self.world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
@@ -283,6 +292,10 @@ class Cosimulator:
             keep[np.searchsorted(states.id, gone)] = False  # _tids follow the world's ids
             self._is_sim[self._tids[~keep]] = False
             self._tids = self._tids[keep]
+            self._base_speed = self._base_speed[keep]
+            for i in gone.tolist():
+                self._planned.pop(i, None)
+                self._requested.pop(i, None)
             self.counters.despawned += gone.size
 
         # 6. ghosts now inside the visible window are spawned; 7. the ghost set reloaded
@@ -358,10 +371,10 @@ class Cosimulator:
         )
 
     def _set_desired_speeds(self, states) -> None:
-        """Step 3: vel_default for all but the lead visible vehicle of each lane ahead of
-        the ego, which takes the speed of the ghost ahead of it (vel_default if none)."""
-        cfg = self.config
-        desired = np.full(states.id.size, cfg.vel_default)
+        """Step 3: each vehicle's own desired speed (vel_default in the paper's
+        behaviour) for all but the lead visible vehicle of each lane ahead of the ego,
+        which takes the speed of the ghost ahead of it (its own if none)."""
+        desired = self._base_speed.copy()
         lanes = self.manager.lanes(states.id)
         ego_x = states.x[states.id == self.ego_id][0]
         ahead = (states.id != self.ego_id) & (states.x > ego_x)
@@ -374,7 +387,9 @@ class Cosimulator:
             lead = rows[np.argmax(states.x[rows])]
             beyond = np.flatnonzero((g.lane == lane) & (g.x > states.x[lead]))
             target = (
-                float(g.speed[beyond[np.argmin(g.x[beyond])]]) if beyond.size else cfg.vel_default
+                float(g.speed[beyond[np.argmin(g.x[beyond])]])
+                if beyond.size
+                else float(desired[lead])
             )
             desired[lead] = self._smooth(lane, target)
         self.manager.set_desired_speed(states.id, desired)
@@ -386,6 +401,38 @@ class Cosimulator:
             target = previous + min(1.0, self.config.dt / tau) * (target - previous)
         self._lead_speed[lane] = target
         return target
+
+    def _request_recorded_changes(self, states) -> None:
+        """``recorded`` behaviour: ask each vehicle for the lane change its recording
+        makes once it reaches the place (the manager starts it when it is safe); drop a
+        request not started ``PLANNED_LATE`` past its place."""
+        ids = np.array(sorted(self._planned), dtype=np.int64)
+        at = np.searchsorted(states.id, ids)
+        lanes = self.manager.lanes(ids)
+        for i, k, lane in zip(ids.tolist(), at.tolist(), lanes.tolist(), strict=True):
+            x = float(states.x[k])
+            asked = self._requested.get(i)
+            if asked is not None:
+                if lane == asked[2]:
+                    self._requested.pop(i)
+                elif x > asked[0] + PLANNED_LATE:
+                    self.manager.force_lane_change(i, 0)
+                    self._requested.pop(i)
+                else:
+                    continue
+            plan = self._planned[i]
+            while plan and x >= plan[0][0]:
+                x_change, lane_from, lane_to = plan.pop(0)
+                if lane != lane_from or x > x_change + PLANNED_LATE:
+                    continue
+                try:
+                    self.manager.force_lane_change(i, 1 if lane_to > lane_from else -1)
+                except ValueError:  # the HOV rule, or no such lane: the twin keeps its rules
+                    continue
+                self._requested[i] = (x_change, lane_from, lane_to)
+                break
+            if not plan:
+                self._planned.pop(i)
 
     def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray) -> int:
         """Step 6 (and 2): spawn the recorded vehicles ``rows`` of ``snap`` where they
@@ -443,13 +490,25 @@ class Cosimulator:
 
     def _spawn(self, new: "_Recorded", *, desired_speed: float) -> np.ndarray:
         ids = self.world.spawn(new.spawn)
+        lanes = lane_of(new.spawn.y)
         self.manager.add(
             ids,
             np.full(ids.size, self.direction),
-            lane_of(new.spawn.y),
+            lanes,
             self.world.params_of(ids),
             desired_speed=desired_speed,
         )
+        drivers = self.behaviour.drivers(new.tid, new.spawn.vehicle_class, lanes)
+        base = drivers.pop("desired_speed", np.full(ids.size, desired_speed))
+        if drivers:
+            self.manager.set_params(ids, **drivers)
+        if not self.behaviour.auto_lane_change:
+            self.manager.set_auto_lane_change(ids, False)
+        for i, tid, x in zip(ids.tolist(), new.tid.tolist(), new.spawn.x.tolist(), strict=True):
+            planned = self.behaviour.changes_of(tid, x)
+            if planned:
+                self._planned[i] = planned
+        self._base_speed = np.concatenate([self._base_speed, base])
         self._tids = np.concatenate([self._tids, new.tid])
         self._is_sim[new.tid] = True
         ids_before, speeds_before = self._just_spawned

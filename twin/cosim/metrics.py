@@ -3,6 +3,11 @@
 - Ego: the simulated ego against the recorded vehicle it was spawned from, over the
   episode while the recording has it: position and speed RMSE, the minimum speed of
   each, the final position gap.
+- Ego position error at 30, 60 and 120 s and at the end; the slow spells (below
+  15 mph) of the recorded ego against the simulated ego's: when each begins and ends.
+- Lane changes: the simulated vehicles' against the recorded vehicles' in the same
+  moving visible window; vehicles stalled across a lane line (straddling it at a
+  standstill for ``STALL_TIME``).
 - Traffic: the mean absolute speed error of every simulated vehicle against its own
   recording while both exist; and the Edie speed field (cells of ``CELL_X`` m by
   ``CELL_T`` s) of simulated and recorded traffic, both seen through the same moving
@@ -12,7 +17,7 @@
 import numpy as np
 import pandas as pd
 
-from twin.data.i24 import LANES
+from twin.data.i24 import LANE_WIDTH, LANES
 from twin.data.traffic import EmpiricalTraffic
 from twin.data.waves import speed_field
 
@@ -20,6 +25,12 @@ CELL_X = 20.0  # [m]
 CELL_T = 2.0  # [s]
 SAMPLE_PERIOD = 0.1  # [s] the speed field and the traffic error are sampled this often
 MIN_CELL_TIME = 0.5  # [s] vehicle-seconds a cell needs in both fields to be compared
+SLOW = 15.0 * 0.44704  # [m/s] 15 mph: below it the ego is in a slow spell
+MIN_SPELL = 1.0  # [s] a slow spell lasts at least this long
+ERROR_TIMES = (30.0, 60.0, 120.0)  # [s] the ego's position error is reported at these
+ACROSS_LINE = 0.9  # [m] a body centre this far from every lane centre straddles a line
+STALL_SPEED = 0.5  # [m/s] ...and below this speed it is at a standstill
+STALL_TIME = 5.0  # [s] ...and this long, it is stalled across the line
 
 
 def ego_metrics(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict:
@@ -43,6 +54,97 @@ def ego_metrics(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict:
         "final_speed_sim_mps": _r(v_sim[-1]),
         "final_speed_recorded_mps": _r(v_rec[-1]),
     }
+
+
+def ego_position_errors(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict:
+    """|x_sim - x_recorded| [m] at ``ERROR_TIMES`` (where the episode and the recording
+    reach them) and at the end."""
+    time = ego_rows["time"].to_numpy()
+    x_sim = ego_rows["x"].to_numpy()
+    out = {}
+    for at in (*ERROR_TIMES, float(time[-1])):
+        key = "end" if at == float(time[-1]) and at not in ERROR_TIMES else f"{at:g}s"
+        if at > time[-1] + 1e-9 or not recorded["t"][0] <= t0 + at <= recorded["t"][-1]:
+            out[key] = None
+            continue
+        k = int(np.argmin(np.abs(time - at)))
+        out[key] = _r(abs(x_sim[k] - np.interp(t0 + at, recorded["t"], recorded["x"])))
+    if "end" not in out:
+        out["end"] = out[f"{float(time[-1]):g}s"]
+    return out
+
+
+def slow_spells(time: np.ndarray, speed: np.ndarray) -> list[tuple[float, float]]:
+    """[(begin, end)] [s] of the stretches below ``SLOW`` lasting ``MIN_SPELL`` or more."""
+    slow = speed < SLOW
+    edges = np.flatnonzero(np.diff(np.r_[False, slow, False].astype(np.int8)))
+    spells = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        begin, end = float(time[a]), float(time[b - 1])
+        if end - begin >= MIN_SPELL:
+            spells.append((round(begin, 3), round(end, 3)))
+    return spells
+
+
+def slow_spell_timing(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict:
+    """The recorded ego's slow spells and the simulated ego's, paired by overlap (else
+    the nearest begin), with the differences of their begins and ends [s, sim - rec]."""
+    time = ego_rows["time"].to_numpy()
+    inside = (t0 + time >= recorded["t"][0]) & (t0 + time <= recorded["t"][-1])
+    time = time[inside]
+    v_rec = np.interp(t0 + time, recorded["t"], recorded["speed"].astype(np.float64))
+    rec = slow_spells(time, v_rec)
+    sim = slow_spells(time, ego_rows["speed"].to_numpy()[inside])
+    pairs = []
+    for begin, end in rec:
+        match = None
+        if sim:
+            overlap = [min(end, e) - max(begin, b) for b, e in sim]
+            k = int(np.argmax(overlap))
+            if overlap[k] < 0:
+                k = int(np.argmin([abs(b - begin) for b, _ in sim]))
+            match = sim[k]
+        pairs.append(
+            {
+                "recorded": [begin, end],
+                "simulated": list(match) if match else None,
+                "begin_difference_s": round(match[0] - begin, 3) if match else None,
+                "end_difference_s": round(match[1] - end, 3) if match else None,
+            }
+        )
+    ends = [abs(p["end_difference_s"]) for p in pairs if p["end_difference_s"] is not None]
+    begins = [abs(p["begin_difference_s"]) for p in pairs if p["begin_difference_s"] is not None]
+    return {
+        "threshold_mps": round(SLOW, 4),
+        "recorded_spells": len(rec),
+        "simulated_spells": len(sim),
+        "spells": pairs,
+        "max_abs_begin_difference_s": max(begins) if begins else None,
+        "max_abs_end_difference_s": max(ends) if ends else None,
+    }
+
+
+def stalled_across_lines(rows: pd.DataFrame, dt: float) -> int:
+    """Vehicles that straddled a lane line at a standstill for ``STALL_TIME`` or more."""
+    y = rows["y"].to_numpy()
+    centre = (np.round(y / LANE_WIDTH - 0.5) + 0.5) * LANE_WIDTH
+    stuck = (np.abs(y - centre) > ACROSS_LINE) & (rows["speed"].to_numpy() < STALL_SPEED)
+    frame = pd.DataFrame({"id": rows["id"].to_numpy(), "stuck": stuck})
+    counts = frame[frame["stuck"]].groupby("id").size()
+    return int(np.count_nonzero(counts.to_numpy() * dt >= STALL_TIME))
+
+
+def recorded_lane_changes_in_window(
+    changes_time: np.ndarray, changes_x: np.ndarray, windows: pd.DataFrame, t0: float
+) -> int:
+    """Recorded lane changes that happened inside the moving visible window."""
+    if changes_time.size == 0:
+        return 0
+    time = windows["time"].to_numpy() + t0
+    inside_episode = (changes_time >= time[0]) & (changes_time <= time[-1])
+    k = np.clip(np.searchsorted(time, changes_time), 0, len(time) - 1)
+    x0, x1 = windows["x0"].to_numpy()[k], windows["x1"].to_numpy()[k]
+    return int(np.count_nonzero(inside_episode & (changes_x >= x0) & (changes_x <= x1)))
 
 
 def traffic_speed_error(rows: pd.DataFrame, traffic: EmpiricalTraffic, t0: float) -> dict:

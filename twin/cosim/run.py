@@ -31,6 +31,7 @@ from twin.cosim import metrics, plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
+from twin.data import following
 from twin.data.store import TrajectoryStore, is_store
 from twin.data.traffic import EmpiricalTraffic
 from twin.errors import StoreError
@@ -233,12 +234,16 @@ def _write_folder(
     sampled = vehicles[step_of % every == 0]
     sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
     counters = sim.counters
+    recorded_changes = following.lane_changes(
+        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim.sim_time)
+    )
     errors = np.array(counters.spawn_speed_error)
     sim_s = sim.sim_time
     figures = {
         "format": RUN_FORMAT,
         "version": __version__,
         "scenario": cfg.scenario,
+        "behaviour": cfg.behaviour,
         "road": cfg.road.value,
         "t0": sim.t0,
         "simulated_s": round(sim_s, 6),
@@ -254,6 +259,8 @@ def _write_folder(
                 "speed_mps": round(sim.ego.speed, 3),
             },
             **metrics.ego_metrics(ego_rows, recorded_ego, sim.t0),
+            "position_error_m": metrics.ego_position_errors(ego_rows, recorded_ego, sim.t0),
+            "slow_spells": metrics.slow_spell_timing(ego_rows, recorded_ego, sim.t0),
         },
         "traffic": {
             **metrics.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
@@ -269,6 +276,10 @@ def _write_folder(
             "spawns_skipped_invalid": counters.skipped_invalid,
             "visible_max": int(vehicles.groupby("time").size().max()) - 1,
             "lane_changes": sim.manager.lane_changes,
+            "lane_changes_recorded_in_window": metrics.recorded_lane_changes_in_window(
+                recorded_changes.time, recorded_changes.x, windows, sim.t0
+            ),
+            "stalled_across_lines": metrics.stalled_across_lines(sampled, metrics.SAMPLE_PERIOD),
         },
         "physics": {
             "spawns_checked": int(errors.size),
@@ -340,7 +351,7 @@ def summary(result: RunResult) -> str:
     ego, counts, physics = m["ego"], m["counts"], m["physics"]
     profile = " ".join(f"{round(v):d}" for v in result.ego_speed)
     lines = [
-        f"run folder: {result.folder}",
+        f"run folder: {result.folder} (behaviour {m['behaviour']})",
         f"ego {ego['record_id']} (lane {ego['selected']['lane']}, x {ego['selected']['x_m']:.0f} m)"
         f" speed each second [m/s]: {profile}",
         f"ego vs recording: speed RMSE {ego.get('speed_rmse_mps', float('nan')):.2f} m/s, "

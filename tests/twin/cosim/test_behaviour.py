@@ -1,0 +1,121 @@
+"""Behaviour modes: the paper's drivers, drivers drawn from a store's calibration, and
+each vehicle driving as fitted to its own recording with its recorded lane changes."""
+
+import shutil
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from twin.cosim import metrics
+from twin.cosim.behaviour import Behaviour, BehaviourError
+from twin.cosim.config import SCENARIO_B, ConfigError
+from twin.cosim.cosimulator import Cosimulator
+from twin.data.calibrate import calibrate, read_fits, write_calibration
+from twin.data.store import TrajectoryStore
+from twin.data.traffic import EmpiricalTraffic
+from twin.traffic.calibration import PARAMS
+
+
+@pytest.fixture(scope="module")
+def calibrated_store(tmp_path_factory, wave_store) -> TrajectoryStore:
+    folder = tmp_path_factory.mktemp("calibrated") / "store"
+    shutil.copytree(wave_store.path, folder)
+    store = TrajectoryStore(folder)
+    doc, fits = calibrate(store, ["westbound"])
+    write_calibration(store, doc, fits)
+    return store
+
+
+def _episode(store, built_map, behaviour, seconds=3.0):
+    config = replace(SCENARIO_B, behaviour=behaviour, t_max=seconds)
+    sim = Cosimulator(config, EmpiricalTraffic(store), built_map)
+    sim.reset()
+    while not sim.done:
+        sim.step()
+    return sim
+
+
+def test_an_unknown_behaviour_or_an_uncalibrated_store_is_named(wave_store, built_map):
+    with pytest.raises(ConfigError, match="behaviour must be one of paper, calibrated"):
+        replace(SCENARIO_B, behaviour="wild")
+    with pytest.raises(BehaviourError, match="twin calibrate"):
+        Behaviour("calibrated", wave_store, "westbound", 0)
+    # the paper's behaviour needs no calibration
+    assert (
+        Behaviour("paper", wave_store, "westbound", 0).drivers(
+            np.arange(3), np.zeros(3, int), np.full(3, -2)
+        )
+        == {}
+    )
+
+
+def test_calibrated_drivers_are_drawn_from_the_calibration(calibrated_store, built_map):
+    sim = _episode(calibrated_store, built_map, "calibrated")
+    try:
+        ids = sim.manager.ids
+        params = sim.manager.params(ids)
+        doc_threshold = sim.behaviour.threshold
+        assert np.all(params["threshold"] == doc_threshold)
+        # drawn per vehicle (not the paper's single decel), within 2 sd of the fit
+        dist = sim.behaviour.distributions["all"]
+        decel = np.log(params["comfortable_decel"])
+        j = PARAMS.index("comfortable_decel")
+        assert np.unique(params["comfortable_decel"]).size > 1
+        assert np.all(np.abs(decel - dist.mean_log[j]) <= 2 * dist.sd_log[j] + 1e-9)
+        # every vehicle keeps its own desired speed (not vel_default)
+        assert np.unique(np.round(sim._base_speed, 6)).size > 1
+    finally:
+        sim.close()
+    again = _episode(calibrated_store, built_map, "calibrated")
+    try:
+        assert np.array_equal(again.manager.params(ids)["time_headway"], params["time_headway"])
+    finally:
+        again.close()
+
+
+def test_recorded_drivers_get_their_own_fits_and_no_mobil(calibrated_store, built_map):
+    sim = _episode(calibrated_store, built_map, "recorded")
+    try:
+        fits = read_fits(calibrated_store)
+        fits = fits[fits["accepted"]].set_index("tid")
+        ids = sim.manager.ids
+        tids = sim._tids
+        own = np.isin(tids, fits.index.to_numpy())
+        assert own.sum() >= 3
+        params = sim.manager.params(ids[own])
+        for name in PARAMS[1:]:
+            assert np.allclose(params[name], fits.loc[tids[own], name].to_numpy())
+        assert not sim.manager._d.auto_lane_change.any()
+    finally:
+        sim.close()
+
+
+def test_slow_spells_are_paired_and_timed():
+    t = np.arange(0.0, 60.0, 0.1)
+    recorded = {"t": 1000.0 + t, "x": 20.0 * t, "speed": np.where((t > 10) & (t < 30), 2.0, 20.0)}
+    sim_speed = np.where((t > 12) & (t < 35), 2.0, 20.0)
+    rows = pd.DataFrame({"time": t, "x": 20.0 * t, "speed": sim_speed})
+    timing = metrics.slow_spell_timing(rows, recorded, 1000.0)
+    (spell,) = timing["spells"]
+    assert spell["begin_difference_s"] == pytest.approx(2.0, abs=0.11)
+    assert spell["end_difference_s"] == pytest.approx(5.0, abs=0.11)
+    errors = metrics.ego_position_errors(rows.assign(x=20.0 * t + 3.0), recorded, 1000.0)
+    assert errors["30s"] == pytest.approx(3.0) and errors["end"] == pytest.approx(3.0)
+    assert errors["60s"] is None or errors["60s"] == pytest.approx(3.0)
+
+
+def test_a_vehicle_straddling_a_line_at_a_standstill_is_counted_as_stalled():
+    t = np.arange(0.0, 10.0, 0.1)
+    line = 2 * 3.6576  # between lanes -1 and -2
+    rows = pd.DataFrame(
+        {
+            "id": np.r_[np.zeros(t.size), np.ones(t.size)],
+            "y": np.r_[np.full(t.size, line), np.full(t.size, 1.5 * 3.6576)],
+            "speed": np.zeros(2 * t.size),
+        }
+    )
+    assert metrics.stalled_across_lines(rows, 0.1) == 1
+    rows.loc[rows["id"] == 0, "speed"] = 5.0  # moving across: a lane change, not a stall
+    assert metrics.stalled_across_lines(rows, 0.1) == 0

@@ -1,0 +1,190 @@
+"""How the visible vehicles drive: the paper's rules, or drivers calibrated from the
+recording (``twin calibrate``).
+
+- ``paper``: the paper's rules: drivers drawn from the traffic manager's default
+  distribution, every visible vehicle wanting ``vel_default`` (the lane leads ahead of
+  the ego take their ghost's speed), MOBIL with the default threshold.
+- ``calibrated``: drivers drawn from the store's calibrated distributions: IDM
+  parameters from the class group's fitted (correlated, log-normal) distribution,
+  desired speeds from the calibrated desired speeds of the vehicle's lane, MOBIL with
+  the calibrated threshold.
+- ``recorded``: each vehicle gets the parameters fitted to its own recording (a
+  calibrated draw where its fit is missing or was rejected), and makes the lane
+  changes its recording makes, where its recording makes them (target lane and place),
+  when they are safe; it makes no others.
+
+A road whose car following could not be calibrated keeps the paper's drivers for it
+(its desired speeds and lane-change threshold are still calibrated where they were).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.data import following
+from twin.data.calibrate import read_calibration, read_fits
+from twin.data.i24 import Road
+from twin.data.store import TrajectoryStore
+from twin.errors import TwinError
+from twin.traffic.calibration import PARAMS, ParameterDistribution, class_group
+
+BEHAVIOURS = ("paper", "calibrated", "recorded")
+SEED_STREAM = 0x6265686176  # the behaviour's random draws use their own stream
+PLANNED_LATE = 100.0  # [m] a recorded lane change not started this far past its place is dropped
+
+
+class BehaviourError(TwinError):
+    """A behaviour cannot be used with these data (unknown, or the store is not calibrated)."""
+
+
+def check_behaviour(name: str) -> str:
+    if name not in BEHAVIOURS:
+        raise BehaviourError(f"unknown behaviour {name!r}: choose one of {', '.join(BEHAVIOURS)}")
+    return name
+
+
+@dataclass(frozen=True)
+class PlannedChanges:
+    """The recorded lane changes of the vehicles of an episode, by recorded tid."""
+
+    tid: np.ndarray
+    x: np.ndarray
+    lane_from: np.ndarray
+    lane_to: np.ndarray
+
+
+class Behaviour:
+    """The drivers of one episode's visible vehicles (see the module doc).
+
+    Args:
+        name: one of :data:`BEHAVIOURS`.
+        store: the recording (its calibration is read for the non-paper modes).
+        road: the episode's road.
+        seed: the run's seed.
+
+    Raises:
+        BehaviourError: unknown name, or a non-paper mode on a store with no calibration
+            of ``road``.
+    """
+
+    def __init__(self, name: str, store: TrajectoryStore, road: Road, seed: int):
+        self.name = check_behaviour(name)
+        self.road = Road.parse(road)
+        self.rng = np.random.default_rng([seed, SEED_STREAM])
+        self.distributions: dict[str, ParameterDistribution] = {}
+        self.speeds: dict = {}
+        self.speed_source = ""
+        self.threshold: float | None = None
+        self.politeness: float | None = None
+        self._fits = None
+        self.planned: PlannedChanges | None = None
+        if self.name == "paper":
+            return
+        doc = read_calibration(store)
+        if doc is None or self.road.value not in doc["roads"]:
+            raise BehaviourError(
+                f"behaviour {self.name!r} needs drivers calibrated on {self.road.value}: run "
+                f"'twin calibrate {store.path} --road {self.road.value}' first (or use "
+                "--behaviour paper)"
+            )
+        section = doc["roads"][self.road.value]
+        car = section["car_following"]
+        if not car.get("not_calibrated"):
+            self.distributions = {
+                group: ParameterDistribution.from_dict(d)
+                for group, d in car["distributions"].items()
+            }
+        self.speeds = section["desired_speed"]
+        free_count = self.speeds.get("all", {}).get("count", 0)
+        fitted_count = car.get("desired_speed_identified", 0) if self.distributions else 0
+        # the desired speed comes from whichever estimate more vehicles back
+        self.speed_source = (
+            "free_flow"
+            if free_count >= fitted_count and free_count
+            else ("car_following" if fitted_count else "paper")
+        )
+        self.threshold = float(section["mobil"]["threshold"])
+        self.politeness = float(section["mobil"]["politeness"])
+        if self.name == "recorded":
+            fits = read_fits(store)
+            if len(fits):
+                fits = fits[(fits["road"] == self.road.value) & fits["accepted"]]
+                self._fits = fits.set_index("tid")
+
+    @property
+    def auto_lane_change(self) -> bool:
+        """Whether vehicles change lanes by MOBIL (not in ``recorded``)."""
+        return self.name != "recorded"
+
+    def plan(self, store: TrajectoryStore, t0: float, t1: float) -> None:
+        """Read the recorded lane changes of the episode's window (``recorded`` only)."""
+        if self.name != "recorded":
+            return
+        grid = following.load_grid(store, self.road, t0, t1)
+        changes = following.lane_changes(grid)
+        order = np.lexsort((changes.x, changes.tid))
+        self.planned = PlannedChanges(
+            tid=changes.tid[order],
+            x=changes.x[order],
+            lane_from=changes.lane_from[order],
+            lane_to=changes.lane_to[order],
+        )
+
+    def changes_of(self, tid: int, x_now: float) -> list[tuple[float, int, int]]:
+        """The recorded lane changes of ``tid`` still ahead of ``x_now`` (x, from, to)."""
+        p = self.planned
+        if p is None:
+            return []
+        a, b = np.searchsorted(p.tid, [tid, tid + 1])
+        return [
+            (float(p.x[i]), int(p.lane_from[i]), int(p.lane_to[i]))
+            for i in range(a, b)
+            if p.x[i] > x_now - PLANNED_LATE * 0.5
+        ]
+
+    def drivers(self, tid: np.ndarray, vehicle_class: np.ndarray, lane: np.ndarray) -> dict:
+        """Parameters for vehicles spawned from recorded ``tid`` (each (n,)): a dict of
+        the traffic manager's parameter names to (n,) arrays, ``{}`` in ``paper``."""
+        n = len(tid)
+        if self.name == "paper" or n == 0:
+            return {}
+        out = {}
+        if self.distributions:
+            groups = class_group(vehicle_class)
+            params = np.empty((n, 5))
+            for group in np.unique(groups):
+                rows = groups == group
+                dist = self.distributions.get(group) or self.distributions["all"]
+                params[rows] = dist.draw(int(rows.sum()), self.rng)
+            if self._fits is not None:
+                own = np.isin(tid, self._fits.index.to_numpy())
+                if own.any():
+                    rows = self._fits.loc[tid[own], list(PARAMS)].to_numpy()
+                    params[own] = rows
+            for j, name in enumerate(PARAMS[1:], start=1):
+                out[name] = params[:, j]
+            if self.speed_source == "car_following":
+                out["desired_speed"] = params[:, 0]
+        if self.speed_source == "free_flow":
+            out["desired_speed"] = self._desired_speeds(lane)
+        if self.threshold is not None:
+            out["threshold"] = np.full(n, self.threshold)
+            out["politeness"] = np.full(n, self.politeness)
+        return out
+
+    def _desired_speeds(self, lane: np.ndarray) -> np.ndarray:
+        z = np.clip(self.rng.standard_normal(len(lane)), -2.0, 2.0)
+        out = np.empty(len(lane))
+        for k, value in enumerate(np.asarray(lane).tolist()):
+            s = self.speeds.get(str(value)) or self.speeds["all"]
+            out[k] = max(s["mean"] + s["sd"] * z[k], 1.0)
+        return out
+
+    def describe(self) -> str:
+        if self.name == "paper":
+            return "paper (default drivers, vel_default)"
+        car = "calibrated" if self.distributions else "paper (not calibrated)"
+        threshold = "" if self.threshold is None else f", MOBIL threshold {self.threshold:.2f}"
+        return (
+            f"{self.name} (car following {car}, desired speed from {self.speed_source}{threshold})"
+        )
