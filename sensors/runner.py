@@ -2,7 +2,8 @@
 
 :func:`generate` draws the episodes, claims the folder, renders the episodes not yet
 complete with an engine, and assembles KITTI, COCO and the manifest
-(:mod:`sensors.dataset` for what is written). Engines:
+(:mod:`sensors.dataset` for what is written). Engines (:mod:`twin.engines`, shared
+with ``twin eval``):
 
 * ``local``: this process (one worker) or a pool of processes started fresh
   (``spawn``: no forked threads or pybullet state), each writing its episodes
@@ -13,14 +14,11 @@ complete with an engine, and assembles KITTI, COCO and the manifest
 """
 
 import json
-import logging
 import os
 import shutil
 import tempfile
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from functools import cache
 from pathlib import Path
 
 from sensors.dataset import (
@@ -36,13 +34,9 @@ from sensors.dataset import (
     render_episode,
     resolved_renderer,
 )
-from sensors.episodes import EpisodeSpec
 from twin.atomic import AtomicFolder, remove_stale
 from twin.data.store import TrajectoryStore
-from twin.errors import TwinError
-
-ENGINES = ("local", "ray")
-POLL_S = 0.2  # [s] how often the local engine's progress bar is updated
+from twin.engines import ENGINES, run_jobs, tick, where, worker_data
 
 
 @dataclass(frozen=True)
@@ -131,7 +125,7 @@ def generate(
     )
 
 
-# -- engines -------------------------------------------------------------------------
+# -- engines (twin.engines) ----------------------------------------------------------
 
 
 def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> int:
@@ -161,115 +155,38 @@ class _Progress:
         return samples
 
 
-def _run_local(config, specs, store, bundle, out: Path, workers: int, bar: _Progress) -> int:
-    """Render ``specs`` in this process (one worker) or a pool of processes."""
-    if workers == 1 or len(specs) <= 1:
-        return sum(
-            bar.episode(
-                _episode_or_error(
-                    _write_episode, spec, config, spec, store, bundle, out, bar.frames
-                )
-            )
-            for spec in specs
-        )
-    import multiprocessing
-
-    context = multiprocessing.get_context("spawn")  # no fork of threads or pybullet
-    ticks = context.SimpleQueue()
-    rendered = 0
-    pool = ProcessPoolExecutor(
-        max_workers=min(workers, len(specs)),
-        mp_context=context,
-        initializer=_start_worker,
-        initargs=(ticks,),
+def _describe(job) -> str:
+    spec = job[1]
+    return (
+        f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix "
+        f"{spec.time:.2f})"
     )
-    try:
-        futures = {
-            pool.submit(_pool_episode, config, spec, _where(store, bundle), str(out)): spec
-            for spec in specs
-        }
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
-            while not ticks.empty():
-                bar.frames(ticks.get())
-            for future in done:
-                rendered += bar.episode(_episode_or_error(future.result, futures[future]))
-    except BaseException:
-        # on an error the episodes running finish (complete and correct) and the
-        # others are cancelled; on Ctrl-C the workers are interrupted with the run
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown(wait=True)
-    while not ticks.empty():
-        bar.frames(ticks.get())
-    return rendered
 
 
-def _episode_or_error(call, spec: EpisodeSpec, *args):
-    try:
-        return call(*args)
-    except TwinError:
-        raise
-    except Exception as error:
-        raise DatasetError(
-            f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix "
-            f"{spec.time:.2f}) failed: {type(error).__name__}: {error}; the complete "
-            "episodes are kept, rerun the same command to resume"
-        ) from error
+def _run_local(config, specs, store, bundle, out: Path, workers: int, bar: _Progress) -> int:
+    """Render ``specs`` in this process (one worker) or a pool of processes, each
+    writing its episodes straight into the dataset folder."""
+    rendered = []
+    run_jobs(
+        _pool_episode,
+        [(config, spec, where(store, bundle), str(out)) for spec in specs],
+        workers=workers,
+        on_done=lambda k, samples: rendered.append(bar.episode(samples)),
+        on_tick=bar.frames,
+        describe=_describe,
+        error_type=DatasetError,
+    )
+    return sum(rendered)
 
 
-_TICKS = None  # a pool worker's queue of frame counts for the progress bar
+def _pool_episode(config, spec, location, out: str) -> int:
+    store, bundle = worker_data(location)
+    return _write_episode(config, spec, store, bundle, Path(out), tick)
 
 
-def _start_worker(ticks) -> None:
-    """Pool worker set-up: report progress to ``ticks``; die with the parent."""
-    global _TICKS
-    _TICKS = ticks
-    _die_with_parent()
-
-
-def _die_with_parent() -> None:
-    """Ask Linux to kill this process when its parent dies (a killed run must not
-    leave workers writing into the dataset)."""
-    import ctypes
-    import signal
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        return  # not Linux: workers end when they find the pool gone
-    if os.getppid() == 1:
-        os._exit(1)
-
-
-def _where(store: TrajectoryStore, bundle) -> tuple[str, str, str]:
-    """How a worker finds the data and the map: store folder, map folder and key."""
-    return str(store.path), str(bundle.folder), bundle.key
-
-
-@cache
-def _worker_data(where: tuple[str, str, str]):
-    """The store and map of a worker. On a node without the map folder the default
-    map is built there, and used if it is the same map (same key)."""
-    from mapgen.build import default_map, is_map, load_map
-
-    store_path, map_folder, key = where
-    bundle = load_map(Path(map_folder)) if is_map(Path(map_folder)) else default_map()
-    if bundle.key != key:
-        raise DatasetError(f"this node has no map {key} (looked in {map_folder})")
-    return TrajectoryStore(store_path), bundle
-
-
-def _pool_episode(config, spec, where, out: str) -> int:
-    store, bundle = _worker_data(where)
-    return _write_episode(config, spec, store, bundle, Path(out), _TICKS.put)
-
-
-def _episode_files(config, spec, where) -> dict[str, bytes]:
+def _episode_files(config, spec, location) -> dict[str, bytes]:
     """A Ray task: render episode ``spec`` in a scratch folder; its files by path."""
-    store, bundle = _worker_data(where)
+    store, bundle = worker_data(location)
     scratch = Path(tempfile.mkdtemp(prefix="i24-twin-episode-"))
     try:
         render_episode(config, spec, store, bundle, scratch)
@@ -285,47 +202,31 @@ def _episode_files(config, spec, where) -> dict[str, bytes]:
 def _run_ray(config, specs, store, bundle, out: Path, workers: int, address, bar: _Progress) -> int:
     """Render ``specs`` as Ray tasks (a local Ray instance of ``workers`` CPUs, or the
     cluster at ``address``); the driver writes each episode's files atomically."""
-    try:
-        import ray
-    except ImportError:
-        raise DatasetError(
-            "--engine ray needs Ray: pip install 'i24-twin[ray]' (or use --engine local)"
-        ) from None
-    started = not ray.is_initialized()
-    if started:
-        try:
-            ray.init(
-                address=address,
-                num_cpus=None if address else workers,
-                include_dashboard=False,
-                log_to_driver=False,
-                logging_level=logging.WARNING,
-            )
-        except Exception as error:
-            where = f"the Ray cluster at {address}" if address else "a local Ray instance"
-            raise DatasetError(f"cannot start or join {where}: {error}") from None
-    try:
-        task = ray.remote(num_cpus=1)(_episode_files)
-        where = _where(store, bundle)
-        refs = {task.remote(config, spec, where): spec for spec in specs}
-        rendered = 0
-        while refs:
-            (ready,), _ = ray.wait(list(refs), num_returns=1)
-            spec = refs.pop(ready)
-            files = _episode_or_error(ray.get, spec, ready)
-            target = episode_folder(out, spec.index)
-            with AtomicFolder(target, recognise=is_episode, kind="dataset episode") as folder:
-                for name, content in files.items():
-                    path = folder.tmp / name
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    path.write_bytes(content)
-            samples = len(json.loads(files[EPISODE])["samples"])
-            bar.frames(samples)
-            rendered += bar.episode(samples)
-    finally:
-        if started:
-            ray.shutdown()
-    return rendered
+    rendered = []
+
+    def write(k: int, files: dict) -> None:
+        spec = specs[k]
+        target = episode_folder(out, spec.index)
+        with AtomicFolder(target, recognise=is_episode, kind="dataset episode") as folder:
+            for name, content in files.items():
+                path = folder.tmp / name
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_bytes(content)
+        samples = len(json.loads(files[EPISODE])["samples"])
+        bar.frames(samples)
+        rendered.append(bar.episode(samples))
+
+    run_jobs(
+        _episode_files,
+        [(config, spec, where(store, bundle)) for spec in specs],
+        engine="ray",
+        workers=workers,
+        ray_address=address,
+        on_done=write,
+        describe=_describe,
+        error_type=DatasetError,
+    )
+    return sum(rendered)
 
 
 def summary(result: DatasetResult) -> str:
