@@ -129,10 +129,14 @@ def measure_cells(
     sampling: EpisodeSampling,
     limits: dict[Road, tuple[float, float]],
     duration: float,
+    *,
+    window: tuple[float | None, float | None] = (None, None),
+    room_speed: float = MAX_SPEED,
 ) -> Cells:
     """The cells of ``store`` in which an episode of ``duration`` [s] can start: inside
     ``limits`` (per road, the x range where map and data exist) with room to drive
-    ``duration`` at the top speed, and ending before the road's data do.
+    ``duration`` at ``room_speed`` (default the top speed), and ending before the
+    road's data do and inside ``window`` (unix seconds, either end open).
 
     Raises:
         SamplingError: a road has no data, or no cell has enough samples.
@@ -142,8 +146,12 @@ def measure_cells(
     for name in sampling.roads:
         road = Road.parse(name)
         t_first, t_last = store.time_range(road)
+        if window[0] is not None:
+            t_first = max(t_first, float(window[0]))
+        if window[1] is not None:
+            t_last = min(t_last, float(window[1]))
         lo, hi = limits[road]
-        hi -= duration * MAX_SPEED  # room to drive the episode without leaving the data
+        hi -= duration * room_speed  # room to drive the episode without leaving the data
         t_edges = np.arange(t_first, t_last - duration - sampling.cell_s, sampling.cell_s)
         x_edges = np.arange(lo, hi - sampling.cell_m + 1e-9, sampling.cell_m)
         if t_edges.size < 2 or x_edges.size < 2:
@@ -179,6 +187,7 @@ def measure_cells(
         raise SamplingError(
             f"no {sampling.cell_s:g} s x {sampling.cell_m:g} m cell of {list(sampling.roads)} "
             f"holds {MIN_CELL_SAMPLES} samples with room for a {duration:g} s episode"
+            + ("" if window == (None, None) else f" between unix {window[0]} and {window[1]}")
         )
     columns = [np.concatenate(column) for column in zip(*parts, strict=True)]
     return Cells(*columns, cell_s=sampling.cell_s, cell_m=sampling.cell_m)

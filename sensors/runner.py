@@ -158,8 +158,7 @@ class _Progress:
 def _describe(job) -> str:
     spec = job[1]
     return (
-        f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix "
-        f"{spec.time:.2f})"
+        f"episode {spec.index} ({spec.road} lane {spec.lane} x {spec.x:g} m, unix {spec.time:.2f})"
     )
 
 

@@ -227,6 +227,39 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(handler=_calibrate)
 
+    p = commands.add_parser(
+        "eval",
+        help="fidelity over many episodes, each behaviour on the same episodes",
+        description="Draw episodes from the recorded traffic (congested and free cells), run "
+        "each with every behaviour asked for, measure each run as 'twin run' does, and write "
+        "episodes.parquet, summary.json, summary.md and fidelity.png. Finished episodes are "
+        "kept: rerun the same command to resume.",
+    )
+    p.add_argument(
+        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
+    )
+    p.add_argument("--road", default="westbound", help="eastbound or westbound")
+    p.add_argument("--episodes", type=int, required=True, help="episodes to draw")
+    p.add_argument("--duration", type=float, default=120.0, help="episode length [s]")
+    p.add_argument("--from", dest="t_from", default=None, help="episodes start at or after")
+    p.add_argument("--until", dest="t_until", default=None, help="episodes end at or before")
+    p.add_argument(
+        "--congested-share", type=float, default=1.0, help="share drawn from congested cells"
+    )
+    p.add_argument(
+        "--behaviour",
+        default=None,
+        help="behaviours, comma-separated (default: paper, and calibrated and recorded when "
+        "the store is calibrated)",
+    )
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=None, help="processes (default: the cores)")
+    p.add_argument("--engine", choices=["local", "ray"], default="local")
+    p.add_argument("--ray-address", default=None, help="Ray cluster to join (--engine ray)")
+    p.add_argument("--out", type=Path, required=True, help="evaluation folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_eval)
+
     bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
     bench_commands = bench.add_subparsers(title="benchmarks")
     p = bench_commands.add_parser("query", help="snapshot latency of EmpiricalTraffic")
@@ -419,6 +452,43 @@ def _info(args) -> int:
     store = _store(args.store)
     print(store.describe())
     print(describe_calibration(read_calibration(store)))
+    return 0
+
+
+def _eval(args) -> int:
+    from twin.cosim.run import open_data
+    from twin.data.calibrate import read_calibration
+    from twin.evaluation import EvalConfig, evaluate, summary_lines
+    from twin.timeutil import parse_time
+
+    store = open_data(args.data, progress=not args.quiet)
+    if args.behaviour is not None:
+        behaviours = tuple(b.strip() for b in args.behaviour.split(",") if b.strip())
+    elif read_calibration(store) is not None:
+        behaviours = ("paper", "calibrated", "recorded")
+    else:
+        behaviours = ("paper",)
+    config = EvalConfig(
+        road=args.road,
+        episodes=args.episodes,
+        duration=args.duration,
+        behaviours=behaviours,
+        congested_share=args.congested_share,
+        t_from=parse_time(args.t_from) if args.t_from is not None else None,
+        t_until=parse_time(args.t_until) if args.t_until is not None else None,
+        seed=args.seed,
+    )
+    workers = args.workers if args.workers is not None else len(os.sched_getaffinity(0))
+    result = evaluate(
+        store,
+        args.out,
+        config,
+        workers=workers,
+        engine=args.engine,
+        ray_address=args.ray_address,
+        progress=not args.quiet,
+    )
+    print(summary_lines(result))
     return 0
 
 

@@ -224,6 +224,40 @@ def _write_folder(
     )  # fmt: skip
     (tmp / "config.toml").write_text(to_toml(cfg))
 
+    figures, frames = measure(sim, store, loop_s, reset_s)
+    vehicles, windows, ghosts, recorded_ego, ego_rows = frames
+    sim_s = sim.sim_time
+    if cameras is not None:
+        figures["cameras"] = cameras.summary()
+    (tmp / METRICS).write_text(json.dumps(figures, indent=2) + "\n")
+
+    title = (
+        f"scenario {cfg.scenario}: {cfg.road.value}, ego {sim.ego.id} from lane {sim.ego.lane}, "
+        f"x = {sim.ego.x:.0f} m"
+    )
+    recorded = store.samples(cfg.road, sim.t0, sim.t0 + sim_s)
+    plots.timespace_plot(
+        recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
+    )
+    bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
+    ghost_times = np.unique(ghosts["time"].to_numpy()) if len(ghosts) else np.zeros(1)
+    at = float(ghost_times[np.argmin(np.abs(ghost_times - min(bev_time, sim_s)))])
+    plots.write_png(_bev(vehicles, ghosts, windows, arrays, at, title), tmp / "bev.png")
+    if cfg.bev_video:
+        plots.write_mp4(
+            (_bev(vehicles, ghosts, windows, arrays, t, title) for t in ghost_times),
+            tmp / "bev.mp4",
+            fps=cfg.ghost_log_rate,
+        )
+    per_second = max(1, round(1.0 / cfg.dt))
+    figures["_ego_speed"] = ego_rows["speed"].to_numpy()[::per_second]
+    return figures
+
+
+def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: float):
+    """The metrics of a finished episode (``metrics.json``), and the log's frames
+    (vehicles, windows, ghosts, the recorded ego, the ego's rows) for the pictures."""
+    cfg, log = sim.config, sim.log
     vehicles = log.vehicles()
     windows = log.windows()
     ghosts = log.ghosts()
@@ -300,31 +334,7 @@ def _write_folder(
             **{k: round(v, 4) for k, v in sim.times.per_step().items()},
         },
     }
-    if cameras is not None:
-        figures["cameras"] = cameras.summary()
-    (tmp / METRICS).write_text(json.dumps(figures, indent=2) + "\n")
-
-    title = (
-        f"scenario {cfg.scenario}: {cfg.road.value}, ego {sim.ego.id} from lane {sim.ego.lane}, "
-        f"x = {sim.ego.x:.0f} m"
-    )
-    recorded = store.samples(cfg.road, sim.t0, sim.t0 + sim_s)
-    plots.timespace_plot(
-        recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
-    )
-    bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
-    ghost_times = np.unique(ghosts["time"].to_numpy()) if len(ghosts) else np.zeros(1)
-    at = float(ghost_times[np.argmin(np.abs(ghost_times - min(bev_time, sim_s)))])
-    plots.write_png(_bev(vehicles, ghosts, windows, arrays, at, title), tmp / "bev.png")
-    if cfg.bev_video:
-        plots.write_mp4(
-            (_bev(vehicles, ghosts, windows, arrays, t, title) for t in ghost_times),
-            tmp / "bev.mp4",
-            fps=cfg.ghost_log_rate,
-        )
-    per_second = max(1, round(1.0 / cfg.dt))
-    figures["_ego_speed"] = ego_rows["speed"].to_numpy()[::per_second]
-    return figures
+    return figures, (vehicles, windows, ghosts, recorded_ego, ego_rows)
 
 
 def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):

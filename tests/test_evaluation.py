@@ -1,0 +1,76 @@
+"""``twin eval``: the same episodes for every behaviour, the same results on one worker
+or two, resumable, with its tables and picture; bad settings named."""
+
+import json
+import shutil
+
+import pandas as pd
+import pytest
+
+from twin.cli import main
+from twin.data.calibrate import calibrate, write_calibration
+from twin.data.store import TrajectoryStore
+from twin.evaluation import EvalConfig, EvaluationError, evaluate
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory, wave_store) -> TrajectoryStore:
+    folder = tmp_path_factory.mktemp("eval") / "store"
+    shutil.copytree(wave_store.path, folder)
+    store = TrajectoryStore(folder)
+    doc, fits = calibrate(store, ["westbound"])
+    write_calibration(store, doc, fits)
+    return store
+
+
+def _config(**changes):
+    settings = {"episodes": 2, "duration": 8.0, "behaviours": ("paper", "calibrated"), "seed": 3}
+    return EvalConfig(**{**settings, **changes})
+
+
+@pytest.mark.slow
+def test_eval_runs_every_behaviour_on_the_same_episodes_and_resumes(
+    calibrated, built_map, tmp_path
+):
+    out = tmp_path / "eval"
+    result = evaluate(calibrated, out, _config(), workers=1, bundle=built_map, progress=False)
+    assert result.runs_done_now == 4
+    frame = pd.read_parquet(out / "episodes.parquet")
+    assert len(frame) == 4
+    by = frame.set_index(["episode", "behaviour"])
+    for episode in (0, 1):
+        # the same ego, start and seed for both behaviours
+        paper, calibrated_row = by.loc[(episode, "paper")], by.loc[(episode, "calibrated")]
+        for column in ("x", "time", "lane", "seed", "ego_record_id"):
+            assert paper[column] == calibrated_row[column]
+    summary = json.loads((out / "summary.json").read_text())
+    assert set(summary["behaviours"]) == {"paper", "calibrated"}
+    assert summary["behaviours"]["paper"]["metrics"]["ego_speed_rmse_mps"]["median"] is not None
+    assert "| ego_speed_rmse_mps (median / p90) |" in (out / "summary.md").read_text()
+    assert (out / "fidelity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # resumed: nothing runs again; two workers give the same rows
+    again = evaluate(calibrated, out, _config(), workers=1, bundle=built_map, progress=False)
+    assert again.runs_done_now == 0
+    other = tmp_path / "eval2"
+    evaluate(calibrated, other, _config(), workers=2, bundle=built_map, progress=False)
+    second = pd.read_parquet(other / "episodes.parquet").drop(columns=["loop_s"])
+    pd.testing.assert_frame_equal(frame.drop(columns=["loop_s"]), second)
+
+
+def test_eval_settings_and_folders_are_checked(calibrated, wave_store, built_map, tmp_path):
+    with pytest.raises(EvaluationError, match="--behaviour must list distinct behaviours"):
+        _config(behaviours=("paper", "wild"))
+    with pytest.raises(EvaluationError, match="--episodes must be an integer"):
+        _config(episodes=0)
+    with pytest.raises(EvaluationError, match="must be before"):
+        _config(t_from=2.0, t_until=1.0)
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / "notes.txt").write_text("mine")
+    with pytest.raises(EvaluationError, match="not an evaluation folder"):
+        evaluate(calibrated, tmp_path / "busy", _config(), bundle=built_map, progress=False)
+    assert (tmp_path / "busy" / "notes.txt").read_text() == "mine"
+    # a store without a calibration cannot run the calibrated behaviour
+    assert main(["eval", "--data", str(wave_store.path), "--episodes", "1", "--behaviour",
+                 "calibrated", "--out", str(tmp_path / "e"), "--quiet"]) == 2  # fmt: skip
+    assert not (tmp_path / "e").exists()

@@ -1,0 +1,507 @@
+"""``twin eval``: the twin's fidelity measured over many episodes, per behaviour.
+
+Episodes are drawn from the recorded traffic as a dataset's are
+(:mod:`sensors.episodes`: congested and free cells, episode ``i`` from ``(seed, i)``
+alone), restricted to the window given; every behaviour runs the same episodes. Each
+(episode, behaviour) is one cosimulation, measured as ``twin run`` measures a run
+(:func:`twin.cosim.run.measure`), on the engines the dataset runner uses
+(:mod:`twin.engines`: a local process pool by default, Ray as an option; same results).
+The output folder::
+
+    OUT/
+      eval.json            what was evaluated (settings, data and map identity)
+      results/             one JSON per (episode, behaviour), written as each finishes
+      episodes.parquet     one row per (episode, behaviour) with every metric
+      summary.json         median, p90 and mean of each metric per behaviour, and sums
+      summary.md           the same as a Markdown table
+      fidelity.png         each metric's distribution per behaviour, side by side
+
+A run that is interrupted keeps its finished results; the same command resumes it.
+"""
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from sensors.episodes import EpisodeSampling, EpisodeSpec, check_roads, draw_episode, measure_cells
+from twin import __version__
+from twin.atomic import atomic_file, remove_stale
+from twin.cosim.behaviour import BEHAVIOURS, Behaviour
+from twin.cosim.config import SCENARIO_B, CosimConfig
+from twin.data.calibrate import read_calibration
+from twin.data.i24 import Road
+from twin.data.store import TrajectoryStore
+from twin.engines import run_jobs, where, worker_data
+from twin.errors import NoVehicleNearError, TwinError
+
+FORMAT = "i24-twin-eval"
+VERSION = 1
+IDENTITY = "eval.json"
+RESULTS = "results"
+CONGESTED_TRAVEL = 13.4  # [m/s] room is kept ahead of an episode's ego for this speed
+
+#: The metrics of a row, with how they are summarised ("sum" adds them over episodes).
+METRICS = {
+    "ego_speed_rmse_mps": "stats",
+    "ego_position_rmse_m": "stats",
+    "ego_position_error_30s_m": "stats",
+    "ego_position_error_60s_m": "stats",
+    "ego_position_error_120s_m": "stats",
+    "ego_position_error_end_m": "stats",
+    "slow_spell_begin_difference_s": "stats",
+    "slow_spell_end_difference_s": "stats",
+    "speed_field_rmse_mps": "stats",
+    "speed_field_rmse_lane_-1_mps": "stats",
+    "speed_field_rmse_lane_-2_mps": "stats",
+    "speed_field_rmse_lane_-3_mps": "stats",
+    "speed_field_rmse_lane_-4_mps": "stats",
+    "lane_changes_simulated": "sum",
+    "lane_changes_recorded": "sum",
+    "collisions": "sum",
+    "stalled_across_lines": "sum",
+    "vehicles_off_road": "sum",
+    "ended_early": "sum",
+    "loop_s": "stats",
+}
+
+
+class EvaluationError(TwinError):
+    """An evaluation cannot run: bad settings, a folder holding something else."""
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """What ``twin eval`` evaluates.
+
+    Attributes:
+        road: the carriageway.
+        episodes: how many episodes.
+        duration: [s] each episode's length.
+        behaviours: the behaviours run on every episode.
+        congested_share: probability an episode starts in a congested cell.
+        t_from, t_until: [s unix] episodes start and end inside this window (None: open).
+        seed: the evaluation's seed (episode ``i`` draws from ``(seed, i)``).
+        cosim: the other settings of each episode's cosimulation.
+    """
+
+    road: str = "westbound"
+    episodes: int = 40
+    duration: float = 120.0
+    behaviours: tuple[str, ...] = BEHAVIOURS
+    congested_share: float = 1.0
+    t_from: float | None = None
+    t_until: float | None = None
+    seed: int = 0
+    cosim: CosimConfig = SCENARIO_B
+
+    def __post_init__(self):
+        try:
+            object.__setattr__(self, "road", Road.parse(self.road).value)
+        except ValueError as error:
+            raise EvaluationError(f"--road: {error}") from None
+        if (
+            not isinstance(self.episodes, int)
+            or isinstance(self.episodes, bool)
+            or self.episodes < 1
+        ):
+            raise EvaluationError(f"--episodes must be an integer >= 1, got {self.episodes!r}")
+        if not (math.isfinite(self.duration) and self.duration > 0):
+            raise EvaluationError(f"--duration must be a positive number, got {self.duration!r}")
+        behaviours = tuple(self.behaviours)
+        unknown = [b for b in behaviours if b not in BEHAVIOURS]
+        if unknown or not behaviours or len(set(behaviours)) != len(behaviours):
+            raise EvaluationError(
+                f"--behaviour must list distinct behaviours of {', '.join(BEHAVIOURS)}, "
+                f"got {','.join(behaviours) or 'none'}"
+            )
+        object.__setattr__(self, "behaviours", behaviours)
+        if not 0.0 <= self.congested_share <= 1.0:
+            raise EvaluationError(
+                f"--congested-share must be in [0, 1], got {self.congested_share}"
+            )
+        if self.t_from is not None and self.t_until is not None and not self.t_from < self.t_until:
+            raise EvaluationError(f"--from ({self.t_from}) must be before --until ({self.t_until})")
+
+    @property
+    def sampling(self) -> EpisodeSampling:
+        return EpisodeSampling(roads=(self.road,), congested_share=self.congested_share)
+
+
+@dataclass(frozen=True)
+class EvalResult:
+    """What :func:`evaluate` ran and wrote."""
+
+    folder: Path
+    summary: dict
+    runs_done_now: int
+    total_s: float
+
+
+def evaluate(
+    store: TrajectoryStore,
+    out: str | os.PathLike,
+    config: EvalConfig,
+    *,
+    workers: int = 1,
+    engine: str = "local",
+    ray_address: str | None = None,
+    bundle=None,
+    progress: bool = True,
+) -> EvalResult:
+    """Run (or resume) the evaluation ``config`` into the folder ``out``.
+
+    Raises:
+        EvaluationError: bad arguments, ``out`` holds something else or another
+            evaluation, an episode failed (finished ones are kept; rerun to resume).
+        BehaviourError: a behaviour needs a calibration the store lacks.
+        SamplingError: no episode can be drawn from the data in the window.
+    """
+    from tqdm import tqdm
+
+    from mapgen.build import default_map
+
+    start = time.perf_counter()
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise EvaluationError(f"--workers must be an integer >= 1, got {workers!r}")
+    out = Path(out)
+    for behaviour in config.behaviours:  # fails early, naming 'twin calibrate'
+        Behaviour(behaviour, store, Road.parse(config.road), config.seed)
+    bundle = bundle or default_map(progress=progress)
+    specs = draw_specs(config, store, bundle)
+    _claim(out, config, store, bundle)
+    results = out / RESULTS
+    results.mkdir(exist_ok=True)
+    remove_stale(results)
+    jobs = [
+        (config, spec, behaviour, where(store, bundle))
+        for spec in specs
+        for behaviour in config.behaviours
+        if not _result_path(out, spec.index, behaviour).is_file()
+    ]
+    with tqdm(
+        total=len(jobs),
+        unit="episode",
+        disable=None if progress else True,
+        desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.behaviours)} to run",
+    ) as bar:
+
+        def save(k: int, row: dict) -> None:
+            _, spec, behaviour, _ = jobs[k]
+            with atomic_file(_result_path(out, spec.index, behaviour)) as tmp:
+                tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
+            bar.update(1)
+
+        run_jobs(
+            _run_one,
+            jobs,
+            engine=engine,
+            workers=workers,
+            ray_address=ray_address,
+            on_done=save,
+            describe=lambda job: f"episode {job[1].index} ({job[2]})",
+            error_type=EvaluationError,
+        )
+    summary = assemble(out, config, specs)
+    return EvalResult(out, summary, len(jobs), time.perf_counter() - start)
+
+
+def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[EpisodeSpec]:
+    """The evaluation's episodes (see the module doc)."""
+    from twin.cosim.cosimulator import road_limits
+    from twin.data.traffic import EmpiricalTraffic
+
+    sampling = config.sampling
+    check_roads(store, sampling)
+    road = Road.parse(config.road)
+    limits = {road: road_limits(bundle, EmpiricalTraffic(store), road)}
+    cells = measure_cells(
+        store,
+        sampling,
+        limits,
+        config.duration,
+        window=(config.t_from, config.t_until),
+        room_speed=CONGESTED_TRAVEL,
+    )
+    return [draw_episode(cells, sampling, config.seed, i) for i in range(config.episodes)]
+
+
+def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) -> dict:
+    """One (episode, behaviour): the cosimulation and its metrics as a flat row."""
+    from twin.cosim.cosimulator import Cosimulator, ScenarioError
+    from twin.cosim.run import measure
+    from twin.data.traffic import EmpiricalTraffic
+
+    store, bundle = worker_data(location)
+    cosim = replace(
+        config.cosim,
+        scenario="eval",
+        road=spec.road,
+        lane=spec.lane,
+        x=spec.x,
+        time=spec.time,
+        t_max=config.duration,
+        seed=spec.seed,
+        behaviour=behaviour,
+        camera=replace(config.cosim.camera, enabled=False),
+    )
+    row = {"episode": spec.index, "behaviour": behaviour, **_spec_columns(spec)}
+    with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
+        setup = time.perf_counter()
+        try:
+            sim.reset()
+        except (NoVehicleNearError, ScenarioError) as error:
+            return {**row, "skipped": str(error)}
+        begin = time.perf_counter()
+        sim.run(progress=False)
+        loop_s = time.perf_counter() - begin
+        figures, _ = measure(sim, store, loop_s, begin - setup)
+    return {**row, "skipped": None, **flatten(figures)}
+
+
+def _spec_columns(spec: EpisodeSpec) -> dict:
+    return {
+        "seed": spec.seed,
+        "road": spec.road,
+        "lane": spec.lane,
+        "x": spec.x,
+        "time": spec.time,
+        "congested": spec.congested,
+        "cell_speed": spec.cell_speed,
+    }
+
+
+def flatten(figures: dict) -> dict:
+    """The metrics of one run (``metrics.json``) as the columns of :data:`METRICS`."""
+    ego, counts, field = figures["ego"], figures["counts"], figures["traffic"]["speed_field"]
+    errors = ego.get("position_error_m", {})
+    spells = ego.get("slow_spells", {}).get("spells", [])
+    first = spells[0] if spells else {}
+    row = {
+        "ego_record_id": ego["record_id"],
+        "simulated_s": figures["simulated_s"],
+        "ego_speed_rmse_mps": ego.get("speed_rmse_mps"),
+        "ego_position_rmse_m": ego.get("position_rmse_m"),
+        "ego_position_error_30s_m": errors.get("30s"),
+        "ego_position_error_60s_m": errors.get("60s"),
+        "ego_position_error_120s_m": errors.get("120s"),
+        "ego_position_error_end_m": errors.get("end"),
+        "slow_spells_recorded": ego.get("slow_spells", {}).get("recorded_spells", 0),
+        "slow_spell_begin_difference_s": first.get("begin_difference_s"),
+        "slow_spell_end_difference_s": first.get("end_difference_s"),
+        "speed_field_rmse_mps": field["all_lanes"].get("rmse_mps"),
+        "lane_changes_simulated": counts["lane_changes"],
+        "lane_changes_recorded": counts["lane_changes_recorded_in_window"],
+        "collisions": figures["physics"]["collisions"],
+        "stalled_across_lines": counts["stalled_across_lines"],
+        "vehicles_off_road": figures["physics"]["vehicles_off_road"],
+        "ended_early": int(bool(figures["ended_early"])),
+        "loop_s": figures["timing"]["loop_s"],
+    }
+    for lane in (-1, -2, -3, -4):
+        row[f"speed_field_rmse_lane_{lane}_mps"] = field[f"lane_{lane}"].get("rmse_mps")
+    return row
+
+
+def _result_path(out: Path, index: int, behaviour: str) -> Path:
+    return out / RESULTS / f"{index:06d}-{behaviour}.json"
+
+
+def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
+    calibration = read_calibration(store)
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "config": json.loads(json.dumps(asdict(config), default=str)),
+        "data": {
+            "store": str(store.path),
+            "roads": store.metadata.get("roads"),
+            "calibration": calibration["created"] if calibration else None,
+        },
+        "map": bundle.key,
+    }
+
+
+def _claim(out: Path, config: EvalConfig, store: TrajectoryStore, bundle) -> None:
+    """Make ``out`` this evaluation's folder, or check that it already is."""
+    identity = _identity(config, store, bundle)
+    marker = out / IDENTITY
+    if out.exists() and not marker.is_file() and any(out.iterdir()):
+        raise EvaluationError(f"{out} exists and is not an evaluation folder: choose another --out")
+    if marker.is_file():
+        try:
+            held = json.loads(marker.read_text())
+        except ValueError:
+            raise EvaluationError(
+                f"{marker} is damaged: remove {out} or choose another --out"
+            ) from None
+        if held != identity:
+            raise EvaluationError(
+                f"{out} holds an evaluation with other settings or data: choose another --out "
+                "(or remove it)"
+            )
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_file(marker) as tmp:
+        tmp.write_text(json.dumps(identity, indent=1) + "\n")
+
+
+def assemble(out: Path, config: EvalConfig, specs: list[EpisodeSpec]) -> dict:
+    """Write episodes.parquet, summary.json, summary.md and fidelity.png from the
+    results of ``specs``; returns the summary."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    rows = []
+    for spec in specs:
+        for behaviour in config.behaviours:
+            rows.append(json.loads(_result_path(out, spec.index, behaviour).read_text()))
+    frame = pd.DataFrame(rows)
+    for name in METRICS:
+        if name not in frame:
+            frame[name] = np.nan
+        frame[name] = pd.to_numeric(frame[name], errors="coerce")
+    with atomic_file(out / "episodes.parquet") as tmp:
+        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
+    summary = summarise(frame, config)
+    with atomic_file(out / "summary.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    with atomic_file(out / "summary.md") as tmp:
+        tmp.write_text(markdown(summary))
+    with atomic_file(out / "fidelity.png") as tmp:
+        _plot(frame, config, tmp)
+    return summary
+
+
+def summarise(frame, config: EvalConfig) -> dict:
+    """Per behaviour: median, p90 and mean of each metric over the episodes that ran,
+    sums of the counts, and the episodes skipped."""
+    out = {
+        "format": FORMAT,
+        "version": __version__,
+        "road": config.road,
+        "episodes": config.episodes,
+        "duration_s": config.duration,
+        "behaviours": {},
+    }
+    for behaviour in config.behaviours:
+        rows = frame[frame["behaviour"] == behaviour]
+        ran = rows[rows["skipped"].isna()] if "skipped" in rows else rows
+        entry = {"episodes_run": len(ran), "episodes_skipped": len(rows) - len(ran), "metrics": {}}
+        for name, kind in METRICS.items():
+            values = ran[name].to_numpy(dtype=np.float64)
+            values = values[np.isfinite(values)]
+            if kind == "sum":
+                entry["metrics"][name] = {"sum": float(values.sum()), "count": int(values.size)}
+            else:
+                entry["metrics"][name] = {
+                    "median": _r(np.median(values)) if values.size else None,
+                    "p90": _r(np.quantile(values, 0.9)) if values.size else None,
+                    "mean": _r(values.mean()) if values.size else None,
+                    "count": int(values.size),
+                }
+        recorded = entry["metrics"]["lane_changes_recorded"]["sum"]
+        simulated = entry["metrics"]["lane_changes_simulated"]["sum"]
+        entry["lane_changes_ratio"] = _r(simulated / recorded) if recorded else None
+        out["behaviours"][behaviour] = entry
+    return out
+
+
+def _r(value) -> float:
+    return round(float(value), 4)
+
+
+def markdown(summary: dict) -> str:
+    """The summary as a Markdown table: one row per metric, a column per behaviour."""
+    behaviours = list(summary["behaviours"])
+    lines = [
+        f"# twin eval: {summary['road']}, {summary['episodes']} episodes of "
+        f"{summary['duration_s']:g} s",
+        "",
+        "| metric | " + " | ".join(behaviours) + " |",
+        "|---|" + "---|" * len(behaviours),
+    ]
+    for name, kind in METRICS.items():
+        cells = []
+        for b in behaviours:
+            m = summary["behaviours"][b]["metrics"][name]
+            if kind == "sum":
+                cells.append(f"{m['sum']:g}")
+            elif m["median"] is None:
+                cells.append("-")
+            else:
+                cells.append(f"{m['median']:.2f} / {m['p90']:.2f}")
+        label = name if kind == "sum" else f"{name} (median / p90)"
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    ratio = [summary["behaviours"][b]["lane_changes_ratio"] for b in behaviours]
+    lines.append(
+        "| lane changes simulated / recorded | "
+        + " | ".join("-" if r is None else f"{r:.2f}" for r in ratio)
+        + " |"
+    )
+    runs = [summary["behaviours"][b] for b in behaviours]
+    lines.append(
+        "| episodes run (skipped) | "
+        + " | ".join(f"{e['episodes_run']} ({e['episodes_skipped']})" for e in runs)
+        + " |"
+    )
+    return "\n".join(lines) + "\n"
+
+
+def _plot(frame, config: EvalConfig, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = [
+        ("ego_speed_rmse_mps", "ego speed RMSE [m/s]"),
+        ("ego_position_error_end_m", "ego position error at the end [m]"),
+        ("speed_field_rmse_mps", "speed-field RMSE, all lanes [m/s]"),
+        ("slow_spell_end_difference_s", "slow spell end, sim - recorded [s]"),
+    ]
+    fig, axes = plt.subplots(1, len(shown), figsize=(4.2 * len(shown), 4.0))
+    for ax, (name, label) in zip(axes, shown, strict=True):
+        data = []
+        for behaviour in config.behaviours:
+            values = frame.loc[frame["behaviour"] == behaviour, name].to_numpy(dtype=float)
+            data.append(values[np.isfinite(values)])
+        ax.boxplot(data, showfliers=True)
+        ax.set_xticks(range(1, len(config.behaviours) + 1), config.behaviours)
+        ax.set_title(label, fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+    fig.suptitle(f"twin eval: {config.road}, {config.episodes} x {config.duration:g} s episodes")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def summary_lines(result: EvalResult) -> str:
+    """A few lines for the terminal."""
+    s = result.summary
+    lines = [
+        f"evaluation folder: {result.folder} (ran {result.runs_done_now} now, "
+        f"{result.total_s:.0f} s)"
+    ]
+    for behaviour, entry in s["behaviours"].items():
+        m = entry["metrics"]
+        speed, end = _stat(m, "ego_speed_rmse_mps"), _stat(m, "ego_position_error_end_m")
+        ratio = entry["lane_changes_ratio"]
+        lines.append(
+            f"{behaviour:<11} ego speed RMSE {speed} m/s, end error {end} m, field RMSE "
+            f"{_stat(m, 'speed_field_rmse_mps')} m/s (median / p90); lane changes "
+            f"{m['lane_changes_simulated']['sum']:g} vs {m['lane_changes_recorded']['sum']:g} "
+            f"recorded ({'-' if ratio is None else f'{ratio:.2f}'}); collisions "
+            f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
+        )
+    return "\n".join(lines)
+
+
+def _stat(metrics: dict, name: str) -> str:
+    m = metrics[name]
+    return "-" if m["median"] is None else f"{m['median']:.2f} / {m['p90']:.2f}"
