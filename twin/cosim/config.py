@@ -48,6 +48,9 @@ class CosimConfig:
             lead vehicle takes from its ghost (0: off, the paper's behaviour).
         spawn_clearance: [m] bumper-to-bumper room a spawned vehicle needs to any body
             it shares its lane's width with...
+        spawn_clearance_at_rest: [m] ...that room when the rear of the two is at rest
+            (it grows to ``spawn_clearance`` at 5 m/s; recorded standing queues have gaps
+            under 2 m, and a queue spawned with holes closes them and drifts)...
         spawn_decel: [m/s^2] ...plus the difference of their braking distances at this
             deceleration when the one behind is faster.
         ego_controller: ``"module:function"`` driving the ego (see
@@ -76,6 +79,7 @@ class CosimConfig:
     w_ghost: float = 50.0
     ghost_smoothing: float = 0.0
     spawn_clearance: float = 2.0
+    spawn_clearance_at_rest: float = 0.3
     spawn_decel: float = 4.0
     ego_controller: str = ""
     ghost_log_rate: float = 10.0
@@ -103,6 +107,7 @@ class CosimConfig:
             "w_ghost": self.w_ghost,
             "ghost_smoothing": self.ghost_smoothing,
             "spawn_clearance": self.spawn_clearance,
+            "spawn_clearance_at_rest": self.spawn_clearance_at_rest,
             "spawn_decel": self.spawn_decel,
             "ghost_log_rate": self.ghost_log_rate,
         }
@@ -117,6 +122,11 @@ class CosimConfig:
                 raise ConfigError(f"{name} must be > 0, got {numbers[name]!r}")
         if self.ghost_smoothing < 0 or self.spawn_clearance < 0:
             raise ConfigError("ghost_smoothing and spawn_clearance must be >= 0")
+        if not 0 <= self.spawn_clearance_at_rest <= self.spawn_clearance:
+            raise ConfigError(
+                f"spawn_clearance_at_rest must be in [0, spawn_clearance = "
+                f"{self.spawn_clearance}] m, got {self.spawn_clearance_at_rest}"
+            )
         if not 0 < self.vel_default <= MAX_SPEED:
             raise ConfigError(
                 f"vel_default must be in (0, {MAX_SPEED}] m/s, got {self.vel_default}"

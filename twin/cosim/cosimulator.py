@@ -44,6 +44,7 @@ from twin.traffic.manager import EgoController, Obstacles, TrafficManager
 
 MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
+CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 
 
 class ScenarioError(TwinError):
@@ -472,8 +473,7 @@ class Cosimulator:
 
     def _fits(self, snap: Snapshot, i: int, body: dict) -> bool:
         """Whether recorded vehicle ``i`` can be spawned among the bodies: no body within
-        ``spawn_clearance`` plus the braking-distance difference, ahead or behind, among
-        those that overlap it laterally."""
+        :func:`spawn_room` ahead or behind, among those that overlap it laterally."""
         cfg = self.config
         x, length, speed = snap.x[i], snap.length[i], snap.speed[i]
         side = np.abs(body["y"] - snap.y[i]) < 0.5 * (body["width"] + snap.width[i]) + (
@@ -485,8 +485,8 @@ class Cosimulator:
         ahead = bx >= x
         gap = np.where(ahead, bx - (x + length), x - (bx + bl))
         closing = np.where(ahead, speed**2 - bv**2, bv**2 - speed**2)
-        need = cfg.spawn_clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
-        return bool(np.all(gap >= need))
+        rear_speed = np.where(ahead, speed, bv)
+        return bool(np.all(gap >= spawn_room(cfg, rear_speed, closing)))
 
     def _spawn(self, new: "_Recorded", *, desired_speed: float) -> np.ndarray:
         ids = self.world.spawn(new.spawn)
@@ -600,6 +600,19 @@ class Ghosts:
 def _no_ghosts() -> Ghosts:
     empty = np.empty(0)
     return Ghosts(empty.astype(np.int32), empty.astype(np.int8), empty, empty, empty, empty)
+
+
+def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) -> np.ndarray:
+    """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
+    ``spawn_clearance_at_rest`` for a rear vehicle at rest growing to ``spawn_clearance``
+    at ``CLEARANCE_SPEED`` and above (a standing queue is spawned as recorded, its gaps
+    are often under 2 m), plus the difference of braking distances at ``spawn_decel``
+    (``closing`` = v_rear^2 - v_front^2)."""
+    share = np.clip(np.asarray(rear_speed) / CLEARANCE_SPEED, 0.0, 1.0)
+    clearance = cfg.spawn_clearance_at_rest + share * (
+        cfg.spawn_clearance - cfg.spawn_clearance_at_rest
+    )
+    return clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
 
 
 def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:

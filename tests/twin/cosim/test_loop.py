@@ -155,6 +155,24 @@ def test_step6_a_ghost_is_not_spawned_where_a_body_is_in_the_way(cosim):
     assert sim.counters.skipped_overlap == 1 and sim.counters.spawned == 1
 
 
+def test_step2_a_standing_queue_is_spawned_as_recorded_a_moving_one_with_room(cosim):
+    length = 15.0 * 0.3048  # make_doc's default length
+    docs = [ego_doc()]
+    # lane -3: a queue at rest 1 m apart, all visible; lane -4: the same at 20 m/s
+    for k in range(5):
+        docs.append(vehicle(10 + k, -3, EGO_X + 20.0 + k * (length + 1.0), 0.0))
+        docs.append(vehicle(20 + k, -4, EGO_X + 20.0 + k * (length + 1.0), 20.0))
+    sim = cosim(docs)
+    spawned = set(sim._tids.tolist())
+    assert all(tid_of(sim, 10 + k) in spawned for k in range(5))
+    # at speed the full clearance holds: every other vehicle of the moving queue
+    assert sum(tid_of(sim, 20 + k) in spawned for k in range(5)) == 3
+    assert sim.counters.skipped_overlap == 2
+    for _ in range(100):
+        sim.step()
+    assert not sim.counters.collisions
+
+
 def test_step7_the_ghosts_are_the_recording_now_and_the_managers_obstacles(cosim):
     sim = cosim([ego_doc(), vehicle(4, -3, EGO_X + 175.0, 25.0)])
     for _ in range(50):
