@@ -129,9 +129,22 @@ def _parser() -> argparse.ArgumentParser:
     p = data_commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
     p.add_argument(
         "--preset",
-        choices=["A", "B"],
+        choices=["A", "B", "C"],
         required=True,
-        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane",
+        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; C: westbound, "
+        "20 minutes of stop-and-go in three lanes, HOV lane closed",
+    )
+    p.add_argument(
+        "--drivers",
+        choices=["default", "other"],
+        default="default",
+        help="other: drivers and lane changing unlike the twin's defaults (test data)",
+    )
+    p.add_argument(
+        "--car-following",
+        choices=["idm", "gipps"],
+        default="idm",
+        help="the drivers' model (gipps: one the twin does not drive with)",
     )
     p.add_argument("--out", required=True, type=Path, help="JSON file to write")
     p.add_argument("--minutes", type=float, default=None, help="recorded minutes (default 16)")
@@ -512,8 +525,10 @@ def _synth(args) -> int:
     from twin.data import synth
     from twin.timeutil import parse_time
 
-    config = synth.PRESETS[args.preset]
-    changes = {"seed": args.seed}
+    config = synth.ALL_PRESETS[args.preset]
+    changes = {"seed": args.seed, "car_following": args.car_following}
+    if args.drivers == "other":
+        changes.update(drivers=synth.OTHER_DRIVERS, **synth.OTHER_LANE_CHANGES)
     if args.minutes is not None:
         changes["minutes"] = args.minutes
     if args.start is not None:

@@ -27,6 +27,7 @@ from tqdm import tqdm
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.traffic.drivers import DriverDistribution
+from twin.traffic.gipps import GippsParams, gipps_acceleration
 from twin.traffic.idm import IDMParams, idm_acceleration
 from twin.traffic.lanes import Occupancy
 from twin.vehicle_classes import vehicle_classes
@@ -37,6 +38,7 @@ MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
 MIN_GAP = 2.0  # [m] IDM s0 mean
 DRIVERS = DriverDistribution(min_gap=MIN_GAP, comfortable_decel=COMFORT_DECEL)
+CAR_FOLLOWING = ("idm", "gipps")
 IDM_NAMES = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
 
 
@@ -81,6 +83,10 @@ class SynthConfig:
         accel_noise: [m/s^2] sd of the drivers' acceleration noise per step.
         drivers: how each vehicle's IDM parameters are drawn (data made by other
             drivers than the twin's defaults, e.g. to test a calibration).
+        car_following: ``"idm"`` (the twin's model) or ``"gipps"`` (:mod:`twin.traffic.gipps`,
+            a model the twin does not drive with: reaction time 2/3 of the drawn time
+            headway, most severe braking twice the drawn comfortable deceleration, the
+            same desired speed, acceleration and minimum gap).
         lane_change_duration: [s] range of lane-change manoeuvre durations.
         politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
             ([-], [m/s^2], [m/s^2], [m/s^2]).
@@ -103,6 +109,7 @@ class SynthConfig:
     position_noise: float = 0.03
     accel_noise: float = 0.15
     drivers: DriverDistribution = DRIVERS
+    car_following: str = "idm"
     lane_change_duration: tuple[float, float] = (3.0, 6.0)
     politeness: float = 0.2
     change_threshold: float = 0.3
@@ -122,6 +129,7 @@ class SynthConfig:
             "downstream": self.downstream >= 0,
             "x_record": self.x_record[0] < self.x_record[1],
             "flow": len(self.flow) == 4 and all(0 <= q <= 3000 for q in self.flow),
+            "car_following": self.car_following in CAR_FOLLOWING,
             "lane_change_duration": 0
             < self.lane_change_duration[0]
             <= self.lane_change_duration[1],
@@ -169,7 +177,40 @@ PRESET_B = SynthConfig(
     ),
 )
 
-PRESETS = {"A": PRESET_A, "B": PRESET_B}
+PRESETS = {"A": PRESET_A, "B": PRESET_B}  # the embedded default data
+
+#: Test data unlike the default data, for calibration and fidelity (issue 17): twenty
+#: minutes westbound, the HOV lane closed, stop-and-go in the three other lanes (a
+#: driver brakes nearly to a stop downstream every 150 s).
+PRESET_C = SynthConfig(
+    road=Road.WESTBOUND,
+    anchor=SCENARIO_TIME,
+    start=SCENARIO_TIME - 600.0,
+    minutes=20.0,
+    flow=(0.0, 2000.0, 1900.0, 1700.0),
+    slowdowns=tuple(
+        Slowdown(t=-700.0 + 150.0 * k, x=2450.0, lanes=(-2, -3, -4), speed=2.0, duration=12.0)
+        for k in range(13)
+    ),
+)
+
+#: Drivers unlike the class table's: longer headways, harder acceleration, larger
+#: standstill gaps, firmer and varied braking.
+OTHER_DRIVERS = DriverDistribution(
+    min_gap=3.0,
+    min_gap_sd=0.5,
+    comfortable_decel=2.5,
+    comfortable_decel_sd=0.4,
+    time_headway_scale=1.4,
+    max_accel_scale=1.5,
+)
+
+#: Lane changing unlike the default data's: more polite, a higher threshold, decisions
+#: half as often.
+OTHER_LANE_CHANGES = {"politeness": 0.5, "change_threshold": 0.6, "decision_interval": 4.0}
+
+#: Every preset ``twin data synth`` offers.
+ALL_PRESETS = {**PRESETS, "C": PRESET_C}
 
 
 @dataclass
@@ -212,6 +253,18 @@ class _Vehicles:
     @property
     def params(self) -> IDMParams:
         return IDMParams(self.v0, self.T, self.s0, self.a, self.b, self.delta)
+
+    @property
+    def gipps(self) -> GippsParams:
+        """The same drivers as Gipps drivers (see ``SynthConfig.car_following``)."""
+        return GippsParams(
+            desired_speed=self.v0,
+            max_accel=self.a,
+            decel=2.0 * self.b,
+            leader_decel=2.0 * self.b,
+            reaction_time=self.T * (2.0 / 3.0),
+            min_gap=self.s0,
+        )
 
 
 @dataclass
@@ -369,8 +422,10 @@ class _Simulation:
         occupancy = self._occupancy()
         owner = occupancy.owner
         gap, leader = occupancy.leaders(veh.x, veh.length)
-        params = veh.params.take(owner)
-        acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, params)
+        if cfg.car_following == "gipps":
+            acc_entry = gipps_acceleration(veh.v[owner], veh.v[leader], gap, veh.gipps.take(owner))
+        else:
+            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, veh.params.take(owner))
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))

@@ -607,6 +607,18 @@ class TrafficManager:
         owner = occupancy.owner[driven]
         gap, leader = occupancy.leaders(scene.x, scene.length)
         gap, leader = gap[driven], leader[driven]
+        # a slow vehicle past the middle of its lane change no longer follows the leader
+        # of the lane it leaves (its followers there still see it): it finishes the
+        # change rather than stopping across the line behind a queue it is leaving
+        entry_lane = -(occupancy.group[driven] % N_LANES) - 1
+        left_behind = (
+            (entry_lane == d.lane_from[owner])
+            & (d.lane_from[owner] != d.lane[owner])
+            & (states.lane[owner] == d.lane[owner])
+            & (speed[owner] < MIN_SPEED_PATH)  # slow: its path is made for this speed
+        )
+        gap = np.where(left_behind, np.inf, gap)
+        leader = np.where(left_behind, owner, leader)
         v_lead = scene.speed[leader]
 
         idm = d.idm()
@@ -709,6 +721,13 @@ class TrafficManager:
 
         # the old follower's acceleration once the candidate has left its lane
         ahead_now, behind_now = occupancy.around(road, lane, x)
+        # room to reach the middle of the change behind the leader it still follows
+        # until then (a vehicle in a standing queue cannot get across)
+        low, high = cfg.lane_change_time
+        half_path = 0.5 * np.maximum(speed, MIN_SPEED_PATH) * high
+        gap_now = np.where(ahead_now >= 0, x_all[ahead_now] - x - length_all[cand], np.inf)
+        lead_now = np.where(ahead_now >= 0, speed_all[ahead_now], 0.0)
+        room = gap_now + lead_now * 0.5 * high >= half_path + MIN_LANE_CHANGE_GAP
         old_gap = np.where(
             (behind_now >= 0) & (ahead_now >= 0),
             x_all[ahead_now] - x_all[behind_now] - length_all[behind_now],
@@ -746,7 +765,8 @@ class TrafficManager:
             follower_now = np.where(behind >= 0, accel_all[behind], 0.0)
             params = d.mobil(cand)
             safe = (
-                mobil_safe(follower_after, params)
+                room
+                & mobil_safe(follower_after, params)
                 & (own_after >= -params.safe_decel)
                 & (gap_ahead >= MIN_LANE_CHANGE_GAP)
                 & (gap_behind >= MIN_LANE_CHANGE_GAP)
@@ -769,7 +789,6 @@ class TrafficManager:
         if not movers.any():
             return
         index = cand[movers]
-        low, high = cfg.lane_change_time
         duration = self.rng.uniform(low, high, index.size)
         d.lane_from[index] = d.lane[index]
         d.lane[index] = d.lane[index] + choice[movers]

@@ -11,26 +11,14 @@ from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.traffic import calibration
 from twin.traffic.calibration import PARAMS, FitSettings, ParameterDistribution
-from twin.traffic.drivers import DriverDistribution
-
-#: Drivers unlike the class table's: longer headways, harder acceleration, larger
-#: standstill gaps, firmer and varied braking.
-OTHER_DRIVERS = DriverDistribution(
-    min_gap=3.0,
-    min_gap_sd=0.5,
-    comfortable_decel=2.5,
-    comfortable_decel_sd=0.4,
-    time_headway_scale=1.4,
-    max_accel_scale=1.5,
-)
 
 
 @pytest.fixture(scope="module")
 def known(tmp_path_factory):
-    """Six minutes of the westbound wave driven by OTHER_DRIVERS, ingested; the runs,
+    """Six minutes of the westbound wave driven by synth.OTHER_DRIVERS, ingested; the runs,
     the fits and each fitted follower's true parameters."""
     folder = tmp_path_factory.mktemp("oracle")
-    config = replace(synth.PRESET_B, minutes=6.0, seed=3, drivers=OTHER_DRIVERS)
+    config = replace(synth.PRESET_B, minutes=6.0, seed=3, drivers=synth.OTHER_DRIVERS)
     result = synth.synthesize(config)
     day = synth.write_i24_json(result, folder / "day.json")
     ingest([day], folder / "store", progress=False)
