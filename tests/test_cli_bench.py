@@ -49,3 +49,13 @@ def test_synth_command_writes_a_day(tmp_path, capsys):
     assert out.read_bytes().startswith(b"[") and "trajectories" in capsys.readouterr().out
     assert main(["data", "synth", "--preset", "A", "--out", str(out), "--start", "06:45"]) == 2
     assert "ISO 8601" in capsys.readouterr().err
+
+
+def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
+    assert main(["bench", "calibrate", "--data", str(wave_store.path), "--repeats", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert line["bench"] == "calibrate" and line["wall_s"] > 0 and line["followers_fitted"] > 0
+    argv = ["bench", "eval", "--data", str(wave_store.path), "--episodes", "1"]
+    assert main([*argv, "--duration", "4", "--workers", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert line["bench"] == "eval" and line["by_workers"]["1"]["wall_s"] > 0

@@ -397,6 +397,78 @@ def dataset_bench(
     }
 
 
+def eval_bench(
+    store=None,
+    *,
+    episodes: int = 4,
+    duration: float = 60.0,
+    behaviours: tuple[str, ...] = ("paper",),
+    workers: tuple[int, ...] | None = None,
+    repeats: int = 1,
+) -> dict:
+    """Wall time of ``twin eval`` by the number of workers (default 1 up to the cores):
+    ``episodes`` episodes of ``duration`` seconds from congested cells of ``store``'s
+    westbound data (default: the embedded data), each with ``behaviours``. Medians over
+    the repeats; scaling is the episodes per second of the most workers over one's."""
+    from twin.cosim.run import open_data
+    from twin.evaluation import EvalConfig, evaluate
+
+    store = store or open_data(None, progress=False)
+    cores = len(os.sched_getaffinity(0))
+    workers = workers or tuple(range(1, cores + 1))
+    config = EvalConfig(episodes=episodes, duration=duration, behaviours=tuple(behaviours))
+    runs = episodes * len(behaviours)
+    figures = {}
+    for count in workers:
+        walls = []
+        for _ in range(repeats):
+            with tempfile.TemporaryDirectory(prefix="twin-bench-eval-") as tmp:
+                start = time.perf_counter()
+                evaluate(store, Path(tmp) / "eval", config, workers=count, progress=False)
+                walls.append(time.perf_counter() - start)
+        wall = float(np.median(walls))
+        figures[str(count)] = {
+            "wall_s": round(wall, 2),
+            "runs_per_min": round(60.0 * runs / wall, 3),
+            "simulated_s_per_wall_s": round(runs * duration / wall, 2),
+        }
+    most = str(max(workers))
+    return {
+        "episodes": episodes,
+        "duration_s": duration,
+        "behaviours": list(behaviours),
+        "repeats": repeats,
+        "by_workers": figures,
+        "scaling": round(figures["1"]["wall_s"] / figures[most]["wall_s"], 2)
+        if "1" in figures and most != "1"
+        else None,
+    }
+
+
+def calibrate_bench(store=None, *, road: str = "westbound", repeats: int = 3) -> dict:
+    """Wall time of ``twin calibrate`` on ``road`` of ``store`` (default: the embedded
+    data; nothing is written), median of the repeats, with what it fitted."""
+    from twin.cosim.run import open_data
+    from twin.data.calibrate import calibrate
+
+    store = store or open_data(None, progress=False)
+    walls = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        doc, _ = calibrate(store, [road])
+        walls.append(time.perf_counter() - start)
+    section = doc["roads"][road]
+    return {
+        "road": road,
+        "trajectories": section["trajectories"],
+        "minutes": round((section["window"]["until"] - section["window"]["from"]) / 60.0, 2),
+        "followers_fitted": section["car_following"]["fitted"],
+        "repeats": repeats,
+        "wall_s": round(float(np.median(walls)), 2),
+        "wall_s_runs": [round(w, 2) for w in walls],
+    }
+
+
 def _cpu_seconds() -> float:
     """CPU seconds of this process and of its children that have ended."""
     import resource

@@ -322,6 +322,21 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_dataset)
+    p = bench_commands.add_parser("eval", help="wall time of twin eval, by workers")
+    p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
+    p.add_argument("--episodes", type=int, default=4)
+    p.add_argument("--duration", type=float, default=60.0, help="episode length [s]")
+    p.add_argument("--behaviour", default="paper", help="behaviours, comma-separated")
+    p.add_argument(
+        "--workers", default=None, help="worker counts, comma-separated (default: 1 to cores)"
+    )
+    p.add_argument("--repeats", type=int, default=1)
+    p.set_defaults(handler=_bench_eval)
+    p = bench_commands.add_parser("calibrate", help="wall time of twin calibrate on one road")
+    p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
+    p.add_argument("--road", default="westbound")
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_calibrate)
     p = bench_commands.add_parser("ingest", help="ingest throughput and peak memory")
     p.add_argument("--size-mb", type=float, default=300.0)
     p.add_argument("--repeats", type=int, default=3)
@@ -635,15 +650,48 @@ def _bench_camera(args) -> int:
     )
 
 
+def _worker_counts(text: str | None):
+    if text is None:
+        return None
+    try:
+        return tuple(int(w) for w in text.split(","))
+    except ValueError:
+        raise ValueError(f"--workers must be integers like 1,2, got {text!r}") from None
+
+
+def _bench_eval(args) -> int:
+    from twin.bench import eval_bench
+
+    return _emit(
+        "eval",
+        eval_bench(
+            _store(args.data) if args.data is not None else None,
+            episodes=args.episodes,
+            duration=args.duration,
+            behaviours=tuple(b.strip() for b in args.behaviour.split(",") if b.strip()),
+            workers=_worker_counts(args.workers),
+            repeats=args.repeats,
+        ),
+    )
+
+
+def _bench_calibrate(args) -> int:
+    from twin.bench import calibrate_bench
+
+    return _emit(
+        "calibrate",
+        calibrate_bench(
+            _store(args.data) if args.data is not None else None,
+            road=args.road,
+            repeats=args.repeats,
+        ),
+    )
+
+
 def _bench_dataset(args) -> int:
     from twin.bench import dataset_bench
 
-    workers = None
-    if args.workers is not None:
-        try:
-            workers = tuple(int(w) for w in args.workers.split(","))
-        except ValueError:
-            raise ValueError(f"--workers must be integers like 1,2, got {args.workers!r}") from None
+    workers = _worker_counts(args.workers)
     return _emit(
         "dataset",
         dataset_bench(
