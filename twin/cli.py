@@ -57,9 +57,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
     p.add_argument(
         "--behaviour",
-        choices=["paper", "calibrated", "recorded"],
+        choices=["auto", "paper", "calibrated", "recorded"],
         default=None,
-        help="how the visible vehicles drive (default paper; the others need 'twin calibrate')",
+        help="how the visible vehicles drive (default auto: calibrated where the store has "
+        "been calibrated with 'twin calibrate', else paper)",
     )
     p.add_argument("--w-visible", type=float, default=None, help="visible window each side [m]")
     p.add_argument("--w-ghost", type=float, default=None, help="ghost window beyond it [m]")

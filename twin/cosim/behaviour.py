@@ -15,6 +15,11 @@ recording (``twin calibrate``).
 
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
+
+``auto`` (the default of ``twin run``) is :data:`AUTO_CHOICE` where the store has a
+calibration of the road, else ``paper``: the behaviour ``twin eval`` found most
+faithful on data it was not calibrated on (README, "Calibration, behaviours and
+fidelity", for the figures).
 """
 
 from dataclasses import dataclass
@@ -29,12 +34,26 @@ from twin.errors import TwinError
 from twin.traffic.calibration import PARAMS, ParameterDistribution, class_group
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")
+AUTO = "auto"
+#: What ``auto`` means on a calibrated road: on held-out halves of two test recordings
+#: made by drivers unlike the twin's (IDM with other parameters, and Gipps), it was the
+#: most faithful behaviour in ``twin eval`` (the README gives the figures).
+AUTO_CHOICE = "calibrated"
 SEED_STREAM = 0x6265686176  # the behaviour's random draws use their own stream
 PLANNED_LATE = 100.0  # [m] a recorded lane change not started this far past its place is dropped
 
 
 class BehaviourError(TwinError):
     """A behaviour cannot be used with these data (unknown, or the store is not calibrated)."""
+
+
+def resolve(name: str, store: TrajectoryStore, road: Road | str) -> str:
+    """The behaviour ``name`` stands for: ``auto`` is :data:`AUTO_CHOICE` where ``store``
+    has a calibration of ``road``, else ``paper``; others are themselves."""
+    if name != AUTO:
+        return check_behaviour(name)
+    doc = read_calibration(store)
+    return AUTO_CHOICE if doc is not None and Road.parse(road).value in doc["roads"] else "paper"
 
 
 def check_behaviour(name: str) -> str:

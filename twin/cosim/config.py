@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sensors.camera import CameraError, CameraSettings, check_rig
-from twin.cosim.behaviour import BEHAVIOURS
+from twin.cosim.behaviour import AUTO, BEHAVIOURS
 from twin.data import i24
 from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
@@ -60,8 +60,9 @@ class CosimConfig:
         bev_video: also write ``bev.mp4`` of the whole episode.
         seed: seed of every random choice of the run (drivers, HOV eligibility).
         behaviour: how the visible vehicles drive: ``paper`` (the paper's rules),
-            ``calibrated`` (drivers drawn from the store's calibration) or ``recorded``
-            (each vehicle's own fitted drivers and recorded lane changes); see
+            ``calibrated`` (drivers drawn from the store's calibration), ``recorded``
+            (each vehicle's own fitted drivers and recorded lane changes) or ``auto``
+            (``calibrated`` where the store is calibrated, else ``paper``); see
             :mod:`twin.cosim.behaviour`.
         traffic: traffic-manager settings; its ``dt`` and ``seed`` are the run's.
         camera: the ego's cameras (off by default; ``twin run --camera``).
@@ -86,7 +87,7 @@ class CosimConfig:
     bev_time: float | None = None
     bev_video: bool = False
     seed: int = 0
-    behaviour: str = "paper"
+    behaviour: str = "auto"
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
     camera: CameraSettings = field(default_factory=CameraSettings)
 
@@ -147,9 +148,9 @@ class CosimConfig:
             raise ConfigError(
                 f"ego_controller must be 'module:function', got {self.ego_controller!r}"
             )
-        if self.behaviour not in BEHAVIOURS:
+        if self.behaviour not in (*BEHAVIOURS, AUTO):
             raise ConfigError(
-                f"behaviour must be one of {', '.join(BEHAVIOURS)}, got {self.behaviour!r}"
+                f"behaviour must be one of {', '.join((*BEHAVIOURS, AUTO))}, got {self.behaviour!r}"
             )
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")

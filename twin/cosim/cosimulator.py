@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.cosim.behaviour import PLANNED_LATE, Behaviour
+from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
 from twin.data.i24 import LANES, lane_of
@@ -155,7 +155,12 @@ class Cosimulator:
         self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
-        self.behaviour = Behaviour(config.behaviour, traffic.store, config.road, config.seed)
+        self.behaviour = Behaviour(
+            resolve(config.behaviour, traffic.store, config.road),
+            traffic.store,
+            config.road,
+            config.seed,
+        )
         self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()

@@ -277,7 +277,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
         "format": RUN_FORMAT,
         "version": __version__,
         "scenario": cfg.scenario,
-        "behaviour": cfg.behaviour,
+        "behaviour": sim.behaviour.name,
         "road": cfg.road.value,
         "t0": sim.t0,
         "simulated_s": round(sim_s, 6),

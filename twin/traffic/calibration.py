@@ -604,12 +604,15 @@ def _accel_behind(v, i, j, gap, idm: IDMParams) -> np.ndarray:
 
 def fit_threshold(incentives: Incentives, recorded: int, *, high: float = 8.0) -> dict:
     """The MOBIL threshold [m/s^2] at which the recorded scenes would start as many lane
-    changes as the recording has (bisection: the count falls as the threshold rises).
-    Where even ``high`` starts more, it is ``high``; where 0 starts fewer, 0."""
+    changes as the recording has: the lowest at which they start no more (bisection: the
+    count falls as the threshold rises). With no recorded change that is just above the
+    largest incentive the recorded drivers resisted, not the top of the range: they
+    would have changed for more. Where even ``high`` starts more, it is ``high``; where
+    0 starts fewer, 0."""
     low_count, high_count = incentives.changes(0.0), incentives.changes(high)
     if low_count <= recorded:
         threshold = 0.0
-    elif high_count >= recorded:
+    elif high_count > recorded:
         threshold = high
     else:
         lo, hi = 0.0, high

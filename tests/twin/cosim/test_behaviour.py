@@ -119,3 +119,14 @@ def test_a_vehicle_straddling_a_line_at_a_standstill_is_counted_as_stalled():
     assert metrics.stalled_across_lines(rows, 0.1) == 1
     rows.loc[rows["id"] == 0, "speed"] = 5.0  # moving across: a lane change, not a stall
     assert metrics.stalled_across_lines(rows, 0.1) == 0
+
+
+def test_auto_is_calibrated_where_the_store_is_calibrated_else_paper(wave_store, calibrated_store):
+    from twin.cosim.behaviour import AUTO_CHOICE, resolve
+
+    assert resolve("auto", wave_store, "westbound") == "paper"
+    assert resolve("auto", calibrated_store, "westbound") == AUTO_CHOICE
+    assert resolve("auto", calibrated_store, "eastbound") == "paper"  # not calibrated there
+    assert resolve("recorded", wave_store, "westbound") == "recorded"
+    with pytest.raises(BehaviourError, match="unknown behaviour"):
+        resolve("wild", wave_store, "westbound")
