@@ -2,6 +2,7 @@
 or two, resumable, with its tables and picture; bad settings named."""
 
 import json
+import os
 import shutil
 
 import pandas as pd
@@ -56,6 +57,18 @@ def test_eval_runs_every_behaviour_on_the_same_episodes_and_resumes(
     evaluate(calibrated, other, _config(), workers=2, bundle=built_map, progress=False)
     second = pd.read_parquet(other / "episodes.parquet").drop(columns=["loop_s"])
     pd.testing.assert_frame_equal(frame.drop(columns=["loop_s"]), second)
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        if os.environ.get("CI"):
+            raise
+        return
+    by_ray = tmp_path / "eval3"
+    evaluate(
+        calibrated, by_ray, _config(), workers=2, engine="ray", bundle=built_map, progress=False
+    )
+    third = pd.read_parquet(by_ray / "episodes.parquet").drop(columns=["loop_s"])
+    pd.testing.assert_frame_equal(frame.drop(columns=["loop_s"]), third)
 
 
 def test_eval_settings_and_folders_are_checked(calibrated, wave_store, built_map, tmp_path):

@@ -265,7 +265,7 @@ class Cosimulator:
         # 3. desired speeds (and the recorded lane changes due); 4. one step of
         # manager and physics
         self._set_desired_speeds(states)
-        if self._planned and self.step_index % self.manager._decision_every == 0:
+        if self._planned and self.step_index % self.manager.decision_steps == 0:
             self._request_recorded_changes(states)
         tick = time.perf_counter()
         commands = self.manager.step(states, self._obstacles_now)

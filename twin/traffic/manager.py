@@ -344,6 +344,11 @@ class TrafficManager:
         self.emergency_steps = 0
         self.refused_requests = 0
 
+    @property
+    def decision_steps(self) -> int:
+        """Steps between two lane-change decision rounds (``decision_period / dt``)."""
+        return self._decision_every
+
     # -- vehicles ---------------------------------------------------------------------
 
     @property
