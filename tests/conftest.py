@@ -89,3 +89,18 @@ def built_map(tmp_path_factory):
     from mapgen.build import build_map
 
     return build_map(tmp_path_factory.mktemp("map") / "map", seed=0)
+
+
+@pytest.fixture(scope="session")
+def calibrated_wave_store(tmp_path_factory, wave_store) -> TrajectoryStore:
+    """A copy of ``wave_store`` calibrated on its westbound road (``twin calibrate``)."""
+    import shutil
+
+    from twin.data.calibrate import calibrate, write_calibration
+
+    folder = tmp_path_factory.mktemp("calibrated") / "store"
+    shutil.copytree(wave_store.path, folder)
+    store = TrajectoryStore(folder)
+    doc, fits = calibrate(store, ["westbound"])
+    write_calibration(store, doc, fits)
+    return store

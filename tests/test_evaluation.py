@@ -3,25 +3,18 @@ or two, resumable, with its tables and picture; bad settings named."""
 
 import json
 import os
-import shutil
 
 import pandas as pd
 import pytest
 
 from twin.cli import main
-from twin.data.calibrate import calibrate, write_calibration
 from twin.data.store import TrajectoryStore
 from twin.evaluation import EvalConfig, EvaluationError, evaluate
 
 
-@pytest.fixture(scope="module")
-def calibrated(tmp_path_factory, wave_store) -> TrajectoryStore:
-    folder = tmp_path_factory.mktemp("eval") / "store"
-    shutil.copytree(wave_store.path, folder)
-    store = TrajectoryStore(folder)
-    doc, fits = calibrate(store, ["westbound"])
-    write_calibration(store, doc, fits)
-    return store
+@pytest.fixture
+def calibrated(calibrated_wave_store) -> TrajectoryStore:
+    return calibrated_wave_store
 
 
 def _config(**changes):

@@ -249,7 +249,8 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) ->
         behaviour=behaviour,
         camera=replace(config.cosim.camera, enabled=False),
     )
-    row = {"episode": spec.index, "behaviour": behaviour, **_spec_columns(spec)}
+    columns = {k: v for k, v in spec.to_dict().items() if k != "index"}
+    row = {"episode": spec.index, "behaviour": behaviour, **columns}
     with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
         setup = time.perf_counter()
         try:
@@ -261,18 +262,6 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) ->
         loop_s = time.perf_counter() - begin
         figures, _ = measure(sim, store, loop_s, begin - setup)
     return {**row, "skipped": None, **flatten(figures)}
-
-
-def _spec_columns(spec: EpisodeSpec) -> dict:
-    return {
-        "seed": spec.seed,
-        "road": spec.road,
-        "lane": spec.lane,
-        "x": spec.x,
-        "time": spec.time,
-        "congested": spec.congested,
-        "cell_speed": spec.cell_speed,
-    }
 
 
 def flatten(figures: dict) -> dict:

@@ -194,11 +194,11 @@ class Behaviour:
 
     def _desired_speeds(self, lane: np.ndarray) -> np.ndarray:
         z = np.clip(self.rng.standard_normal(len(lane)), -2.0, 2.0)
-        out = np.empty(len(lane))
-        for k, value in enumerate(np.asarray(lane).tolist()):
-            s = self.speeds.get(str(value)) or self.speeds["all"]
-            out[k] = max(s["mean"] + s["sd"] * z[k], 1.0)
-        return out
+        summary = {k: self.speeds.get(str(k)) or self.speeds["all"] for k in (-1, -2, -3, -4)}
+        mean = np.array([summary[k]["mean"] for k in (-1, -2, -3, -4)])
+        sd = np.array([summary[k]["sd"] for k in (-1, -2, -3, -4)])
+        at = -np.asarray(lane, dtype=np.int64) - 1
+        return np.maximum(mean[at] + sd[at] * z, 1.0)
 
     def describe(self) -> str:
         if self.name == "paper":

@@ -24,7 +24,7 @@ it sits at a bound the fit is kept and the desired speed is taken from free flow
 """
 
 import itertools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -219,22 +219,15 @@ def fit_followers(
     if progress is not None:
         progress(0, followers.size)
     order = np.argsort(-np.bincount(run_vehicle, weights=runs.steps), kind="stable")
-    results = []
+    params = np.zeros((followers.size, 5))
+    stats = np.zeros((followers.size, 3))
     for start in range(0, followers.size, settings.chunk):
         chosen = np.sort(order[start : start + settings.chunk])
         rows = np.flatnonzero(np.isin(run_vehicle, chosen))
         local = np.searchsorted(chosen, run_vehicle[rows])
-        results.append(_fit_chunk(runs.take(rows), local, chosen.size, settings))
+        params[chosen], stats[chosen] = _fit_chunk(runs.take(rows), local, chosen.size, settings)
         if progress is not None:
             progress(min(start + settings.chunk, followers.size), followers.size)
-    params = np.zeros((followers.size, 5))
-    stats = np.zeros((followers.size, 3))
-    for (chosen_params, chosen_stats), start in zip(
-        results, range(0, followers.size, settings.chunk), strict=True
-    ):
-        chosen = np.sort(order[start : start + settings.chunk])
-        params[chosen] = chosen_params
-        stats[chosen] = chosen_stats
     seconds = np.bincount(run_vehicle, weights=runs.steps, minlength=followers.size) * runs.dt
     n_runs = np.bincount(run_vehicle, minlength=followers.size)
     first_run = np.searchsorted(run_vehicle, np.arange(followers.size)) if runs.tid.size else []
@@ -333,7 +326,6 @@ class ParameterDistribution:
     """IDM parameters of one class group, log-normal with correlations.
 
     Attributes:
-        names: parameter names (:data:`PARAMS`).
         mean_log, sd_log: (5,) mean and sd of log(parameter).
         correlation: (5, 5) correlation of the log parameters.
         median, p10, p90: (5,) quantiles of the fitted values.
@@ -347,7 +339,6 @@ class ParameterDistribution:
     p10: np.ndarray
     p90: np.ndarray
     count: int
-    names: tuple = field(default=PARAMS)
 
     @classmethod
     def of(cls, params: np.ndarray) -> "ParameterDistribution":

@@ -1,7 +1,6 @@
 """Behaviour modes: the paper's drivers, drivers drawn from a store's calibration, and
 each vehicle driving as fitted to its own recording with its recorded lane changes."""
 
-import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -12,20 +11,15 @@ from twin.cosim import metrics
 from twin.cosim.behaviour import Behaviour, BehaviourError
 from twin.cosim.config import SCENARIO_B, ConfigError
 from twin.cosim.cosimulator import Cosimulator
-from twin.data.calibrate import calibrate, read_fits, write_calibration
+from twin.data.calibrate import read_fits
 from twin.data.store import TrajectoryStore
 from twin.data.traffic import EmpiricalTraffic
 from twin.traffic.calibration import PARAMS
 
 
-@pytest.fixture(scope="module")
-def calibrated_store(tmp_path_factory, wave_store) -> TrajectoryStore:
-    folder = tmp_path_factory.mktemp("calibrated") / "store"
-    shutil.copytree(wave_store.path, folder)
-    store = TrajectoryStore(folder)
-    doc, fits = calibrate(store, ["westbound"])
-    write_calibration(store, doc, fits)
-    return store
+@pytest.fixture
+def calibrated_store(calibrated_wave_store) -> TrajectoryStore:
+    return calibrated_wave_store
 
 
 def _episode(store, built_map, behaviour, seconds=3.0):
