@@ -9,8 +9,9 @@ and the gap to it, bumper to bumper. From that:
 - **following runs**: stretches in which a vehicle keeps the same leader in the same
   lane, long enough to identify a car-following model (the leader's recorded motion is
   replayed to a simulated follower);
-- **free-flow speeds**: each vehicle's median speed while nothing is close ahead of it,
-  the estimate of its desired speed, per lane;
+- **free-flow speeds**: each vehicle's median speed while nothing is close ahead of it
+  and it cruises (not still accelerating out of a queue), the estimate of its desired
+  speed, per lane;
 - **lane changes**: a vehicle's lane (by its y) changing and holding, with the speed of
   the lanes around it, and the exposure (vehicle-km) they are counted against.
 
@@ -34,6 +35,8 @@ LANE_HOLD = 1.0  # [s] a new lane counts once the vehicle has stayed in it this 
 FREE_GAP = 60.0  # [m] free flow: at least this gap to the leader ...
 FREE_HEADWAY = 6.0  # [s] ... and at least this time gap ...
 FREE_MIN_SPEED = 10.0  # [m/s] ... at a speed no queue discharges at (not leaving a stop)
+FREE_SPREAD = 1.5  # [m/s] ... cruising: its free speeds' p10 to p90 within this (a driver
+# still accelerating towards its desired speed is not at it)
 CELL = 100.0  # [m] cells along the road in which "the speed of a lane" is measured
 SPEED_BINS = (0.0, 5.0, 15.0, 25.0, math.inf)  # [m/s] lane-speed bins of the lane-change rates
 SPEED_BIN_NAMES = ("0-5", "5-15", "15-25", "25+")
@@ -334,7 +337,10 @@ def free_flow_speeds(grid: GridTraffic, *, min_time: float = 5.0) -> FreeFlow:
     rows, key = rows[order], key[order]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if key.size else np.zeros(0, int)
     counts = np.diff(np.r_[starts, key.size])
-    keep = counts * grid.dt >= min_time
+    p10 = grid.speed[rows[starts + (counts - 1) // 10]]
+    p90 = grid.speed[rows[starts + 9 * (counts - 1) // 10]]
+    spread = p90 - p10
+    keep = (counts * grid.dt >= min_time) & (spread <= FREE_SPREAD)
     starts, counts = starts[keep], counts[keep]
     lower = rows[starts + (counts - 1) // 2]
     upper = rows[starts + counts // 2]

@@ -54,10 +54,14 @@ def test_free_flow_speed_is_the_median_speed_with_nothing_close_ahead(tmp_path):
     alone = make_doc("a" * 24, mm=61.5, y_ft=18.0, speed=31.0, n=n)
     close = make_doc("b" * 24, mm=61.5, y_ft=30.0, speed=25.0, n=n)
     behind = make_doc("c" * 24, mm=61.5 + 15.0 / 1609.344, y_ft=30.0, speed=25.0, n=n)
-    store = _store(tmp_path, [alone, close, behind])
+    # alone in lane -3 but still accelerating, 12 -> 24 m/s: not at its desired speed
+    leaving = make_doc("d" * 24, mm=61.5, y_ft=42.0, n=n)
+    t = np.arange(n) / 25.0
+    leaving["x_position"] = (61.5 * 5280.0 - (12.0 * t + 0.2 * t**2) / FT).tolist()
+    store = _store(tmp_path, [alone, close, behind, leaving])
     free = following.free_flow_speeds(following.load_grid(store, "westbound"))
     # the vehicle alone in lane -1 and the leader of lane -2 are free; the one 15 m
-    # behind it is not
+    # behind it is not, nor the one accelerating
     assert sorted(free.lane.tolist()) == [-2, -1]
     assert free.speed[free.lane == -1][0] == pytest.approx(31.0, abs=0.05)
     assert free.speed[free.lane == -2][0] == pytest.approx(25.0, abs=0.05)
