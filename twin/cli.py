@@ -147,6 +147,18 @@ def _parser() -> argparse.ArgumentParser:
         default="idm",
         help="the drivers' model (gipps: one the twin does not drive with)",
     )
+    for flag, unit in (
+        ("--politeness", "-"),
+        ("--change-threshold", "m/s^2"),
+        ("--decision-interval", "s"),
+    ):
+        p.add_argument(
+            flag,
+            type=float,
+            default=None,
+            help=f"the drivers' MOBIL {flag[2:].replace('-', ' ')} [{unit}] (default: "
+            "the preset's, or --drivers other's)",
+        )
     p.add_argument("--out", required=True, type=Path, help="JSON file to write")
     p.add_argument("--minutes", type=float, default=None, help="recorded minutes (default 16)")
     p.add_argument(
@@ -545,6 +557,9 @@ def _synth(args) -> int:
     changes = {"seed": args.seed, "car_following": args.car_following}
     if args.drivers == "other":
         changes.update(drivers=synth.OTHER_DRIVERS, **synth.OTHER_LANE_CHANGES)
+    for name in ("politeness", "change_threshold", "decision_interval"):
+        if getattr(args, name) is not None:
+            changes[name] = getattr(args, name)
     if args.minutes is not None:
         changes["minutes"] = args.minutes
     if args.start is not None:

@@ -133,6 +133,9 @@ class SynthConfig:
             "lane_change_duration": 0
             < self.lane_change_duration[0]
             <= self.lane_change_duration[1],
+            "politeness": 0 <= self.politeness <= 10,
+            "change_threshold": 0 <= self.change_threshold <= 10,
+            "decision_interval": 0 < self.decision_interval <= 600,
         }
         for name, ok in checks.items():
             if not ok:
