@@ -379,7 +379,8 @@ class Cosimulator:
     def _set_desired_speeds(self, states) -> None:
         """Step 3: each vehicle's own desired speed (vel_default in the paper's
         behaviour) for all but the lead visible vehicle of each lane ahead of the ego,
-        which takes the speed of the ghost ahead of it (its own if none)."""
+        which takes the speed of the ghost ahead of it (its own if none; in the
+        calibrated behaviours the larger of the two, see ``Behaviour.lead_chases_ghost``)."""
         desired = self._base_speed.copy()
         lanes = self.manager.lanes(states.id)
         ego_x = states.x[states.id == self.ego_id][0]
@@ -397,6 +398,8 @@ class Cosimulator:
                 if beyond.size
                 else float(desired[lead])
             )
+            if self.behaviour.lead_chases_ghost:
+                target = max(target, float(desired[lead]))
             desired[lead] = self._smooth(lane, target)
         self.manager.set_desired_speed(states.id, desired)
 

@@ -93,6 +93,28 @@ def test_step3_the_lane_lead_takes_its_ghosts_speed_the_others_vel_default(cosim
     assert lead["speed"].iloc[-1] < 18.0
 
 
+def test_a_calibrated_lane_lead_keeps_its_speed_and_is_held_back_by_its_ghost(cosim):
+    docs = [
+        ego_doc(),
+        vehicle(3, -2, EGO_X + 110.0, 20.0),  # the lead of lane -2
+        vehicle(4, -2, EGO_X + 180.0, 12.0),  # its ghost, slower
+        vehicle(5, -3, EGO_X + 90.0, 20.0),  # lead of lane -3
+        vehicle(7, -3, EGO_X + 175.0, 26.0),  # its ghost, faster than the lead's own
+    ]
+    sim = cosim(docs)
+    sim.behaviour.name = "calibrated"  # its drivers are the paper's here: only the rule
+    sim._base_speed[:] = 24.0  # each vehicle's own desired speed
+    sim.step()
+    ids = dict(zip(sim._tids.tolist(), sim.world.ids.tolist(), strict=True))
+    desired = {n: float(sim.manager.desired_speed([ids[tid_of(sim, n)]])[0]) for n in (3, 5)}
+    assert desired == {3: 24.0, 5: pytest.approx(26.0, abs=1e-6)}
+    # the slow ghost ahead is its leader: it still slows toward it
+    for _ in range(300):
+        sim.step()
+    lead = rows_of(sim, tid_of(sim, 3))
+    assert lead["speed"].iloc[-1] < 18.0
+
+
 def test_ghost_smoothing_lags_the_lead_speed_when_asked(cosim):
     docs = [ego_doc(), vehicle(3, -2, EGO_X + 110.0, 20.0), vehicle(4, -2, EGO_X + 180.0, 12.0)]
     sim = cosim(docs, ghost_smoothing=2.0)
