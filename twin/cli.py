@@ -178,6 +178,37 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("timespace.png"))
     p.set_defaults(handler=_plot)
 
+    p = data_commands.add_parser(
+        "waves",
+        help="stop-and-go waves per lane as the I-24 MOTION team measures them, against "
+        "the real 2022-11-22 morning",
+        description="The I-24 MOTION wave-analysis method (Ji et al. 2024): virtual "
+        "trajectories through each lane's speed field, wave fronts and tails at 15 mph, "
+        "chained into waves. Writes lane_N/wave_front_15.csv, wave_tail_15.csv, CC_15.csv "
+        "(the real tables' columns and units), waves.json and waves.png, and prints each "
+        "lane's figures beside the real westbound morning's.",
+    )
+    p.add_argument("store", nargs="?", type=Path, help="store folder (default: the embedded data)")
+    p.add_argument("--road", default="westbound")
+    p.add_argument(
+        "--start", default=None, help="unix or ISO 8601 with offset (default: data start)"
+    )
+    p.add_argument("--minutes", type=float, default=None, help="span (default: to the data's end)")
+    p.add_argument("--out", type=Path, default=None, help="folder to write (replaced as a whole)")
+    p.add_argument(
+        "--tables",
+        type=Path,
+        default=None,
+        help="summarise a folder of lane_N tables instead (e.g. the real ones in "
+        "../shared/data/i24_waves/2022-11-22)",
+    )
+    p.add_argument(
+        "--miles", type=float, default=None,
+        help="miles the --tables cover (default: from their waves.json, else 3.85, the real ones')",
+    )  # fmt: skip
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(handler=_waves)
+
     maps = commands.add_parser("map", help="the road map: build it, look at it")
     map_commands = maps.add_subparsers(title="map commands")
     p = map_commands.add_parser(
@@ -582,6 +613,35 @@ def _plot(args) -> int:
     start = parse_time(args.start) if args.start is not None else store.time_range(args.road)[0]
     out = time_space_plot(store, args.road, start, args.minutes, args.out)
     print(f"wrote {out}")
+    return 0
+
+
+def _waves(args) -> int:
+    from twin.data import wave_analysis as wa
+    from twin.timeutil import parse_time
+
+    real = wa.reference()
+    if args.tables is not None:
+        lanes = wa.read_tables(args.tables, **({"miles": args.miles} if args.miles else {}))
+        print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), "tables"))
+        return 0
+    if args.out is None:
+        raise TwinError("twin data waves needs --out DIR (or --tables DIR to read tables)")
+    store = _store(args.store)
+    start = parse_time(args.start) if args.start is not None else None
+    lanes = wa.analyse_store(store, args.road, start, args.minutes, progress=not args.quiet)
+    first = start if start is not None else store.time_range(args.road)[0]
+    meta = {
+        "store": str(store.path),
+        "road": args.road,
+        "start_unix": first,
+        "minutes": args.minutes,
+        "title": f"{store.path.name}, {args.road}: waves at 15 mph",
+    }
+    out = wa.write_tables(lanes, args.out, meta)
+    print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), store.path.name))
+    print(f"real: {real['source']}")
+    print(f"wrote {out} (lane_N/*.csv, waves.json, waves.png)")
     return 0
 
 

@@ -1,0 +1,159 @@
+"""The I-24 MOTION wave analysis: on a hand-built wave whose answer is known, on the
+real 2022-11-22 tables (their README's figures, and their CC table rebuilt from their
+own fronts and tails), and on a store, with the tables' exact columns."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.conftest import SHARED
+from twin.cli import main
+from twin.data import i24
+from twin.data import wave_analysis as wa
+from twin.data.i24 import Road
+from twin.paths import asset
+
+REAL = SHARED / "data" / "i24_waves" / "2022-11-22"
+
+#: The shared README's table: waves with >= 20 points, front speed median (p25, p75)
+#: [m/s], fronts per vehicle per mile, front to tail median (p90) [s].
+README = {
+    "lane_1": (47, 4.9, 4.4, 5.4, 1.06, 29, 83),
+    "lane_2": (55, 5.1, 4.4, 5.5, 0.92, 31, 109),
+    "lane_3": (61, 5.2, 4.2, 5.6, 0.90, 32, 109),
+    "lane_4": (76, 4.4, 3.8, 5.2, 1.01, 29, 118),
+}
+
+
+@pytest.fixture(scope="module")
+def real_tables():
+    if not REAL.is_dir():
+        pytest.skip("../shared/data/i24_waves is not beside the checkout")
+    return wa.read_tables(REAL)
+
+
+def _one_wave(c=5.0, width=200.0, free=30.0, slow=2.0, minutes=12.0, length=2400.0):
+    """A lane's samples: free flow, and one slow band (``width`` metres, linear ramps of
+    400 m each side, so that drivers brake and speed up at 1 to 2 m/s^2) moving upstream
+    at ``c`` m/s."""
+    t = np.arange(0.0, 60.0 * minutes, 0.5)
+    x = np.arange(0.0, length, 5.0)
+    tt, xx = np.meshgrid(t, x, indexing="ij")
+    u = xx + c * tt - 2600.0  # the band's own coordinate: 0 at its upstream edge
+    ramp = 400.0
+    depth = np.clip(np.minimum(u + ramp, width + ramp - u) / ramp, 0.0, 1.0)
+    speed = free - (free - slow) * depth
+    return tt.ravel(), xx.ravel(), speed.ravel(), (0.0, 60.0 * minutes), (0.0, length)
+
+
+def test_one_wave_of_known_speed_gives_that_speed_and_one_front_per_vehicle():
+    t, x, v, span, x_range = _one_wave(c=5.0)
+    vt = wa.virtual_trajectories(t, x, v, span, x_range)
+    lane = wa.analyse_lane(vt, Road.WESTBOUND, -2, (x_range[1] - x_range[0]) / i24.MILE)
+    stats = wa.statistics(lane.front, lane.cc, lane.miles)
+    assert stats["waves"] == 1
+    assert stats["front_speed_mps"]["median"] == pytest.approx(5.0, abs=0.25)
+    # every vehicle that met the wave met it once: one front and one tail each
+    assert lane.front.groupby("v_id").size().max() == 1
+    assert lane.tail.groupby("v_id").size().max() == 1
+    assert stats["fronts"] == stats["vehicles_meeting_a_front"] > 50
+    assert stats["fronts_per_vehicle_mile"] == pytest.approx(1.0 / lane.miles, rel=1e-3)
+    # the points sit where the speed passes through 15 mph, within the 5 mph band
+    assert np.all(np.abs(lane.front["speed"] - 15.0) <= 5.0)
+    # a faster wave gives its speed too
+    t, x, v, span, x_range = _one_wave(c=3.0)
+    vt = wa.virtual_trajectories(t, x, v, span, x_range)
+    lane = wa.analyse_lane(vt, Road.WESTBOUND, -2, 1.0)
+    assert wa.statistics(lane.front, lane.cc, 1.0)["front_speed_mps"]["median"] == (
+        pytest.approx(3.0, abs=0.25)
+    )
+
+
+def test_free_flow_has_no_wave():
+    t, x, v, span, x_range = _one_wave(slow=30.0)
+    vt = wa.virtual_trajectories(t, x, v, span, x_range)
+    lane = wa.analyse_lane(vt, Road.WESTBOUND, -3, 1.0)
+    assert len(lane.front) == len(lane.tail) == len(lane.cc) == 0
+    stats = wa.statistics(lane.front, lane.cc, 1.0)
+    assert stats["waves"] == 0 and stats["front_speed_mps"]["median"] is None
+
+
+def test_the_real_tables_give_their_readmes_figures(real_tables):
+    figures = wa.summary(real_tables)
+    for lane, (waves, median, p25, p75, fronts, tail, tail90) in README.items():
+        got = figures[lane]
+        assert got["waves"] == waves
+        speed = got["front_speed_mps"]
+        assert (round(speed["median"], 1), round(speed["p25"], 1), round(speed["p75"], 1)) == (
+            median, p25, p75,
+        )  # fmt: skip
+        assert round(got["fronts_per_vehicle_mile"], 2) == fronts
+        assert (got["front_to_tail_s"]["median"], got["front_to_tail_s"]["p90"]) == (tail, tail90)
+    # the shipped reference is these figures
+    assert json.loads(asset(wa.REFERENCE_ASSET).read_text())["lanes"] == figures
+
+
+def test_the_real_wave_table_is_rebuilt_from_the_real_fronts_and_tails(real_tables):
+    """Pairing, chaining and joining as the tool does: its CC_15 of lane 1, row for row
+    (as a multiset: pairs, trace ids and wave numbers)."""
+    lane = real_tables[-1]
+    pairs = wa.pair_points(lane.front, lane.tail)
+    cc = wa.waves_of(
+        pairs, wa._traces(lane.front, Road.WESTBOUND), wa._traces(lane.tail, Road.WESTBOUND)
+    )
+    key = ["unique_index_front", "unique_index_tail", "trace_id_front", "trace_id_tail", "c_id"]
+    ours = cc[key].astype(int).value_counts().sort_index()
+    real = lane.cc[key].astype(int).value_counts().sort_index()
+    assert ours.equals(real)
+
+
+def test_a_store_is_analysed_into_the_real_tables_columns(wave_store, tmp_path, capsys):
+    out = tmp_path / "waves"
+    assert main(["data", "waves", str(wave_store.path), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "1 (HOV)" in printed and "real" in printed and "fronts/veh/mile" in printed
+    lanes = wa.read_tables(out)
+    for lane in lanes.values():
+        for name in ("wave_front_15", "wave_tail_15", "CC_15"):
+            ours = pd.read_csv(out / f"lane_{lane.lane}" / f"{name}.csv", nrows=0).columns
+            if REAL.is_dir():
+                real = pd.read_csv(REAL / "lane_1" / f"{name}.csv", nrows=0).columns
+                assert list(ours) == list(real)
+    doc = json.loads((out / "waves.json").read_text())
+    assert doc["format"] == wa.FORMAT and set(doc["lanes"]) == {
+        f"lane_{w.lane}" for w in lanes.values()
+    }
+    assert (out / "waves.png").stat().st_size > 10_000
+    # read back, the tables give the same figures
+    assert wa.summary(wa.read_tables(out)) == doc["lanes"]
+    # preset B's wave is in the HOV lane: fronts there
+    assert doc["lanes"]["lane_1"]["fronts"] > 0
+    # the span is checked against the data
+    assert main(["data", "waves", str(wave_store.path), "--out", str(out), "--start",
+                 "2031-01-01T08:00:00-06:00"]) == 2  # fmt: skip
+    assert "no two minutes of westbound data" in capsys.readouterr().err
+    assert (out / "waves.json").is_file()  # the earlier result is kept
+
+
+def test_bad_tables_and_folders_are_named(tmp_path):
+    with pytest.raises(wa.WaveAnalysisError, match="not a folder"):
+        wa.read_tables(tmp_path / "none")
+    with pytest.raises(wa.WaveAnalysisError, match="no lane_1"):
+        wa.read_tables(tmp_path)
+    (tmp_path / "lane_2").mkdir()
+    (tmp_path / "lane_2" / "wave_front_15.csv").write_text("time,space\n1,2\n")
+    with pytest.raises(wa.WaveAnalysisError, match=r"front_15\.csv lacks the columns speed, v_id"):
+        wa.read_tables(tmp_path)
+    columns = ",".join(wa.POINT_COLUMNS)
+    (tmp_path / "lane_2" / "wave_front_15.csv").write_text(f"{columns}\n")
+    with pytest.raises(wa.WaveAnalysisError, match=r"wave_tail_15\.csv is missing"):
+        wa.read_tables(tmp_path)
+    # a folder that is not a waves folder is never overwritten
+    precious = tmp_path / "precious"
+    precious.mkdir()
+    (precious / "notes.txt").write_text("mine")
+    with pytest.raises(wa.WaveAnalysisError, match="refusing to overwrite"):
+        wa.write_tables({}, precious, {})
+    assert (precious / "notes.txt").read_text() == "mine"
