@@ -130,10 +130,11 @@ def _parser() -> argparse.ArgumentParser:
     p = data_commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
     p.add_argument(
         "--preset",
-        choices=["A", "B", "C"],
+        choices=["A", "B", "S"],
         required=True,
-        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; C: westbound, "
-        "20 minutes of stop-and-go in three lanes, HOV lane closed",
+        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; S (test "
+        "data): westbound, 20 minutes of stop-and-go in three lanes started by drivers "
+        "braking, HOV lane closed",
     )
     p.add_argument(
         "--drivers",

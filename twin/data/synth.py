@@ -17,7 +17,7 @@ camera rate (25 Hz) with a per-vehicle phase and small tracking noise.
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +64,34 @@ class Slowdown:
 
 
 @dataclass(frozen=True)
+class Bottleneck:
+    """A stretch downstream of the recorded range that drivers take more slowly (a merge,
+    a curve, a lane drop's friction): where demand exceeds what it discharges, a queue
+    grows upstream of it and, with drivers that differ and accelerate unevenly, breaks
+    into stop-and-go waves that travel upstream through the recorded range.
+
+    Attributes:
+        x: [m] road-frame start of the stretch.
+        length: [m] its length.
+        speed: [m/s] the mean of the drivers' speeds through it (each driver's own,
+            drawn once: some hold up the queue more than others, so it discharges
+            unevenly).
+        speed_sd: [m/s] their spread.
+        slow_share: [-] the share of drivers who take it hesitantly (a driver merging
+            late, a truck pulling in), at ``slow_speed``: each holds up the lane behind
+            it for a while, and the queue it leaves travels upstream as a wave.
+        slow_speed: [m/s] their speed through it.
+    """
+
+    x: float
+    length: float
+    speed: float
+    speed_sd: float = 0.0
+    slow_share: float = 0.0
+    slow_speed: float = 3.0
+
+
+@dataclass(frozen=True)
 class SynthConfig:
     """A synthetic recording of one road.
 
@@ -74,6 +102,8 @@ class SynthConfig:
         minutes: [min] recorded duration.
         flow: [veh/h] demand entering lanes -1, -2, -3, -4.
         slowdowns: the braking events that seed waves.
+        bottleneck: a stretch downstream that discharges less than the demand (waves
+            that arise from the drivers), or None.
         x_record: [m] road-frame range recorded (the instrument's field of view).
         upstream, downstream: [m] road simulated beyond the recorded range.
         warmup: [s] simulated before ``start`` so the road is in steady traffic.
@@ -99,6 +129,7 @@ class SynthConfig:
     start: float
     flow: tuple[float, float, float, float]
     slowdowns: tuple[Slowdown, ...] = ()
+    bottleneck: Bottleneck | None = None
     minutes: float = 16.0
     x_record: tuple[float, float] = (-600.0, i24.SEGMENT_LENGTH + 600.0)
     upstream: float = 800.0
@@ -140,6 +171,20 @@ class SynthConfig:
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(f"SynthConfig.{name} is invalid: {getattr(self, name)!r}")
+        b = self.bottleneck
+        if b is not None and not (
+            self.x_record[1] <= b.x
+            and b.x + b.length <= self.x_record[1] + self.downstream
+            and b.length > 0
+            and b.speed > 0
+            and b.speed_sd >= 0
+            and 0 <= b.slow_share <= 1
+            and b.slow_speed > 0
+        ):
+            raise ValueError(
+                f"invalid bottleneck {b!r}: it must lie downstream of the recorded range, "
+                f"within the {self.downstream:g} m simulated beyond it"
+            )
         for s in self.slowdowns:
             if not (
                 set(s.lanes) <= set(i24.LANES) and s.speed >= 0 and s.duration >= 0 and s.decel > 0
@@ -182,10 +227,10 @@ PRESET_B = SynthConfig(
 
 PRESETS = {"A": PRESET_A, "B": PRESET_B}  # the embedded default data
 
-#: Test data unlike the default data, for calibration and fidelity (issue 17): twenty
-#: minutes westbound, the HOV lane closed, stop-and-go in the three other lanes (a
-#: driver brakes nearly to a stop downstream every 150 s).
-PRESET_C = SynthConfig(
+#: Test data unlike the default data, for calibration and fidelity (issue 17; preset
+#: "S", for its slowdowns): twenty minutes westbound, the HOV lane closed, stop-and-go in
+#: the three other lanes (a driver brakes nearly to a stop downstream every 150 s).
+PRESET_S = SynthConfig(
     road=Road.WESTBOUND,
     anchor=SCENARIO_TIME,
     start=SCENARIO_TIME - 600.0,
@@ -213,7 +258,7 @@ OTHER_DRIVERS = DriverDistribution(
 OTHER_LANE_CHANGES = {"politeness": 0.5, "change_threshold": 0.6, "decision_interval": 4.0}
 
 #: Every preset ``twin data synth`` offers.
-ALL_PRESETS = {**PRESETS, "C": PRESET_C}
+ALL_PRESETS = {**PRESETS, "S": PRESET_S}
 
 
 @dataclass
@@ -241,6 +286,7 @@ class _Vehicles:
     forced_speed: np.ndarray  # [m/s], nan when not braking for a slowdown
     forced_until: np.ndarray  # [s]
     forced_decel: np.ndarray  # [m/s^2]
+    bottleneck_speed: np.ndarray  # [m/s] the driver's speed through the bottleneck
 
     def __len__(self) -> int:
         return len(self.vid)
@@ -353,7 +399,25 @@ class _Simulation:
             forced_speed=np.full(n, np.nan),
             forced_until=np.zeros(n),
             forced_decel=np.zeros(n),
+            bottleneck_speed=self._bottleneck_speeds(n),
         )
+
+    def _bottleneck_speeds(self, n: int) -> np.ndarray:
+        b = self.cfg.bottleneck
+        if b is None:  # drawn only with a bottleneck: the presets without keep their data
+            return np.full(n, np.inf)
+        speed = np.maximum(b.speed + b.speed_sd * self.rng.standard_normal(n), 2.0)
+        slow = self.rng.random(n) < b.slow_share
+        return np.where(slow, b.slow_speed, speed)
+
+    def _params(self) -> IDMParams:
+        """The drivers' IDM, with the bottleneck's speeds for those in it."""
+        veh, b = self.vehicles, self.cfg.bottleneck
+        if b is None:
+            return veh.params
+        inside = (veh.x + veh.length >= b.x) & (veh.x <= b.x + b.length)
+        v0 = np.where(inside, np.minimum(veh.v0, veh.bottleneck_speed), veh.v0)
+        return IDMParams(v0, veh.T, veh.s0, veh.a, veh.b, veh.delta)
 
     def populate(self) -> None:
         """Fill the road with traffic at each lane's demand, at free-flow spacing."""
@@ -426,9 +490,10 @@ class _Simulation:
         owner = occupancy.owner
         gap, leader = occupancy.leaders(veh.x, veh.length)
         if cfg.car_following == "gipps":
-            acc_entry = gipps_acceleration(veh.v[owner], veh.v[leader], gap, veh.gipps.take(owner))
+            drivers = replace(veh.gipps, desired_speed=self._params().desired_speed)
+            acc_entry = gipps_acceleration(veh.v[owner], veh.v[leader], gap, drivers.take(owner))
         else:
-            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, veh.params.take(owner))
+            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, self._params().take(owner))
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))

@@ -38,7 +38,7 @@ def test_safe_speed_stops_behind_a_standing_leader_and_holds_at_the_minimum_gap(
 
 
 def test_a_day_driven_by_gipps_drivers_differs_from_idm_and_has_no_collision():
-    config = replace(synth.PRESET_C, minutes=1.0, warmup=120.0, drivers=synth.OTHER_DRIVERS)
+    config = replace(synth.PRESET_S, minutes=1.0, warmup=120.0, drivers=synth.OTHER_DRIVERS)
     gipps = synth.synthesize(replace(config, car_following="gipps"))
     idm = synth.synthesize(config)
     assert gipps.collisions == 0 and len(gipps.vid) > 100
