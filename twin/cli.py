@@ -10,6 +10,8 @@ from pathlib import Path
 from twin import __version__
 from twin.errors import TwinError
 
+DATA_HELP = "store folder, I-24 JSON or embedded:morning (default: the embedded data)"
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = _parser()
@@ -44,9 +46,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--scenario", choices=["A", "B"], default=None, help="paper preset (default B)")
     p.add_argument("--config", type=Path, default=None, help="TOML configuration file")
-    p.add_argument(
-        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
-    )
+    p.add_argument("--data", type=Path, default=None, help=DATA_HELP)
     p.add_argument("--road", default=None, help="eastbound or westbound")
     p.add_argument("--lane", type=int, default=None, help="desired ego lane, -1 (HOV) .. -4")
     p.add_argument("--x", type=float, default=None, help="desired ego x [m] along travel")
@@ -92,9 +92,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--scenario", choices=["A", "B"], default="B", help="paper preset")
     p.add_argument("--config", type=Path, default=None, help="TOML configuration file")
-    p.add_argument(
-        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
-    )
+    p.add_argument("--data", type=Path, default=None, help=DATA_HELP)
     p.add_argument("--t", type=float, default=0.0, help="time of the frame [s after t0]")
     p.add_argument("--camera", default=None, help="camera name (default: the rig's first)")
     p.add_argument("--renderer", choices=["auto", "tiny", "egl"], default=None)
@@ -130,9 +128,10 @@ def _parser() -> argparse.ArgumentParser:
     p = data_commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
     p.add_argument(
         "--preset",
-        choices=["A", "B", "S"],
+        choices=["A", "B", "C", "S"],
         required=True,
-        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; S (test "
+        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; C: a "
+        "westbound morning with waves like the real ones (twin data waves); S (test "
         "data): westbound, 20 minutes of stop-and-go in three lanes started by drivers "
         "braking, HOV lane closed",
     )
@@ -237,9 +236,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--episodes", type=int, required=True, help="episodes in the dataset")
     p.add_argument("--out", type=Path, required=True, help="dataset folder")
-    p.add_argument(
-        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
-    )
+    p.add_argument("--data", type=Path, default=None, help=DATA_HELP)
     p.add_argument("--seed", type=int, default=None, help="dataset seed (default 0)")
     p.add_argument(
         "--camera", default=None, help="cameras of the rig, comma-separated (default: front)"
@@ -293,9 +290,7 @@ def _parser() -> argparse.ArgumentParser:
         "episodes.parquet, summary.json, summary.md and fidelity.png. Finished episodes are "
         "kept: rerun the same command to resume.",
     )
-    p.add_argument(
-        "--data", type=Path, default=None, help="store folder or I-24 JSON (default: embedded)"
-    )
+    p.add_argument("--data", type=Path, default=None, help=DATA_HELP)
     p.add_argument("--road", default="westbound", help="eastbound or westbound")
     p.add_argument("--episodes", type=int, required=True, help="episodes to draw")
     p.add_argument("--duration", type=float, default=120.0, help="episode length [s]")
@@ -497,10 +492,15 @@ def _dataset(args) -> int:
 
 
 def _store(path: Path | None):
-    from twin.data.default import default_store
+    """A STORE argument: the embedded default (None), ``embedded:NAME`` or a store folder."""
+    from twin.data.default import EMBEDDED_PREFIX, default_store, embedded_store
     from twin.data.store import TrajectoryStore
 
-    return TrajectoryStore(path) if path is not None else default_store()
+    if path is None:
+        return default_store()
+    if str(path).startswith(EMBEDDED_PREFIX) and not Path(path).exists():
+        return embedded_store(str(path)[len(EMBEDDED_PREFIX) :])
+    return TrajectoryStore(path)
 
 
 def _ingest(args) -> int:
@@ -521,10 +521,20 @@ def _ingest(args) -> int:
 
 def _info(args) -> int:
     from twin.data.calibrate import describe_calibration, read_calibration
+    from twin.data.default import EMBEDDED, EMBEDDED_PREFIX, embedded_folder
+    from twin.data.store import is_store
 
     store = _store(args.store)
     print(store.describe())
     print(describe_calibration(read_calibration(store)))
+    if args.store is None:
+        print("embedded data (STORE or --data):")
+        for name, (_, presets) in EMBEDDED.items():
+            built = "built" if is_store(embedded_folder(name)) else "built on first use"
+            print(
+                f"  {EMBEDDED_PREFIX}{name}: synthetic preset{'s' * (len(presets) > 1)} "
+                f"{', '.join(presets)} ({built})"
+            )
     return 0
 
 

@@ -96,18 +96,22 @@ class RunResult:
 
 
 def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> TrajectoryStore:
-    """The trajectory data of a run: the embedded default store (``None``), a store
-    folder, or an I-24 MOTION JSON day file (ingested once into the cache).
+    """The trajectory data of a run: the embedded default store (``None``), another
+    embedded store (``embedded:morning``, see :mod:`twin.data.default`), a store folder,
+    or an I-24 MOTION JSON day file (ingested once into the cache).
 
     Raises:
         StoreError: the path is neither a store folder nor a JSON file.
         FileNotFoundError: the path does not exist.
+        KeyError: an unknown embedded store.
     """
-    from twin.data.default import default_store
+    from twin.data.default import EMBEDDED_PREFIX, default_store, embedded_store
     from twin.data.ingest import ingest
 
     if data is None:
         return default_store(progress=progress)
+    if str(data).startswith(EMBEDDED_PREFIX) and not Path(data).exists():
+        return embedded_store(str(data)[len(EMBEDDED_PREFIX) :], progress=progress)
     path = Path(data)
     if not path.exists():
         raise FileNotFoundError(f"--data {path}: no such file or folder")

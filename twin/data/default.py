@@ -1,9 +1,11 @@
-"""The embedded default data: a store built from the synthetic presets, cached on first use.
+"""The embedded data: stores built from the synthetic presets, cached on first use.
 
 The real I-24 MOTION days cannot be downloaded on the twin's machines, so ``twin run``
-and the ``twin data`` commands with no store use this one: preset A (eastbound) and
-preset B (westbound) of :mod:`twin.data.synth`, written as I-24 JSON and ingested
-like real data. It is built once (about a minute) and cached under
+and the ``twin data`` commands with no store use the default one: preset A
+(eastbound) and preset B (westbound) of :mod:`twin.data.synth`, written as I-24 JSON
+and ingested like real data. ``embedded:morning`` (``--data embedded:morning``) is
+preset C, a realistic westbound morning; it is built only when first asked for, so
+that the first ``twin run`` stays short. Each is built once and cached under
 :func:`twin.paths.cache_dir`, keyed by a hash of everything it is made from.
 """
 
@@ -22,6 +24,11 @@ from twin.traffic import drivers, idm, lanes
 DEFAULT_SEED = 0
 
 
+#: The embedded stores: name -> (folder prefix, presets).
+EMBEDDED = {"default": ("default-store", ("A", "B")), "morning": ("morning-store", ("C",))}
+EMBEDDED_PREFIX = "embedded:"
+
+
 def default_key(seed: int = DEFAULT_SEED) -> str:
     """Hash of the generator's code (with the driver models it uses), presets, class
     table, ingest code and seed."""
@@ -35,19 +42,48 @@ def default_key(seed: int = DEFAULT_SEED) -> str:
 
 def default_store(*, seed: int = DEFAULT_SEED, progress: bool = True) -> TrajectoryStore:
     """The default store, built (and cached) on first use."""
-    folder = cache_dir() / f"default-store-{default_key(seed)}"
+    return embedded_store("default", seed=seed, progress=progress)
+
+
+def embedded_folder(name: str, seed: int = DEFAULT_SEED) -> Path:
+    """Where the embedded store ``name`` is cached (built or not)."""
+    prefix, _ = EMBEDDED[name]
+    return cache_dir() / f"{prefix}-{default_key(seed)}"
+
+
+def embedded_store(
+    name: str, *, seed: int = DEFAULT_SEED, progress: bool = True
+) -> TrajectoryStore:
+    """The embedded store ``name`` (see ``EMBEDDED``), built (and cached) on first use.
+
+    Raises:
+        KeyError: no embedded store of that name (the message lists them).
+    """
+    if name not in EMBEDDED:
+        raise KeyError(
+            f"no embedded data {name!r}: choose one of "
+            + ", ".join(EMBEDDED_PREFIX + n for n in EMBEDDED)
+        )
+    folder = embedded_folder(name, seed)
     if not is_store(folder):
-        build_default_store(folder, seed=seed, progress=progress)
+        build_default_store(folder, seed=seed, progress=progress, presets=EMBEDDED[name][1])
     return TrajectoryStore(folder)
 
 
-def build_default_store(out: Path, *, seed: int = DEFAULT_SEED, progress: bool = True) -> Path:
-    """Synthesize presets A and B, write them as I-24 JSON days, and ingest both into ``out``."""
+def build_default_store(
+    out: Path,
+    *,
+    seed: int = DEFAULT_SEED,
+    progress: bool = True,
+    presets: tuple[str, ...] = ("A", "B"),
+) -> Path:
+    """Synthesize ``presets``, write them as I-24 JSON days, and ingest them into ``out``."""
     out = Path(out)
     work = out.parent / f".{out.name}.json"
     work.mkdir(parents=True, exist_ok=True)
     days = []
-    for name, preset in sorted(synth.PRESETS.items()):
+    for name in sorted(presets):
+        preset = synth.ALL_PRESETS[name]
         if progress:
             print(f"building the default data: synthetic preset {name} ({preset.road.value})")
         config = replace(preset, seed=seed)

@@ -257,8 +257,51 @@ OTHER_DRIVERS = DriverDistribution(
 #: half as often.
 OTHER_LANE_CHANGES = {"politeness": 0.5, "change_threshold": 0.6, "decision_interval": 4.0}
 
+#: The drivers of preset C: longer time gaps than the class table's (x 1.35), firmer
+#: acceleration (x 1.5), larger standstill gaps (3 +- 0.5 m) and varied braking (2.5 +-
+#: 0.4 m/s^2). With them the queue behind the bottleneck carries its waves upstream at
+#: 4.5 to 5 m/s, the corridor's measured front speeds.
+MORNING_DRIVERS = DriverDistribution(
+    min_gap=3.0,
+    min_gap_sd=0.5,
+    comfortable_decel=2.5,
+    comfortable_decel_sd=0.4,
+    time_headway_scale=1.35,
+    max_accel_scale=1.5,
+)
+
+#: Preset C, a westbound morning whose waves are like the real 2022-11-22 morning's
+#: (issue 18; ``twin data waves`` compares them): 30 minutes from 06:35:50, traffic in
+#: every lane near what its drivers can carry, and 1.2 km downstream of the recorded
+#: range a 200 m stretch (a merge) that drivers take at their own speed (26 +- 2 m/s),
+#: a few of them (1 in 200) hesitantly at 4.5 m/s. Each hesitant driver holds up its
+#: lane; the queue behind it leaves as a stop-and-go wave that travels upstream through
+#: the recorded range. No driver is made to brake: the waves come from the drivers.
+#: Lane changes are rarer than in the other presets (threshold 1.5 m/s^2, decisions
+#: every 4 s) and the HOV lane is closed by its double line, as everywhere.
+PRESET_C = SynthConfig(
+    road=Road.WESTBOUND,
+    anchor=SCENARIO_TIME,
+    start=SCENARIO_TIME - 600.0,
+    minutes=30.0,
+    flow=(1900.0, 1900.0, 1700.0, 1600.0),
+    warmup=900.0,
+    downstream=2500.0,
+    bottleneck=Bottleneck(
+        x=i24.SEGMENT_LENGTH + 600.0 + 1200.0,
+        length=200.0,
+        speed=26.0,
+        speed_sd=2.0,
+        slow_share=0.005,
+        slow_speed=4.5,
+    ),
+    drivers=MORNING_DRIVERS,
+    change_threshold=1.5,
+    decision_interval=4.0,
+)
+
 #: Every preset ``twin data synth`` offers.
-ALL_PRESETS = {**PRESETS, "S": PRESET_S}
+ALL_PRESETS = {**PRESETS, "C": PRESET_C, "S": PRESET_S}
 
 
 @dataclass
@@ -493,7 +536,8 @@ class _Simulation:
             drivers = replace(veh.gipps, desired_speed=self._params().desired_speed)
             acc_entry = gipps_acceleration(veh.v[owner], veh.v[leader], gap, drivers.take(owner))
         else:
-            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, self._params().take(owner))
+            drivers = self._params().take(owner)
+            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, drivers)
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))

@@ -106,6 +106,8 @@ def test_bad_inputs_are_named_errors(scene_store, tmp_path, capsys):
     assert "cannot import 'nosuch'" in capsys.readouterr().err
     assert main(["run", "--data", str(tmp_path / "missing"), "--quiet"]) == 2
     assert "no such file or folder" in capsys.readouterr().err
+    assert main(["run", "--data", "embedded:nosuch", "--quiet"]) == 2
+    assert "choose one of embedded:default, embedded:morning" in capsys.readouterr().err
     assert main(run_args(scene_store, tmp_path / "r", "--lane", "-4")) == 2
     assert "no recorded vehicle in lane -4" in capsys.readouterr().err
     assert main(run_args(scene_store, tmp_path / "r", "--time", "06:45")) == 2

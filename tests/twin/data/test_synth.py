@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from twin.data import i24
-from twin.data.synth import PRESET_B, SCENARIO_TIME, synthesize
+from twin.data.synth import PRESET_B, PRESET_C, SCENARIO_TIME, _Simulation, synthesize
 from twin.data.traffic import EmpiricalTraffic
 from twin.data.waves import speed_field, wave_front_speed
 
@@ -123,3 +123,30 @@ def test_lane_changes_are_manoeuvres_of_several_seconds(wave_store):
 def test_invalid_config_is_named():
     with pytest.raises(ValueError, match="flow"):
         replace(PRESET_B, flow=(1.0, 2.0))
+    with pytest.raises(ValueError, match="decision_interval"):
+        replace(PRESET_B, decision_interval=0.0)
+    # a bottleneck must lie downstream of the recorded range, inside the simulated road
+    with pytest.raises(ValueError, match="bottleneck"):
+        replace(PRESET_C, bottleneck=replace(PRESET_C.bottleneck, x=100.0))
+    with pytest.raises(ValueError, match="bottleneck"):
+        replace(PRESET_C, bottleneck=replace(PRESET_C.bottleneck, slow_share=1.5))
+
+
+def test_hesitant_drivers_at_the_bottleneck_queue_the_lane_behind_them():
+    """Preset C's mechanism: no driver is made to brake; drivers who take the bottleneck
+    slowly hold up their lane, upstream of the bottleneck too. Every driver hesitant
+    (share 1): the 200 m before it are slowed after 5 minutes; none (share 0): they
+    flow at the drivers' speed."""
+    base = replace(PRESET_C, flow=(0.0, 1900.0, 0.0, 0.0))
+    speeds = {}
+    for share in (0.0, 1.0):
+        config = replace(base, bottleneck=replace(base.bottleneck, slow_share=share))
+        sim = _Simulation(config, np.random.default_rng(0))
+        sim.populate()
+        for _ in range(3000):
+            sim.step()
+        v, b = sim.vehicles, config.bottleneck
+        before = (v.x > b.x - 200.0) & (v.x < b.x)
+        speeds[share] = float(np.median(v.v[before]))
+    assert speeds[0.0] > 25.0
+    assert speeds[1.0] < speeds[0.0] - 10.0
