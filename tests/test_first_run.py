@@ -136,7 +136,7 @@ def test_the_test_extra_is_missing_for_the_fresh_user(user):
 def test_the_first_twin_run_prints_only_the_twins_summary(fresh):
     lines = assert_clean(fresh.first)
     assert len(lines) <= MAX_LINES, "\n".join(lines)
-    assert lines[0].startswith("building the default data")
+    assert lines[0].startswith("building the embedded data")
     assert "run folder: runs/B (behaviour paper)" in lines
     assert lines[-1].startswith("simulated 30.0 s")
     assert (fresh.cwd / "runs" / "B" / "metrics.json").is_file()

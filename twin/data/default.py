@@ -85,7 +85,7 @@ def build_default_store(
     for name in sorted(presets):
         preset = synth.ALL_PRESETS[name]
         if progress:
-            print(f"building the default data: synthetic preset {name} ({preset.road.value})")
+            print(f"building the embedded data: synthetic preset {name} ({preset.road.value})")
         config = replace(preset, seed=seed)
         result = synth.synthesize(config, progress=progress)
         days.append(
