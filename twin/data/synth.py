@@ -257,18 +257,12 @@ OTHER_DRIVERS = DriverDistribution(
 #: half as often.
 OTHER_LANE_CHANGES = {"politeness": 0.5, "change_threshold": 0.6, "decision_interval": 4.0}
 
-#: The drivers of preset C: longer time gaps than the class table's (x 1.35), firmer
-#: acceleration (x 1.5), larger standstill gaps (3 +- 0.5 m) and varied braking (2.5 +-
-#: 0.4 m/s^2). With them the queue behind the bottleneck carries its waves upstream at
-#: 4.5 to 5 m/s, the corridor's measured front speeds.
-MORNING_DRIVERS = DriverDistribution(
-    min_gap=3.0,
-    min_gap_sd=0.5,
-    comfortable_decel=2.5,
-    comfortable_decel_sd=0.4,
-    time_headway_scale=1.35,
-    max_accel_scale=1.5,
-)
+#: The drivers of preset C: the other drivers with time gaps x 1.35 (not 1.4): longer
+#: than the class table's, firmer acceleration (x 1.5), larger standstill gaps (3 +- 0.5
+#: m) and varied braking (2.5 +- 0.4 m/s^2). With them the queue behind the
+#: bottleneck carries its waves upstream at 4.5 to 5 m/s, the corridor's measured front
+#: speeds.
+MORNING_DRIVERS = replace(OTHER_DRIVERS, time_headway_scale=1.35)
 
 #: Preset C, a westbound morning whose waves are like the real 2022-11-22 morning's
 #: (issue 18; ``twin data waves`` compares them): 30 minutes from 06:35:50, traffic in
