@@ -493,13 +493,13 @@ def _dataset(args) -> int:
 
 def _store(path: Path | None):
     """A STORE argument: the embedded default (None), ``embedded:NAME`` or a store folder."""
-    from twin.data.default import EMBEDDED_PREFIX, default_store, embedded_store
+    from twin.data.default import default_store, embedded_name, embedded_store
     from twin.data.store import TrajectoryStore
 
     if path is None:
         return default_store()
-    if str(path).startswith(EMBEDDED_PREFIX) and not Path(path).exists():
-        return embedded_store(str(path)[len(EMBEDDED_PREFIX) :])
+    if (name := embedded_name(path)) is not None:
+        return embedded_store(name)
     return TrajectoryStore(path)
 
 

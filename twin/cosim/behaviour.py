@@ -35,10 +35,10 @@ from twin.traffic.calibration import PARAMS, ParameterDistribution, class_group
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")
 AUTO = "auto"
-#: What ``auto`` means on a calibrated road: on the held-out half of a recording made by
-#: drivers unlike the twin's (IDM, other parameters) it beat ``paper`` on every ``twin
-#: eval`` metric; on one made by Gipps drivers it was better on speeds and the speed
-#: field, worse on the ego's final position (the README gives the figures).
+#: What ``auto`` means on a calibrated road: on the held-out halves of recordings made by
+#: drivers unlike the twin's (IDM with other parameters, Gipps) it beat ``paper`` on
+#: speeds, positions and the speed field, and matched ``recorded`` there (the README
+#: gives the figures).
 AUTO_CHOICE = "calibrated"
 SEED_STREAM = 0x6265686176  # the behaviour's random draws use their own stream
 PLANNED_LATE = 100.0  # [m] a recorded lane change not started this far past its place is dropped

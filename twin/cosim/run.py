@@ -105,13 +105,13 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
         FileNotFoundError: the path does not exist.
         KeyError: an unknown embedded store.
     """
-    from twin.data.default import EMBEDDED_PREFIX, default_store, embedded_store
+    from twin.data.default import default_store, embedded_name, embedded_store
     from twin.data.ingest import ingest
 
     if data is None:
         return default_store(progress=progress)
-    if str(data).startswith(EMBEDDED_PREFIX) and not Path(data).exists():
-        return embedded_store(str(data)[len(EMBEDDED_PREFIX) :], progress=progress)
+    if (name := embedded_name(data)) is not None:
+        return embedded_store(name, progress=progress)
     path = Path(data)
     if not path.exists():
         raise FileNotFoundError(f"--data {path}: no such file or folder")

@@ -40,6 +40,15 @@ def default_key(seed: int = DEFAULT_SEED) -> str:
     return digest.hexdigest()[:16]
 
 
+def embedded_name(data) -> str | None:
+    """The embedded store ``data`` names (``embedded:NAME``, where no file or folder of
+    that name exists), else None."""
+    text = str(data)
+    if text.startswith(EMBEDDED_PREFIX) and not Path(text).exists():
+        return text[len(EMBEDDED_PREFIX) :]
+    return None
+
+
 def default_store(*, seed: int = DEFAULT_SEED, progress: bool = True) -> TrajectoryStore:
     """The default store, built (and cached) on first use."""
     return embedded_store("default", seed=seed, progress=progress)

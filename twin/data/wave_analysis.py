@@ -215,14 +215,10 @@ def pair_points(front: pd.DataFrame, tail: pd.DataFrame) -> pd.DataFrame:
         vehicle = vehicle.sort_values("time", kind="stable")
         if vehicle["wave_type"].iloc[0] == 2:
             vehicle = vehicle.iloc[1:]
-            if (
-                len(vehicle)
-                and vehicle.sort_values("time", ascending=False, kind="stable")["wave_type"].iloc[0]
-                == 1
-            ):
-                vehicle = vehicle.drop(vehicle["time"].idxmax())
-        fronts = vehicle[vehicle["wave_type"] == 1].sort_values("time", kind="stable")
-        tails = vehicle[vehicle["wave_type"] == 2].sort_values("time", kind="stable")
+            if len(vehicle) and vehicle["wave_type"].iloc[-1] == 1:
+                vehicle = vehicle.iloc[:-1]
+        fronts = vehicle[vehicle["wave_type"] == 1]
+        tails = vehicle[vehicle["wave_type"] == 2]
         n = min(len(fronts), len(tails))
         if n == 0:
             continue
@@ -318,12 +314,10 @@ def waves_of(
     root = pd.Series([find(("f", f)) for f in pairs["trace_id_front"]], dtype=object)
     wave_of = pd.factorize(root)[0]  # components numbered in order of first appearance
     out, c_id = [], 0
-    for component in range(wave_of.max() + 1 if len(wave_of) else 0):
-        rows = pairs[wave_of == component]
+    for _, rows in pairs.groupby(wave_of, sort=True):
         if len(rows) >= MIN_PAIRS:
             c_id += 1
-            out.append(rows.assign(c_id=c_id))
-            out.append(rows.assign(c_id=c_id))
+            out.extend([rows.assign(c_id=c_id)] * 2)
     columns = [*pairs.columns, "c_id"]
     if not out:
         return pd.DataFrame(columns=columns)
