@@ -79,7 +79,10 @@ class Bottleneck:
         speed_sd: [m/s] their spread.
         slow_share: [-] the share of drivers who take it hesitantly (a driver merging
             late, a truck pulling in), at ``slow_speed``: each holds up the lane behind
-            it for a while, and the queue it leaves travels upstream as a wave.
+            it for a while, and the queue it leaves travels upstream as a wave. They are
+            spread evenly over each lane's drivers (from one to the next 0.5 to 1.5 times
+            ``1 / slow_share`` drivers, uniformly), so that a short day is not left with
+            one wave in a lane, or ten, by chance.
         slow_speed: [m/s] their speed through it.
     """
 
@@ -111,6 +114,8 @@ class SynthConfig:
         sample_rate: [Hz] recording rate.
         position_noise: [m] sd of the tracking noise on x and y.
         accel_noise: [m/s^2] sd of the drivers' acceleration noise per step.
+        heavy_factor: [-] factors on the class table's share of heavy vehicles (the
+            classes kept out of the HOV lane) in lanes -2, -3 and -4.
         drivers: how each vehicle's IDM parameters are drawn (data made by other
             drivers than the twin's defaults, e.g. to test a calibration).
         car_following: ``"idm"`` (the twin's model) or ``"gipps"`` (:mod:`twin.traffic.gipps`,
@@ -139,6 +144,7 @@ class SynthConfig:
     sample_rate: float = 25.0
     position_noise: float = 0.03
     accel_noise: float = 0.15
+    heavy_factor: tuple[float, float, float] = (0.3, 1.0, 1.6)
     drivers: DriverDistribution = DRIVERS
     car_following: str = "idm"
     lane_change_duration: tuple[float, float] = (3.0, 6.0)
@@ -160,6 +166,8 @@ class SynthConfig:
             "downstream": self.downstream >= 0,
             "x_record": self.x_record[0] < self.x_record[1],
             "flow": len(self.flow) == 4 and all(0 <= q <= 3000 for q in self.flow),
+            "heavy_factor": len(self.heavy_factor) == 3
+            and all(0 <= f <= 5 for f in self.heavy_factor),
             "car_following": self.car_following in CAR_FOLLOWING,
             "lane_change_duration": 0
             < self.lane_change_duration[0]
@@ -268,17 +276,21 @@ MORNING_DRIVERS = replace(OTHER_DRIVERS, time_headway_scale=1.35)
 #: (issue 18; ``twin data waves`` compares them): 30 minutes from 06:35:50, traffic in
 #: every lane near what its drivers can carry, and 1.2 km downstream of the recorded
 #: range a 200 m stretch (a merge) that drivers take at their own speed (26 +- 2 m/s),
-#: a few of them (1 in 200) hesitantly at 4.5 m/s. Each hesitant driver holds up its
-#: lane; the queue behind it leaves as a stop-and-go wave that travels upstream through
-#: the recorded range. No driver is made to brake: the waves come from the drivers.
-#: Lane changes are rarer than in the other presets (threshold 1.5 m/s^2, decisions
-#: every 4 s) and the HOV lane is closed by its double line, as everywhere.
+#: a few of them (1 in 200, spread evenly) hesitantly at 4.5 m/s. Each hesitant driver
+#: holds up its lane; the queue behind it leaves as a stop-and-go wave that travels
+#: upstream through the recorded range. No driver is made to brake: the waves come from
+#: the drivers. Heavy vehicles are a third of the class table's whole-day share in lanes
+#: -2 to -4 (a commuter peak; with the table's share, their slow starts break lanes -3
+#: and -4 into short shallow waves: front to tail 14 to 18 s against the real 29 to
+#: 32 s). Lane changes are rarer than in the other presets (threshold 1.5 m/s^2,
+#: decisions every 4 s) and gentler (into gaps the new follower takes braking at most
+#: 1 m/s^2), and the HOV lane is closed by its double line, as everywhere.
 PRESET_C = SynthConfig(
     road=Road.WESTBOUND,
     anchor=SCENARIO_TIME,
     start=SCENARIO_TIME - 600.0,
     minutes=30.0,
-    flow=(1900.0, 1900.0, 1700.0, 1600.0),
+    flow=(1900.0, 1900.0, 1850.0, 1800.0),
     warmup=900.0,
     downstream=2500.0,
     bottleneck=Bottleneck(
@@ -289,9 +301,11 @@ PRESET_C = SynthConfig(
         slow_share=0.005,
         slow_speed=4.5,
     ),
+    heavy_factor=(0.3, 0.3, 0.3),
     drivers=MORNING_DRIVERS,
     change_threshold=1.5,
     decision_interval=4.0,
+    safe_decel=1.0,
 )
 
 #: Every preset ``twin data synth`` offers.
@@ -382,6 +396,7 @@ class _Simulation:
         # The arrival drawn for each lane, waiting for a gap to enter.
         self.waiting: list[_Vehicles | None] = [None] * 4
         self.next_arrival = np.full(4, np.inf)
+        self.until_slow: list[int] | None = None  # drivers to each lane's next hesitant one
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
         self.registry_drivers: list[IDMParams] = []  # by vid
@@ -393,10 +408,8 @@ class _Simulation:
         heavy = self.classes.column("hov_allowed") == 0
         if lane == i24.HOV_LANE:
             share[heavy] = 0.0
-        elif lane == -2:
-            share[heavy] *= 0.3
-        elif lane == -4:
-            share[heavy] *= 1.6
+        else:
+            share[heavy] *= self.cfg.heavy_factor[i24.LANES.index(lane) - 1]
         return share / share.sum()
 
     def _new_vehicles(self, lanes: np.ndarray, x: np.ndarray, v: np.ndarray) -> _Vehicles:
@@ -436,16 +449,34 @@ class _Simulation:
             forced_speed=np.full(n, np.nan),
             forced_until=np.zeros(n),
             forced_decel=np.zeros(n),
-            bottleneck_speed=self._bottleneck_speeds(n),
+            bottleneck_speed=self._bottleneck_speeds(lanes),
         )
 
-    def _bottleneck_speeds(self, n: int) -> np.ndarray:
+    def _bottleneck_speeds(self, lanes: np.ndarray) -> np.ndarray:
         b = self.cfg.bottleneck
+        n = len(lanes)
         if b is None:  # drawn only with a bottleneck: the presets without keep their data
             return np.full(n, np.inf)
         speed = np.maximum(b.speed + b.speed_sd * self.rng.standard_normal(n), 2.0)
-        slow = self.rng.random(n) < b.slow_share
+        slow = np.zeros(n, dtype=bool)
+        if b.slow_share > 0:
+            if self.until_slow is None:  # the first gap of each lane: a renewal in progress
+                self.until_slow = [
+                    math.ceil(self.rng.uniform(0.0, 1.0) * self._slow_gap()) for _ in i24.LANES
+                ]
+            for i, lane in enumerate(lanes):
+                k = i24.LANES.index(int(lane))
+                self.until_slow[k] -= 1
+                if self.until_slow[k] <= 0:
+                    slow[i] = True
+                    self.until_slow[k] = self._slow_gap()
         return np.where(slow, b.slow_speed, speed)
+
+    def _slow_gap(self) -> int:
+        """Drivers from one hesitant driver to the next in a lane: 0.5 to 1.5 times the
+        mean (1 / slow_share), uniformly."""
+        mean = 1.0 / self.cfg.bottleneck.slow_share
+        return max(1, round(mean * self.rng.uniform(0.5, 1.5)))
 
     def _params(self) -> IDMParams:
         """The drivers' IDM, with the bottleneck's speeds for those in it."""

@@ -71,8 +71,9 @@ def test_free_flow_in_preset_a(light_result):
     assert light_result.collisions == 0
 
 
-def test_synthesis_is_deterministic_by_seed():
-    config = replace(PRESET_B, start=SCENARIO_TIME, minutes=0.5, warmup=30.0)
+@pytest.mark.parametrize("preset", [PRESET_B, PRESET_C], ids=["B", "C"])
+def test_synthesis_is_deterministic_by_seed(preset):
+    config = replace(preset, start=SCENARIO_TIME, minutes=0.5, warmup=30.0)
     a, b = synthesize(config), synthesize(config)
     c = synthesize(replace(config, seed=1))
     assert np.array_equal(a.vid, b.vid)
@@ -125,6 +126,8 @@ def test_invalid_config_is_named():
         replace(PRESET_B, flow=(1.0, 2.0))
     with pytest.raises(ValueError, match="decision_interval"):
         replace(PRESET_B, decision_interval=0.0)
+    with pytest.raises(ValueError, match="heavy_factor"):
+        replace(PRESET_B, heavy_factor=(0.3, -1.0, 1.6))
     # a bottleneck must lie downstream of the recorded range, inside the simulated road
     with pytest.raises(ValueError, match="bottleneck"):
         replace(PRESET_C, bottleneck=replace(PRESET_C.bottleneck, x=100.0))
@@ -150,3 +153,17 @@ def test_hesitant_drivers_at_the_bottleneck_queue_the_lane_behind_them():
         speeds[share] = float(np.median(v.v[before]))
     assert speeds[0.0] > 25.0
     assert speeds[1.0] < speeds[0.0] - 10.0
+
+
+def test_hesitant_drivers_are_spread_evenly_over_each_lane():
+    """1 in 200 drivers of each lane, never closer than 100 nor further apart than 300
+    drivers: a 30-minute day is not left with one wave in a lane, or ten, by chance."""
+    sim = _Simulation(PRESET_C, np.random.default_rng(0))
+    lanes = np.tile(np.array(i24.LANES), 20_000)
+    hesitant = sim._bottleneck_speeds(lanes) == PRESET_C.bottleneck.slow_speed
+    for lane in i24.LANES:
+        at = np.flatnonzero(hesitant[lanes == lane])
+        assert 88 <= at.size <= 112  # of 20,000 drivers (the count's sd is about 3)
+        gaps = np.diff(at)
+        assert gaps.min() >= 100 and gaps.max() <= 300
+        assert 180 <= np.mean(gaps) <= 220
