@@ -197,6 +197,7 @@ class WheelForces:
     wheel_spin: np.ndarray  # (n, 4) [rad/s] after this step
     load: np.ndarray  # (n, 4) [N] suspension force (0 without contact)
     contact: np.ndarray  # (n, 4) bool
+    drive_power: np.ndarray  # (n,) [W] the drive torques times the wheels' spin (tractive)
 
 
 def ray_ends(params: VehicleParams, position: np.ndarray, rotation: np.ndarray):
@@ -333,7 +334,14 @@ def vehicle_forces(
         ],
         axis=1,
     )
-    return WheelForces(force=force, torque=torque, wheel_spin=spin, load=load, contact=contact)
+    return WheelForces(
+        force=force,
+        torque=torque,
+        wheel_spin=spin,
+        load=load,
+        contact=contact,
+        drive_power=(drive_torque * spin).sum(axis=1),
+    )
 
 
 def _held(controls: Controls, speed: np.ndarray) -> np.ndarray:

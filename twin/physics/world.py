@@ -119,6 +119,8 @@ class VehicleStates:
         world's up axis; heading: (n,) [rad] world yaw.
         road, x, y, lane: road frame (x of the back centre, as the data's x).
         wheel_spin, load: (n, 4) [rad/s], [N]; contact: (n, 4) bool.
+        drive_power: (n,) [W] what the powertrain delivered at the wheels in the last
+        step (drive torque times wheel spin; braking and coasting deliver none).
     """
 
     id: np.ndarray
@@ -136,6 +138,7 @@ class VehicleStates:
     wheel_spin: np.ndarray
     load: np.ndarray
     contact: np.ndarray
+    drive_power: np.ndarray
 
 
 class PhysicsWorld:
@@ -176,6 +179,7 @@ class PhysicsWorld:
         self._read = None  # (position, quaternion, velocity, angular velocity) of now
         self._load = np.empty((0, 4))  # [N] per wheel, from the last step
         self._contact = np.empty((0, 4), dtype=bool)
+        self._drive_power = np.empty(0)  # [W] per vehicle, from the last step
 
     # -- lifecycle --------------------------------------------------------------------
 
@@ -285,6 +289,7 @@ class PhysicsWorld:
             self._controls[name] = np.concatenate([self._controls[name], np.full(n, default)])
         self._load = np.concatenate([self._load, np.zeros((n, 4))])  # until the first step
         self._contact = np.concatenate([self._contact, np.zeros((n, 4), dtype=bool)])
+        self._drive_power = np.concatenate([self._drive_power, np.zeros(n)])
         self._spin = np.concatenate(
             [self._spin, (states.speed / params.wheel_radius)[:, None].repeat(4, 1)]
         )
@@ -312,6 +317,7 @@ class PhysicsWorld:
         self._spin = self._spin[keep]
         self._load = self._load[keep]
         self._contact = self._contact[keep]
+        self._drive_power = self._drive_power[keep]
         self._impulse = self._impulse[keep]
         self._read = None
 
@@ -393,6 +399,7 @@ class PhysicsWorld:
             self._spin = forces.wheel_spin
             self._impulse = np.zeros_like(self._impulse)
             self._load, self._contact = forces.load, forces.contact
+            self._drive_power = forces.drive_power
         p.stepSimulation(physicsClientId=self.client)
         self.time += dt
         self._read = None
@@ -419,6 +426,7 @@ class PhysicsWorld:
             wheel_spin=self._spin.copy(),
             load=self._load.copy(),
             contact=self._contact.copy(),
+            drive_power=self._drive_power.copy(),
         )
 
     # -- internals --------------------------------------------------------------------
