@@ -18,6 +18,14 @@ speed      float64 [m/s] along the heading
 accel      float64 [m/s^2] measured (speed change over the last step; NaN on a
                    vehicle's first row and for ghosts)
 accel_cmd  float64 [m/s^2] what the driver commanded (NaN for ghosts)
+grade      float64 [-] the road's grade under the vehicle's centre along travel (rise
+                   over run, from the map)
+drive_power float64 [W] what the twin's powertrain delivered at the wheels in the
+                   step (drive torque times wheel spin; NaN for ghosts)
+fuel_rate  float64 [g/s] fuel of the CIRCLES RAV4 model at the realised speed,
+                   acceleration and grade (:mod:`twin.energy`; NaN where ``accel`` is)
+fuel_feasible bool the acceleration is within what that powertrain can deliver (null
+                   for ghosts)
 heading    float64 [rad] world yaw (ghosts: the road's)
 vehicle_class int8 index into ``twin.data.i24.VEHICLE_CLASSES``
 length, width, height float32 [m]
@@ -29,8 +37,13 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from twin import energy
+
 ROLES = ("ego", "visible", "ghost")
-_VEHICLE = ("time", "id", "tid", "role", "lane", "x", "y", "z", "speed", "accel_cmd", "heading")
+_VEHICLE = (
+    "time", "id", "tid", "role", "lane", "x", "y", "z", "speed", "accel_cmd", "heading",
+    "drive_power",
+)  # fmt: skip
 _GHOST = ("time", "tid", "lane", "x", "y", "speed")
 
 
@@ -65,6 +78,7 @@ class TrajectoryLog:
         v["speed"].append(states.speed)
         v["accel_cmd"].append(np.asarray(accel_cmd, dtype=np.float64))
         v["heading"].append(states.heading)
+        v["drive_power"].append(states.drive_power)
 
     def add_windows(self, time: float, windows) -> None:
         """Append the windows (a ``Windows``) in force at ``time`` [s since t0]."""
@@ -119,10 +133,11 @@ class TrajectoryLog:
         road = np.full(n, self.road, dtype=np.int8)
         if n:
             center = ghosts["x"].to_numpy() + 0.5 * vehicle_meta["length"][ghost_tid]
-            ground, heading, _ = road_model.to_world(road, center, ghosts["y"].to_numpy())
+            ground, heading, pitch = road_model.to_world(road, center, ghosts["y"].to_numpy())
             ghost_z = ground[:, 2] + 0.5 * vehicle_meta["height"][ghost_tid]
         else:
-            ghost_z, heading = np.empty(0), np.empty(0)
+            ghost_z, heading, pitch = np.empty(0), np.empty(0), np.empty(0)
+        fuel = energy.log_rows(sim, road_model, self.road, vehicle_meta["length"])
         role = np.concatenate([sim["role"].to_numpy(), np.full(n, 2, np.int8)])
         columns = {
             "time": np.concatenate([sim["time"], ghosts["time"]]),
@@ -140,6 +155,13 @@ class TrajectoryLog:
             "accel": np.concatenate([sim["accel"], np.full(n, np.nan)]),
             "accel_cmd": np.concatenate([sim["accel_cmd"], np.full(n, np.nan)]),
             "heading": np.concatenate([sim["heading"], heading]),
+            "grade": np.concatenate([fuel["grade"], np.tan(pitch)]),
+            "drive_power": np.concatenate([sim["drive_power"], np.full(n, np.nan)]),
+            "fuel_rate": np.concatenate([fuel["fuel_rate"], np.full(n, np.nan)]),
+            "fuel_feasible": pa.array(
+                np.concatenate([fuel["feasible"].to_numpy(), np.ones(n, dtype=bool)]),
+                mask=np.r_[np.zeros(len(sim), dtype=bool), np.ones(n, dtype=bool)],
+            ),
         }
         all_tid = np.concatenate([tid, ghosts["tid"]]).astype(np.int64)
         columns["vehicle_class"] = vehicle_meta["vehicle_class"][all_tid].astype(np.int8)

@@ -25,7 +25,7 @@ import numpy as np
 
 from sensors.camera import CameraRig, Frame
 from sensors.writer import FrameWriter
-from twin import __version__
+from twin import __version__, energy
 from twin.atomic import AtomicFolder, marked_as
 from twin.cosim import metrics, plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
@@ -306,6 +306,14 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
                 sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
             ),
         },
+        "energy": energy.run_figures(
+            vehicles,
+            sim.ego_id,
+            sim.world.road,
+            cfg.road.direction,
+            store.trajectory_arrays["length"],
+            cfg.dt,
+        ),
         "counts": {
             "visible_at_start": counters.spawned_initially,
             "spawned": counters.spawned,

@@ -9,14 +9,17 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
+from twin import energy
 from twin.cli import main
 from twin.cosim import metrics
 from twin.cosim.config import load_config
+from twin.data.i24 import MILE
 from twin.data.traffic import EmpiricalTraffic
 
 COLUMNS = [
     "time", "id", "record_id", "role", "road", "lane", "x", "y", "z", "speed", "accel",
-    "accel_cmd", "heading", "vehicle_class", "length", "width", "height",
+    "accel_cmd", "heading", "grade", "drive_power", "fuel_rate", "fuel_feasible",
+    "vehicle_class", "length", "width", "height",
 ]  # fmt: skip
 
 
@@ -80,6 +83,29 @@ def test_metrics_json_and_config_toml(run_folder):
     config = load_config(run_folder / "config.toml")
     assert (config.road.value, config.lane, config.x, config.t_max) == ("westbound", -2, 700, 2)
     assert config.time == pytest.approx(T0) and config.traffic.hov_share == 0.2
+
+
+def test_energy_in_the_log_and_in_metrics_json(run_folder):
+    frame = pd.read_parquet(run_folder / "trajectories.parquet")
+    m = json.loads((run_folder / "metrics.json").read_text())["energy"]
+    ego = frame[frame["role"] == "ego"]
+    # the ego eases off from 20 m/s down the map's 1.1 % grade: the RAV4 model's rate
+    # there, and its own powertrain still pushing against drag and rolling resistance
+    assert ego["grade"].median() == pytest.approx(-0.011, abs=0.002)
+    steady = energy.RAV4_2019.rate(
+        *(float(ego[name].median()) for name in ("speed", "accel", "grade"))
+    )
+    assert ego["fuel_rate"].median() == pytest.approx(float(steady), rel=0.02)
+    assert ego["fuel_feasible"].all() and ego["drive_power"].median() > 500.0  # [W]
+    assert m["ego"]["fuel_g"] == pytest.approx(ego["fuel_rate"].sum() * 0.01, abs=1e-3)
+    assert m["ego"]["mpg"] == pytest.approx(
+        m["ego"]["distance_m"] / MILE / (m["ego"]["fuel_g"] / energy.GRAMS_PER_GALLON), rel=1e-3
+    )
+    simulated = frame[frame["role"] != "ghost"]
+    assert m["window"]["vehicles"] == simulated["id"].nunique()
+    ghosts = frame[frame["role"] == "ghost"]
+    assert ghosts["fuel_rate"].isna().all() and ghosts["fuel_feasible"].isna().all()
+    assert m["fuel_model"] == energy.RAV4_2019.name
 
 
 def test_pictures_open_in_opencv(run_folder):
