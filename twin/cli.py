@@ -68,7 +68,10 @@ def _parser() -> argparse.ArgumentParser:
         "--ghost-smoothing", type=float, default=None, help="lag on ghost speeds [s] (0: off)"
     )
     p.add_argument(
-        "--ego-controller", default=None, help="module:function driving the ego (see README)"
+        "--ego-controller",
+        default=None,
+        help="module:function driving the ego, or a baseline: twin.controllers:human, "
+        "follower_stopper, pi_saturation or acc (parameters: --set controller.NAME.KEY=V)",
     )
     p.add_argument("--bev-time", type=float, default=None, help="time of bev.png [s after t0]")
     p.add_argument("--bev-video", action="store_true", default=None, help="also write bev.mp4")

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sensors.camera import CameraError, CameraSettings, check_rig
+from twin.controllers import ControllerSettings
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
 from twin.data import i24
 from twin.data.i24 import Road
@@ -54,7 +55,9 @@ class CosimConfig:
         spawn_decel: [m/s^2] ...plus the difference of their braking distances at this
             deceleration when the one behind is faster.
         ego_controller: ``"module:function"`` driving the ego (see
-            :mod:`twin.traffic.manager`, ``EgoController``); empty: the traffic manager.
+            :mod:`twin.traffic.manager`, ``EgoController``), or a controller factory
+            such as ``twin.controllers:follower_stopper`` (:mod:`twin.controllers`);
+            empty: the traffic manager.
         ghost_log_rate: [Hz] rate at which the ghost set is written to the log.
         bev_time: [s] after t0 of the bird's-eye picture; ``None``: half the episode.
         bev_video: also write ``bev.mp4`` of the whole episode.
@@ -66,6 +69,7 @@ class CosimConfig:
             :mod:`twin.cosim.behaviour`.
         traffic: traffic-manager settings; its ``dt`` and ``seed`` are the run's.
         camera: the ego's cameras (off by default; ``twin run --camera``).
+        controller: the baseline controllers' parameters (``[controller.NAME]``).
     """
 
     scenario: str = "custom"
@@ -90,6 +94,7 @@ class CosimConfig:
     behaviour: str = "auto"
     traffic: TrafficConfig = field(default_factory=TrafficConfig)
     camera: CameraSettings = field(default_factory=CameraSettings)
+    controller: ControllerSettings = field(default_factory=ControllerSettings)
 
     def __post_init__(self):
         try:
@@ -205,8 +210,8 @@ def from_toml(
 
     Keys override the fields of ``base``; without a base, a top-level ``scenario = "A"``
     or ``"B"`` starts from that preset, anything else from the defaults. Nested
-    settings go in ``[traffic]``, ``[traffic.drivers]``, ``[traffic.mobil]`` and
-    ``[camera]`` tables.
+    settings go in ``[traffic]``, ``[traffic.drivers]``, ``[traffic.mobil]``,
+    ``[camera]`` and ``[controller.NAME]`` tables.
 
     Raises:
         ConfigError: malformed TOML, an unknown key, a value of the wrong type or an

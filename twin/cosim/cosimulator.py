@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
+from twin.controllers import is_factory
 from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
@@ -151,7 +152,7 @@ class Cosimulator:
         self.traffic = traffic
         self.road = config.road
         self.direction = config.road.direction
-        self.controller = controller or load_controller(config.ego_controller)
+        self.controller = controller or load_controller(config.ego_controller, config)
         self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
@@ -638,13 +639,16 @@ def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[flo
     return lo, hi
 
 
-def load_controller(spec: str) -> EgoController | None:
+def load_controller(spec: str, config=None) -> EgoController | None:
     """Import ``"module:function"`` (``""``: ``None``, the traffic manager drives).
     The current directory is searched first, as ``python -m`` would (like uvicorn's
-    app loading), so ``my_acc.py`` beside the user is found.
+    app loading), so ``my_acc.py`` beside the user is found. A controller factory
+    (:func:`twin.controllers.controller_factory`) is called with ``config``, the run's
+    configuration, for a fresh controller.
 
     Raises:
-        ControllerError: the module cannot be imported or has no such callable.
+        ControllerError: the module cannot be imported, has no such callable, or its
+            factory fails.
     """
     if not spec:
         return None
@@ -660,4 +664,9 @@ def load_controller(spec: str) -> EgoController | None:
     controller = getattr(module, name, None)
     if not callable(controller):
         raise ControllerError(f"ego controller {spec!r}: {module_name} has no callable {name!r}")
+    if is_factory(controller):
+        try:
+            controller = controller(config)
+        except Exception as error:
+            raise ControllerError(f"ego controller {spec!r} could not be built: {error}") from None
     return controller
