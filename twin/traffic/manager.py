@@ -846,13 +846,13 @@ class TrafficManager:
         for vehicle_id, controller in self._controllers.items():
             i = int(np.searchsorted(d.id, vehicle_id))
             controlled[i] = True
+            name = getattr(controller, "__name__", type(controller).__name__)
+            who = f"the controller {name} of vehicle {vehicle_id} at t = {self.time:.2f} s"
             try:
                 answer = controller(self._observe(i, scene, float(command[i])))
             except Exception as error:
-                raise ControllerError(
-                    f"the controller of vehicle {vehicle_id} raised {error!r}"
-                ) from error
-            accel, lane_change = _parse_command(answer, vehicle_id)
+                raise ControllerError(f"{who} raised {error!r}") from error
+            accel, lane_change = _parse_command(answer, who)
             command[i] = accel
             if lane_change and d.lane_from[i] == d.lane[i] and d.requested[i] == 0:
                 try:
@@ -941,7 +941,9 @@ def _direction(direction: int | str) -> int:
     return int(direction)
 
 
-def _parse_command(answer, vehicle_id: int) -> tuple[float, int]:
+def _parse_command(answer, who: str) -> tuple[float, int]:
+    """``(accel, lane_change)`` of a controller's answer; ``who`` names the controller,
+    its vehicle and the time in the errors."""
     if isinstance(answer, EgoCommand):
         accel, lane_change = answer.accel, answer.lane_change
     else:
@@ -950,15 +952,14 @@ def _parse_command(answer, vehicle_id: int) -> tuple[float, int]:
         accel = float(accel)
     except (TypeError, ValueError):
         raise ControllerError(
-            f"the controller of vehicle {vehicle_id} returned {answer!r}, "
-            "not an acceleration or an EgoCommand"
+            f"{who} returned {answer!r}, not an acceleration or an EgoCommand"
         ) from None
     if not math.isfinite(accel):
-        raise ControllerError(f"the controller of vehicle {vehicle_id} returned accel {accel}")
+        raise ControllerError(f"{who} returned accel {accel}")
     try:
         return accel, _direction(lane_change)
     except ValueError as error:
-        raise ControllerError(f"the controller of vehicle {vehicle_id}: {error}") from None
+        raise ControllerError(f"{who}: {error}") from None
 
 
 def _dtype(name: str):

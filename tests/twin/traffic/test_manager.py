@@ -81,7 +81,8 @@ def test_a_controller_that_raises_is_named():
     manager, params = point_mass_manager(np.full(1, -2), 0)
     manager.add([0], 1, -2, params)
     manager.set_controller(0, lambda obs: 1 / 0)
-    with pytest.raises(ControllerError, match="vehicle 0 raised ZeroDivisionError"):
+    named = r"the controller <lambda> of vehicle 0 at t = 0.00 s raised ZeroDivisionError"
+    with pytest.raises(ControllerError, match=named):
         manager.step(point_states([0], [0.0], [-2], [20.0]))
 
 
