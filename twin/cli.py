@@ -308,6 +308,13 @@ def _parser() -> argparse.ArgumentParser:
         help="behaviours, comma-separated (default: paper, and calibrated and recorded when "
         "the store is calibrated)",
     )
+    p.add_argument(
+        "--controller",
+        default=None,
+        help="ego controllers run on every episode, comma-separated: human, follower_stopper, "
+        "pi_saturation, acc or module:function (the benchmark: paired against human; "
+        "default behaviour then: calibrated where the store is calibrated, else paper)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None, help="processes (default: the cores)")
     p.add_argument("--engine", choices=["local", "ray"], default="local")
@@ -548,9 +555,13 @@ def _eval(args) -> int:
     from twin.timeutil import parse_time
 
     store = open_data(args.data, progress=not args.quiet)
+    controllers = _listed(args.controller)
+    calibrated = read_calibration(store) is not None
     if args.behaviour is not None:
-        behaviours = tuple(b.strip() for b in args.behaviour.split(",") if b.strip())
-    elif read_calibration(store) is not None:
+        behaviours = _listed(args.behaviour)
+    elif controllers:
+        behaviours = ("calibrated",) if calibrated else ("paper",)
+    elif calibrated:
         behaviours = ("paper", "calibrated", "recorded")
     else:
         behaviours = ("paper",)
@@ -563,6 +574,7 @@ def _eval(args) -> int:
         t_from=parse_time(args.t_from) if args.t_from is not None else None,
         t_until=parse_time(args.t_until) if args.t_until is not None else None,
         seed=args.seed,
+        controllers=controllers,
     )
     workers = args.workers if args.workers is not None else len(os.sched_getaffinity(0))
     result = evaluate(
@@ -576,6 +588,11 @@ def _eval(args) -> int:
     )
     print(summary_lines(result))
     return 0
+
+
+def _listed(text: str | None) -> tuple[str, ...]:
+    """A comma-separated option as a tuple (empty for None)."""
+    return tuple(t.strip() for t in (text or "").split(",") if t.strip())
 
 
 def _calibrate(args) -> int:

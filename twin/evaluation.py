@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from sensors.episodes import EpisodeSampling, EpisodeSpec, check_roads, draw_episode, measure_cells
-from twin import __version__
+from twin import __version__, benchmark
 from twin.atomic import atomic_file, remove_stale
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
@@ -67,7 +67,25 @@ METRICS = {
     "vehicles_off_road": "sum",
     "ended_early": "sum",
     "loop_s": "stats",
+    # energy and wave dampening (twin.energy, twin.cosim.control_metrics)
+    "ego_mpg": "stats",
+    "followers_mpg": "stats",
+    "ego_and_followers_mpg": "stats",
+    "window_mpg": "stats",
+    "ego_and_followers_l_per_100km": "stats",
+    "speed_std_behind_mps": "stats",
+    "wave_amplitude_behind_mps": "stats",
+    "throughput_veh_per_h": "stats",
+    "min_ttc_s": "stats",
+    "ttc_under_4s_share": "stats",
+    "time_gap_median_s": "stats",
+    "time_gap_p10_s": "stats",
+    "accel_rms_mps2": "stats",
+    "jerk_rms_mps3": "stats",
+    "infeasible_s": "sum",
 }
+#: Baseline controllers named without their module (``--controller human,acc``).
+BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
 
 
 class EvaluationError(TwinError):
@@ -87,6 +105,9 @@ class EvalConfig:
         t_from, t_until: [s unix] episodes start and end inside this window (None: open).
         seed: the evaluation's seed (episode ``i`` draws from ``(seed, i)``).
         cosim: the other settings of each episode's cosimulation.
+        controllers: ego controllers run on every episode (each with every behaviour):
+            ``module:function`` or a baseline of :data:`BASELINES`; empty: the traffic
+            manager drives the ego (a fidelity evaluation).
     """
 
     road: str = "westbound"
@@ -98,6 +119,7 @@ class EvalConfig:
     t_until: float | None = None
     seed: int = 0
     cosim: CosimConfig = SCENARIO_B
+    controllers: tuple[str, ...] = ()
 
     def __post_init__(self):
         try:
@@ -120,12 +142,43 @@ class EvalConfig:
                 f"got {','.join(behaviours) or 'none'}"
             )
         object.__setattr__(self, "behaviours", behaviours)
+        controllers = tuple(controller_spec(c) for c in self.controllers)
+        labels = [controller_label(c) for c in controllers]
+        bad = [c for c in controllers if c.count(":") != 1 or not all(c.split(":"))]
+        if bad or len(set(labels)) != len(labels):
+            raise EvaluationError(
+                f"--controller must list distinct controllers, each 'module:function' or one "
+                f"of {', '.join(BASELINES)}, got {','.join(self.controllers)}"
+            )
+        object.__setattr__(self, "controllers", controllers)
         if not 0.0 <= self.congested_share <= 1.0:
             raise EvaluationError(
                 f"--congested-share must be in [0, 1], got {self.congested_share}"
             )
         if self.t_from is not None and self.t_until is not None and not self.t_from < self.t_until:
             raise EvaluationError(f"--from ({self.t_from}) must be before --until ({self.t_until})")
+
+    @property
+    def arms(self) -> list[tuple[str, str, str]]:
+        """What runs on every episode: (label, behaviour, controller spec) each; the
+        label is the behaviour's name, or the controller's (``behaviour+controller``
+        with several behaviours)."""
+        if not self.controllers:
+            return [(b, b, "") for b in self.behaviours]
+        return [
+            (
+                controller_label(c) if len(self.behaviours) == 1 else f"{b}+{controller_label(c)}",
+                b,
+                c,
+            )
+            for b in self.behaviours
+            for c in self.controllers
+        ]
+
+    @property
+    def arms_key(self) -> str:
+        """``summary.json``'s key of the arms: ``controllers`` or ``behaviours``."""
+        return "controllers" if self.controllers else "behaviours"
 
     @property
     def sampling(self) -> EpisodeSampling:
@@ -178,21 +231,21 @@ def evaluate(
     results.mkdir(exist_ok=True)
     remove_stale(results)
     jobs = [
-        (config, spec, behaviour, where(store, bundle))
+        (config, spec, arm, where(store, bundle))
         for spec in specs
-        for behaviour in config.behaviours
-        if not _result_path(out, spec.index, behaviour).is_file()
+        for arm in config.arms
+        if not _result_path(out, spec.index, arm[0]).is_file()
     ]
     with tqdm(
         total=len(jobs),
         unit="episode",
         disable=None if progress else True,
-        desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.behaviours)} to run",
+        desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.arms)} to run",
     ) as bar:
 
         def save(k: int, row: dict) -> None:
-            _, spec, behaviour, _ = jobs[k]
-            with atomic_file(_result_path(out, spec.index, behaviour)) as tmp:
+            _, spec, arm, _ = jobs[k]
+            with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
                 tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
             bar.update(1)
 
@@ -203,7 +256,7 @@ def evaluate(
             workers=workers,
             ray_address=ray_address,
             on_done=save,
-            describe=lambda job: f"episode {job[1].index} ({job[2]})",
+            describe=lambda job: f"episode {job[1].index} ({job[2][0]})",
             error_type=EvaluationError,
         )
     summary = assemble(out, config, specs)
@@ -230,12 +283,14 @@ def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[Episo
     return [draw_episode(cells, sampling, config.seed, i) for i in range(config.episodes)]
 
 
-def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) -> dict:
-    """One (episode, behaviour): the cosimulation and its metrics as a flat row."""
+def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
+    """One (episode, arm): the cosimulation and its metrics as a flat row, with the
+    ego's and its followers' speeds each second (for the pictures)."""
     from twin.cosim.cosimulator import Cosimulator, ScenarioError
     from twin.cosim.run import measure
     from twin.data.traffic import EmpiricalTraffic
 
+    label, behaviour, controller = arm
     store, bundle = worker_data(location)
     cosim = replace(
         config.cosim,
@@ -248,9 +303,16 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) ->
         seed=spec.seed,
         behaviour=behaviour,
         camera=replace(config.cosim.camera, enabled=False),
+        ego_controller=controller,
     )
     columns = {k: v for k, v in spec.to_dict().items() if k != "index"}
-    row = {"episode": spec.index, "behaviour": behaviour, **columns}
+    row = {
+        "episode": spec.index,
+        "arm": label,
+        "behaviour": behaviour,
+        "controller": controller_label(controller) if controller else None,
+        **columns,
+    }
     with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
         setup = time.perf_counter()
         try:
@@ -260,13 +322,30 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, behaviour: str, location) ->
         begin = time.perf_counter()
         sim.run(progress=False)
         loop_s = time.perf_counter() - begin
-        figures, _ = measure(sim, store, loop_s, begin - setup)
-    return {**row, "skipped": None, **flatten(figures)}
+        figures, frames = measure(sim, store, loop_s, begin - setup)
+    traces = speed_traces(frames[0], sim.ego_id, figures["control"]["followers"], cosim.dt)
+    return {**row, "skipped": None, **flatten(figures), **traces}
+
+
+def speed_traces(vehicles, ego_id: int, followers: list[int], dt: float) -> dict:
+    """The ego's and each follower's speed [m/s] each second (NaN where absent)."""
+    every = max(1, round(1.0 / dt))
+    step = np.round(vehicles["time"].to_numpy() / dt).astype(np.int64)
+    rows = vehicles[step % every == 0]
+    seconds = np.unique(np.round(rows["time"].to_numpy()).astype(np.int64))
+
+    def trace(vid: int) -> list:
+        mine = rows[rows["id"] == vid]
+        at = dict(zip(np.round(mine["time"]).astype(np.int64), mine["speed"], strict=True))
+        return [round(float(at[t]), 3) if t in at else None for t in seconds]
+
+    return {"ego_speeds": trace(ego_id), "follower_speeds": [trace(f) for f in followers]}
 
 
 def flatten(figures: dict) -> dict:
     """The metrics of one run (``metrics.json``) as the columns of :data:`METRICS`."""
     ego, counts, field = figures["ego"], figures["counts"], figures["traffic"]["speed_field"]
+    energy, control = figures["energy"], figures["control"]
     errors = ego.get("position_error_m", {})
     spells = ego.get("slow_spells", {}).get("spells", [])
     first = spells[0] if spells else {}
@@ -290,14 +369,40 @@ def flatten(figures: dict) -> dict:
         "vehicles_off_road": figures["physics"]["vehicles_off_road"],
         "ended_early": int(bool(figures["ended_early"])),
         "loop_s": figures["timing"]["loop_s"],
+        "ego_mpg": energy["ego"]["mpg"],
+        "followers_mpg": energy["followers"]["mpg"],
+        "ego_and_followers_mpg": energy["ego_and_followers"]["mpg"],
+        "window_mpg": energy["window"]["mpg"],
+        "ego_and_followers_l_per_100km": energy["ego_and_followers"]["l_per_100km"],
+        "followers": len(energy["followers"]["ids"]),
+        "speed_std_behind_mps": control["speed_std_behind_mps"],
+        "wave_amplitude_behind_mps": control["wave_amplitude_behind_mps"],
+        "throughput_veh_per_h": control["throughput_veh_per_h"],
+        "min_ttc_s": control["min_ttc_s"],
+        "ttc_under_4s_share": control["ttc_under_4s_share"],
+        "time_gap_median_s": control["time_gap_s"]["median"],
+        "time_gap_p10_s": control["time_gap_s"]["p10"],
+        "accel_rms_mps2": control["accel_rms_mps2"],
+        "jerk_rms_mps3": control["jerk_rms_mps3"],
+        "infeasible_s": energy["ego"]["infeasible_s"],
     }
     for lane in (-1, -2, -3, -4):
         row[f"speed_field_rmse_lane_{lane}_mps"] = field[f"lane_{lane}"].get("rmse_mps")
     return row
 
 
-def _result_path(out: Path, index: int, behaviour: str) -> Path:
-    return out / RESULTS / f"{index:06d}-{behaviour}.json"
+def _result_path(out: Path, index: int, label: str) -> Path:
+    return out / RESULTS / f"{index:06d}-{label}.json"
+
+
+def controller_spec(name: str) -> str:
+    """``module:function`` of a controller named on the command line."""
+    return f"twin.controllers:{name}" if name in BASELINES else name
+
+
+def controller_label(spec: str) -> str:
+    """A controller's short name: its function's."""
+    return spec.rpartition(":")[2]
 
 
 def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
@@ -348,8 +453,8 @@ def assemble(out: Path, config: EvalConfig, specs: list[EpisodeSpec]) -> dict:
 
     rows = []
     for spec in specs:
-        for behaviour in config.behaviours:
-            rows.append(json.loads(_result_path(out, spec.index, behaviour).read_text()))
+        for label, _, _ in config.arms:
+            rows.append(json.loads(_result_path(out, spec.index, label).read_text()))
     frame = pd.DataFrame(rows)
     for name in METRICS:
         if name not in frame:
@@ -358,28 +463,33 @@ def assemble(out: Path, config: EvalConfig, specs: list[EpisodeSpec]) -> dict:
     with atomic_file(out / "episodes.parquet") as tmp:
         pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
     summary = summarise(frame, config)
+    if config.controllers:
+        summary["paired_vs_human"] = benchmark.paired_vs_human(frame, config)
     with atomic_file(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     with atomic_file(out / "summary.md") as tmp:
-        tmp.write_text(markdown(summary))
+        tmp.write_text(markdown(summary) + benchmark.markdown(summary))
     with atomic_file(out / "fidelity.png") as tmp:
         _plot(frame, config, tmp)
+    if config.controllers:
+        with atomic_file(out / "waves.png") as tmp:
+            benchmark.plot_traces(frame, config, tmp)
     return summary
 
 
 def summarise(frame, config: EvalConfig) -> dict:
-    """Per behaviour: median, p90 and mean of each metric over the episodes that ran,
-    sums of the counts, and the episodes skipped."""
+    """Per arm (behaviour, or controller): median, p90 and mean of each metric over the
+    episodes that ran, sums of the counts, and the episodes skipped."""
     out = {
         "format": FORMAT,
         "version": __version__,
         "road": config.road,
         "episodes": config.episodes,
         "duration_s": config.duration,
-        "behaviours": {},
+        config.arms_key: {},
     }
-    for behaviour in config.behaviours:
-        rows = frame[frame["behaviour"] == behaviour]
+    for label, _, _ in config.arms:
+        rows = frame[frame["arm"] == label]
         ran = rows[rows["skipped"].isna()] if "skipped" in rows else rows
         entry = {"episodes_run": len(ran), "episodes_skipped": len(rows) - len(ran), "metrics": {}}
         for name, kind in METRICS.items():
@@ -397,7 +507,7 @@ def summarise(frame, config: EvalConfig) -> dict:
         recorded = entry["metrics"]["lane_changes_recorded"]["sum"]
         simulated = entry["metrics"]["lane_changes_simulated"]["sum"]
         entry["lane_changes_ratio"] = _r(simulated / recorded) if recorded else None
-        out["behaviours"][behaviour] = entry
+        out[config.arms_key][label] = entry
     return out
 
 
@@ -406,8 +516,9 @@ def _r(value) -> float:
 
 
 def markdown(summary: dict) -> str:
-    """The summary as a Markdown table: one row per metric, a column per behaviour."""
-    behaviours = list(summary["behaviours"])
+    """The summary as a Markdown table: one row per metric, a column per arm."""
+    key = "controllers" if "controllers" in summary else "behaviours"
+    behaviours = list(summary[key])
     lines = [
         f"# twin eval: {summary['road']}, {summary['episodes']} episodes of "
         f"{summary['duration_s']:g} s",
@@ -418,7 +529,7 @@ def markdown(summary: dict) -> str:
     for name, kind in METRICS.items():
         cells = []
         for b in behaviours:
-            m = summary["behaviours"][b]["metrics"][name]
+            m = summary[key][b]["metrics"][name]
             if kind == "sum":
                 cells.append(f"{m['sum']:g}")
             elif m["median"] is None:
@@ -427,13 +538,13 @@ def markdown(summary: dict) -> str:
                 cells.append(f"{m['median']:.2f} / {m['p90']:.2f}")
         label = name if kind == "sum" else f"{name} (median / p90)"
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    ratio = [summary["behaviours"][b]["lane_changes_ratio"] for b in behaviours]
+    ratio = [summary[key][b]["lane_changes_ratio"] for b in behaviours]
     lines.append(
         "| lane changes simulated / recorded | "
         + " | ".join("-" if r is None else f"{r:.2f}" for r in ratio)
         + " |"
     )
-    runs = [summary["behaviours"][b] for b in behaviours]
+    runs = [summary[key][b] for b in behaviours]
     lines.append(
         "| episodes run (skipped) | "
         + " | ".join(f"{e['episodes_run']} ({e['episodes_skipped']})" for e in runs)
@@ -457,11 +568,12 @@ def _plot(frame, config: EvalConfig, path: Path) -> None:
     fig, axes = plt.subplots(1, len(shown), figsize=(4.2 * len(shown), 4.0))
     for ax, (name, label) in zip(axes, shown, strict=True):
         data = []
-        for behaviour in config.behaviours:
-            values = frame.loc[frame["behaviour"] == behaviour, name].to_numpy(dtype=float)
+        labels = [label for label, _, _ in config.arms]
+        for label in labels:
+            values = frame.loc[frame["arm"] == label, name].to_numpy(dtype=float)
             data.append(values[np.isfinite(values)])
         ax.boxplot(data, showfliers=True)
-        ax.set_xticks(range(1, len(config.behaviours) + 1), config.behaviours)
+        ax.set_xticks(range(1, len(labels) + 1), labels)
         ax.set_title(label, fontsize=10)
         ax.grid(axis="y", alpha=0.3)
     fig.suptitle(f"twin eval: {config.road}, {config.episodes} x {config.duration:g} s episodes")
@@ -477,6 +589,8 @@ def summary_lines(result: EvalResult) -> str:
         f"evaluation folder: {result.folder} (ran {result.runs_done_now} now, "
         f"{result.total_s:.0f} s)"
     ]
+    if "controllers" in s:
+        return "\n".join(lines + benchmark.lines(s))
     for behaviour, entry in s["behaviours"].items():
         m = entry["metrics"]
         speed, end = _stat(m, "ego_speed_rmse_mps"), _stat(m, "ego_position_error_end_m")

@@ -27,7 +27,7 @@ from sensors.camera import CameraRig, Frame
 from sensors.writer import FrameWriter
 from twin import __version__, energy
 from twin.atomic import AtomicFolder, marked_as
-from twin.cosim import metrics, plots
+from twin.cosim import control_metrics, metrics, plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
@@ -311,6 +311,14 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             sim.ego_id,
             sim.world.road,
             cfg.road.direction,
+            store.trajectory_arrays["length"],
+            cfg.dt,
+        ),
+        "control": control_metrics.control_figures(
+            vehicles,
+            ghosts,
+            sim.ego_id,
+            energy.followers(vehicles, sim.ego_id),
             store.trajectory_arrays["length"],
             cfg.dt,
         ),

@@ -1,0 +1,124 @@
+"""What a wave-dampening benchmark reports of one run (``metrics.json`` ``control``).
+
+The words are the field's (``../shared/docs/CONTROL.md``, "What benchmarks report"):
+fuel economy of the AV (the ego), of its K followers and of the window
+(:mod:`twin.energy`); the speed standard deviation and the wave amplitude behind the
+AV; throughput past the ego's starting point; safety (minimum time to collision, the
+share of time under 4 s, time gaps); comfort (acceleration and jerk RMS).
+
+Gaps are measured from the log at :data:`SAMPLE_PERIOD`: the AV's leader is the
+nearest vehicle ahead in its lane, simulated or ghost, bumper to bumper.
+"""
+
+import math
+
+import numpy as np
+import pandas as pd
+
+SAMPLE_PERIOD = 0.1  # [s] the log is read at 10 Hz (the ghosts' rate)
+TTC_ALERT = 4.0  # [s] time to collision counted as critical below this
+MOVING = 1.0  # [m/s] time gaps are taken while the AV moves faster than this
+
+
+def sample(rows: pd.DataFrame, dt: float, period: float = SAMPLE_PERIOD) -> pd.DataFrame:
+    """The rows at whole multiples of ``period`` (steps of ``dt``)."""
+    every = max(1, round(period / dt))
+    step = np.round(rows["time"].to_numpy() / dt).astype(np.int64)
+    return rows[step % every == 0]
+
+
+def leader_gaps(
+    ego: pd.DataFrame, others: pd.DataFrame, length: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``ego`` (sampled): the bumper-to-bumper gap [m] to the nearest vehicle
+    ahead in its lane among ``others`` (rows ``time``, ``lane``, ``x`` back centre,
+    ``speed``, ``tid``) at the same time, and that vehicle's speed; ``inf`` and NaN
+    where none.
+
+    Args:
+        length: [m] vehicle length per store tid.
+    """
+    gap = np.full(len(ego), math.inf)
+    speed = np.full(len(ego), math.nan)
+    by_time = {round(t, 6): frame for t, frame in others.groupby(others["time"].round(6))}
+    front = ego["x"].to_numpy() + length[ego["tid"].to_numpy().astype(np.int64)]
+    for i, (t, lane) in enumerate(zip(ego["time"].to_numpy(), ego["lane"].to_numpy(), strict=True)):
+        frame = by_time.get(round(float(t), 6))
+        if frame is None:
+            continue
+        ahead = frame[(frame["lane"].to_numpy() == lane) & (frame["x"].to_numpy() > front[i] - 1.0)]
+        if len(ahead):
+            k = int(np.argmin(ahead["x"].to_numpy()))
+            gap[i] = float(ahead["x"].iloc[k]) - front[i]
+            speed[i] = float(ahead["speed"].iloc[k])
+    return gap, speed
+
+
+def control_figures(
+    vehicles: pd.DataFrame,
+    ghosts: pd.DataFrame,
+    ego_id: int,
+    followers: list[int],
+    length: np.ndarray,
+    dt: float,
+) -> dict:
+    """The benchmark figures of one run (see the module doc).
+
+    Args:
+        vehicles: the log's simulated-vehicle rows (``time``, ``id``, ``tid``, ``lane``,
+            ``x``, ``speed``). ghosts: the log's ghost rows.
+        ego_id: the AV. followers: its followers' ids (:func:`twin.energy.followers`).
+        length: [m] vehicle length per store tid. dt: [s] the log's step.
+    """
+    rows = sample(vehicles, dt)
+    ego = rows[rows["id"] == ego_id].sort_values("time")
+    others = pd.concat(
+        [
+            rows[rows["id"] != ego_id][["time", "lane", "x", "speed"]],
+            ghosts[["time", "lane", "x", "speed"]],
+        ]
+    )
+    gap, lead_speed = leader_gaps(ego, others, length)
+    v = ego["speed"].to_numpy()
+    closing = v - lead_speed
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ttc = np.where((closing > 0) & np.isfinite(gap), np.maximum(gap, 0.0) / closing, np.inf)
+        time_gap = np.where((v > MOVING) & np.isfinite(gap), gap / v, np.nan)
+    accel = np.diff(v) / SAMPLE_PERIOD
+    jerk = np.diff(accel) / SAMPLE_PERIOD
+    behind = rows[rows["id"].isin(followers)]
+    per_follower = behind.groupby("id")["speed"]
+    gaps = time_gap[np.isfinite(time_gap)]
+    duration = float(rows["time"].max() - rows["time"].min()) if len(rows) else 0.0
+    return {
+        "followers": [int(i) for i in followers],
+        "speed_std_behind_mps": _r(per_follower.std(ddof=0).mean()) if len(behind) else None,
+        "wave_amplitude_behind_mps": _r((per_follower.max() - per_follower.min()).mean())
+        if len(behind)
+        else None,
+        "throughput_veh_per_h": _r(_crossings(rows, float(ego["x"].iloc[0])) / duration * 3600.0)
+        if duration > 0 and len(ego)
+        else None,
+        "min_ttc_s": _r(np.min(ttc)) if np.isfinite(ttc).any() else None,
+        "ttc_under_4s_share": _r(np.mean(ttc < TTC_ALERT)) if ttc.size else None,
+        "time_gap_s": {
+            "p10": _r(np.percentile(gaps, 10)) if gaps.size else None,
+            "median": _r(np.median(gaps)) if gaps.size else None,
+            "p90": _r(np.percentile(gaps, 90)) if gaps.size else None,
+            "min": _r(gaps.min()) if gaps.size else None,
+        },
+        "accel_rms_mps2": _r(np.sqrt(np.mean(accel**2))) if accel.size else None,
+        "jerk_rms_mps3": _r(np.sqrt(np.mean(jerk**2))) if jerk.size else None,
+    }
+
+
+def _crossings(rows: pd.DataFrame, x0: float) -> int:
+    """Simulated vehicles that pass ``x0`` (from behind it to beyond it)."""
+    first = rows.groupby("id")["x"].first()
+    last = rows.groupby("id")["x"].last()
+    return int(((first < x0) & (last >= x0)).sum())
+
+
+def _r(value) -> float | None:
+    value = float(value)
+    return round(value, 4) if math.isfinite(value) else None
