@@ -445,6 +445,50 @@ def eval_bench(
     }
 
 
+def env_bench(
+    data: str | None = None, *, steps: int = 200, workers: int | None = None, repeats: int = 3
+) -> dict:
+    """Env steps per second of ``i24twin/WaveDampening-v0`` (10 Hz control, 0.01 s
+    physics, the default windows, no cameras) on ``data`` (default: the embedded
+    morning): one env, and an ``AsyncVectorEnv`` of ``workers`` envs (default: the
+    cores), each stepping ``steps`` times with a zero action after a reset (not timed).
+    Medians over the repeats; scaling is the vector env's steps per second over one's."""
+    import gymnasium as gym
+
+    from twin.env import ENV_ID
+
+    workers = workers or len(os.sched_getaffinity(0))
+
+    def make():
+        return gym.make(ENV_ID, data=data, duration=steps * 0.1 + 1.0)
+
+    def rate(env, n_envs: int, seed) -> float:
+        env.reset(seed=seed)
+        action = np.zeros((n_envs, 1) if n_envs > 1 else (1,), np.float32)
+        start = time.perf_counter()
+        for _ in range(steps):
+            env.step(action)
+        return n_envs * steps / (time.perf_counter() - start)
+
+    one, vector = [], []
+    for k in range(repeats):
+        env = make()
+        one.append(rate(env, 1, k))
+        env.close()
+        envs = gym.vector.AsyncVectorEnv([make] * workers)
+        vector.append(rate(envs, workers, [k * workers + i for i in range(workers)]))
+        envs.close()
+    single, many = float(np.median(one)), float(np.median(vector))
+    return {
+        "steps": steps,
+        "repeats": repeats,
+        "env_steps_per_s": round(single, 2),
+        "vector_workers": workers,
+        "vector_env_steps_per_s": round(many, 2),
+        "scaling": round(many / single, 2),
+    }
+
+
 def calibrate_bench(store=None, *, road: str = "westbound", repeats: int = 3) -> dict:
     """Wall time of ``twin calibrate`` on ``road`` of ``store`` (default: the embedded
     data; nothing is written), median of the repeats, with what it fitted."""

@@ -372,6 +372,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--repeats", type=int, default=3)
     p.set_defaults(handler=_bench_dataset)
+    p = bench_commands.add_parser(
+        "env", help="env steps per second of i24twin/WaveDampening-v0, one env and a vector env"
+    )
+    p.add_argument("--data", default=None, help="store (default: the embedded morning)")
+    p.add_argument("--steps", type=int, default=200, help="steps timed per env")
+    p.add_argument("--workers", type=int, default=None, help="vector env size (default: cores)")
+    p.add_argument("--repeats", type=int, default=3)
+    p.set_defaults(handler=_bench_env)
     p = bench_commands.add_parser("eval", help="wall time of twin eval, by workers")
     p.add_argument("--data", type=Path, default=None, help="store (default: the embedded data)")
     p.add_argument("--episodes", type=int, default=4)
@@ -764,6 +772,17 @@ def _worker_counts(text: str | None):
         return tuple(int(w) for w in text.split(","))
     except ValueError:
         raise ValueError(f"--workers must be integers like 1,2, got {text!r}") from None
+
+
+def _bench_env(args) -> int:
+    from twin.bench import env_bench
+
+    if args.steps < 1 or args.repeats < 1 or (args.workers is not None and args.workers < 1):
+        raise ValueError("--steps, --repeats and --workers must be >= 1")
+    return _emit(
+        "env",
+        env_bench(args.data, steps=args.steps, workers=args.workers, repeats=args.repeats),
+    )
 
 
 def _bench_eval(args) -> int:
