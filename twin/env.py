@@ -174,6 +174,7 @@ class WaveDampeningEnv(gym.Env):
         self._followers: list[int] = []
         self._collisions = 0
         self._ego_accel = 0.0  # [m/s^2] measured over the last physics step
+        self._states = None  # the world's states after the last physics step
 
     # -- Gymnasium ----------------------------------------------------------------------
 
@@ -214,7 +215,7 @@ class WaveDampeningEnv(gym.Env):
             raise RuntimeError("no episode could be placed in 20 draws")
         self.episode = k
         self._command, self._last, self._history = 0.0, None, []
-        self._collisions, self._ego_accel = 0, 0.0
+        self._collisions, self._ego_accel, self._states = 0, 0.0, None
         self._advance()  # one physics step: the controller sees the ego once
         rows = self.sim.log.vehicles()
         self._followers = energy.followers(rows, self.sim.ego_id)
@@ -264,9 +265,9 @@ class WaveDampeningEnv(gym.Env):
     def _advance(self) -> float:
         """One physics step; the fuel [g] of the AV and its followers in it (their
         measured acceleration over the step, as the run's energy figures)."""
-        before = self.sim.world.states()
+        before = self._states if self._states is not None else self.sim.world.states()
         self.sim.step()
-        states = self.sim.world.states()
+        states = self._states = self.sim.world.states()
         dt = self.sim.config.dt
         speed_before = dict(zip(before.id.tolist(), before.speed.tolist(), strict=True))
         accel = np.array(
@@ -298,7 +299,7 @@ class WaveDampeningEnv(gym.Env):
         def speed_or_own(value):
             return obs.speed if not math.isfinite(value) else float(value)
 
-        states = self.sim.world.states()
+        states = self._states
         ego = states.id == self.sim.ego_id
         values = [
             obs.speed,
