@@ -19,6 +19,10 @@ table (``--set controller.follower_stopper.desired_speed=25``):
 FollowerStopper and PI with saturation command a speed; the ego tracks it with a
 low-level speed loop (``accel = gain (v_cmd - v)``, within the comfort limits). The
 formulas and their parameters' values are those of ``../shared/docs/CONTROL.md``.
+Under each of the three sits a safety layer, the drivers' emergency braking
+(``[controller] emergency_braking``, on by default): PI with saturation as defined
+keeps its target speed until the gap is within ``dx_s + gamma`` (6 m when closing),
+which at highway speeds into a wave is a collision without it.
 
 A controller here is built fresh for each episode (it keeps state: the speed history,
 the last commanded speed), by a factory marked :func:`controller_factory` that takes
@@ -282,8 +286,19 @@ class Human:
 @dataclass(frozen=True)
 class ControllerSettings:
     """The baseline controllers' parameters (the run configuration's ``[controller]``
-    tables)."""
+    tables).
 
+    Attributes:
+        emergency_braking: the safety layer of FollowerStopper, PI with saturation and
+            the ACC: where staying clear of the leader (if it keeps braking as it does)
+            needs harder braking than the controller asks, the ego brakes as hard as
+            needed, by the same test as the drivers' emergency braking
+            (:func:`twin.traffic.control.required_decel`). ``False``: the
+            controller's command alone (``human`` has the drivers' braking anyway).
+        follower_stopper, pi_saturation, acc: each controller's parameters.
+    """
+
+    emergency_braking: bool = True
     follower_stopper: FollowerStopperParams = field(default_factory=FollowerStopperParams)
     pi_saturation: PISaturationParams = field(default_factory=PISaturationParams)
     acc: ACCParams = field(default_factory=ACCParams)
@@ -298,19 +313,26 @@ def human(config) -> Human:
 @controller_factory
 def follower_stopper(config) -> FollowerStopper:
     """FollowerStopper with ``[controller.follower_stopper]``."""
-    return FollowerStopper(config.controller.follower_stopper)
+    return _guarded(FollowerStopper(config.controller.follower_stopper), config)
 
 
 @controller_factory
 def pi_saturation(config) -> PISaturation:
     """PI with saturation with ``[controller.pi_saturation]``."""
-    return PISaturation(config.controller.pi_saturation)
+    return _guarded(PISaturation(config.controller.pi_saturation), config)
 
 
 @controller_factory
 def acc(config) -> ACC:
     """Constant time-gap ACC with ``[controller.acc]``."""
-    return ACC(config.controller.acc)
+    return _guarded(ACC(config.controller.acc), config)
+
+
+def _guarded(controller, config):
+    """``controller`` with the run's ``[controller] emergency_braking`` setting, which
+    the traffic manager reads (see :class:`ControllerSettings`)."""
+    controller.emergency_braking = config.controller.emergency_braking
+    return controller
 
 
 def _leader(obs: Observation) -> tuple[float, float]:

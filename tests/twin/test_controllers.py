@@ -118,6 +118,14 @@ def test_a_parameter_from_the_configuration_reaches_the_controller(follow_store,
     assert load_config(out / "config.toml").controller.follower_stopper.desired_speed == 12.0
 
 
+@pytest.mark.parametrize("name", ["follower_stopper", "pi_saturation", "acc"])
+def test_the_safety_layer_is_on_unless_the_configuration_turns_it_off(name):
+    on = getattr(c, name)(CosimConfig())
+    off_config = from_toml("[controller]\nemergency_braking = false\n")
+    assert on.emergency_braking is True
+    assert getattr(c, name)(off_config).emergency_braking is False
+
+
 def test_bad_controller_output_stops_the_run_naming_controller_and_time(
     follow_store, tmp_path, capsys
 ):

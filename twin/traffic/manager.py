@@ -342,6 +342,7 @@ class TrafficManager:
         self._controllers: dict[int, EgoController] = {}
         self.lane_changes = 0
         self.emergency_steps = 0
+        self.safety_overrides = 0  # controller steps overridden by emergency braking
         self.refused_requests = 0
 
     @property
@@ -654,7 +655,7 @@ class TrafficManager:
         low, high = np.where(emergency, -d.tyre_decel, -normal_limit), d.max_accel
         if self._controllers:
             # a user's controller may use all the tyres give; the engine limits the rest
-            command, controlled = self._ask_controllers(scene, command)
+            command, controlled = self._ask_controllers(scene, command, need, emergency)
             low = np.where(controlled, -d.tyre_decel, low)
             high = np.where(controlled, d.tyre_decel, high)
         command = np.clip(command, low, high)
@@ -838,8 +839,15 @@ class TrafficManager:
 
     # -- user controllers -------------------------------------------------------------
 
-    def _ask_controllers(self, scene: _Scene, command: np.ndarray):
-        """The commands with the controllers' answers in; and (n,) bool, controlled."""
+    def _ask_controllers(
+        self, scene: _Scene, command: np.ndarray, need: np.ndarray, emergency: np.ndarray
+    ):
+        """The commands with the controllers' answers in; and (n,) bool, controlled.
+
+        A controller with a true ``emergency_braking`` attribute is overridden by the
+        drivers' emergency braking (``need`` where ``emergency``), as a production
+        vehicle's safety layer would; the others get what they ask.
+        """
         d = self._d
         command = command.copy()
         controlled = np.zeros(len(d), dtype=bool)
@@ -853,6 +861,10 @@ class TrafficManager:
             except Exception as error:
                 raise ControllerError(f"{who} raised {error!r}") from error
             accel, lane_change = _parse_command(answer, who)
+            if emergency[i] and getattr(controller, "emergency_braking", False):
+                if -need[i] < accel:
+                    self.safety_overrides += 1
+                accel = min(accel, -float(need[i]))
             command[i] = accel
             if lane_change and d.lane_from[i] == d.lane[i] and d.requested[i] == 0:
                 try:

@@ -81,6 +81,32 @@ def test_emergency_braking_stops_followers_behind_a_leader_that_brakes_at_the_li
     assert manager.emergency_steps > 0
 
 
+class HoldSpeed:
+    """A controller that keeps its speed whatever is ahead (PI with saturation does so
+    until the gap is under 6 m)."""
+
+    def __init__(self, emergency_braking: bool):
+        self.emergency_braking = emergency_braking
+
+    def __call__(self, obs):
+        return EgoCommand(accel=0.0)
+
+
+@pytest.mark.parametrize("braking", [True, False])
+def test_a_controller_that_asks_for_it_is_overridden_by_emergency_braking(
+    world, built_map, braking
+):
+    manager = make_manager(built_map, auto_lane_change=False)
+    ids = spawn(world, manager, -1, -3, [300.0, 0.0], [0.0, 25.0], desired_speed=[0.0, 30.0])
+    manager.set_controller(int(ids[1]), HoldSpeed(braking))
+    rec = run(world, manager, 20.0)
+    if braking:
+        assert rec.contacts == 0 and rec.speed[-1, 1] < 0.1
+        assert manager.safety_overrides > 0
+    else:  # the controller gets what it asks: it runs into the standing car
+        assert rec.contacts > 0 and manager.safety_overrides == 0
+
+
 def test_no_collision_between_managed_vehicles_whatever_the_ghosts_do(world, built_map):
     manager = make_manager(built_map, auto_lane_change=False)
     x = 200.0 - np.arange(6) * 30.0
