@@ -83,6 +83,7 @@ METRICS = {
     "accel_rms_mps2": "stats",
     "jerk_rms_mps3": "stats",
     "infeasible_s": "sum",
+    "safety_override_s": "sum",
 }
 #: Baseline controllers named without their module (``--controller human,acc``).
 BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
@@ -385,6 +386,7 @@ def flatten(figures: dict) -> dict:
         "accel_rms_mps2": control["accel_rms_mps2"],
         "jerk_rms_mps3": control["jerk_rms_mps3"],
         "infeasible_s": energy["ego"]["infeasible_s"],
+        "safety_override_s": control.get("safety_override_s", 0.0),
     }
     for lane in (-1, -2, -3, -4):
         row[f"speed_field_rmse_lane_{lane}_mps"] = field[f"lane_{lane}"].get("rmse_mps")

@@ -314,14 +314,18 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             store.trajectory_arrays["length"],
             cfg.dt,
         ),
-        "control": control_metrics.control_figures(
-            vehicles,
-            ghosts,
-            sim.ego_id,
-            energy.followers(vehicles, sim.ego_id),
-            store.trajectory_arrays["length"],
-            cfg.dt,
-        ),
+        "control": {
+            **control_metrics.control_figures(
+                vehicles,
+                ghosts,
+                sim.ego_id,
+                energy.followers(vehicles, sim.ego_id),
+                store.trajectory_arrays["length"],
+                cfg.dt,
+            ),
+            # time the baselines' safety layer overrode the ego's controller
+            "safety_override_s": round(sim.manager.safety_overrides * cfg.dt, 3),
+        },
         "counts": {
             "visible_at_start": counters.spawned_initially,
             "spawned": counters.spawned,
