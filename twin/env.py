@@ -269,13 +269,10 @@ class WaveDampeningEnv(gym.Env):
         self.sim.step()
         states = self._states = self.sim.world.states()
         dt = self.sim.config.dt
-        speed_before = dict(zip(before.id.tolist(), before.speed.tolist(), strict=True))
-        accel = np.array(
-            [
-                (v - speed_before.get(i, v)) / dt
-                for i, v in zip(states.id.tolist(), states.speed.tolist(), strict=True)
-            ]
-        )
+        # ids are sorted in both; a vehicle new in this step has no acceleration yet
+        where = np.minimum(np.searchsorted(before.id, states.id), max(before.id.size - 1, 0))
+        known = before.id[where] == states.id if before.id.size else np.zeros(states.id.size, bool)
+        accel = np.where(known, states.speed - before.speed[where], 0.0) / dt
         ego = states.id == self.sim.ego_id
         self._ego_accel = float(accel[ego][0]) if ego.any() else 0.0
         mine = np.isin(states.id, [self.sim.ego_id, *self._followers])
