@@ -83,7 +83,9 @@ def test_eval_settings_and_folders_are_checked(calibrated, wave_store, built_map
 
 
 def test_the_controller_benchmark_pairs_each_controller_with_human(calibrated, built_map, tmp_path):
-    config = _config(behaviours=("calibrated",), controllers=("human", "follower_stopper"))
+    config = _config(
+        behaviours=("calibrated",), controllers=("human", "follower_stopper"), av_share=0.3
+    )
     assert config.controllers == ("twin.controllers:human", "twin.controllers:follower_stopper")
     out = tmp_path / "bench"
     evaluate(calibrated, out, config, workers=1, bundle=built_map, progress=False)
@@ -96,6 +98,8 @@ def test_the_controller_benchmark_pairs_each_controller_with_human(calibrated, b
                 by.loc[(episode, "human"), column] == by.loc[(episode, "follower_stopper"), column]
             )
     assert frame["ego_and_followers_mpg"].notna().all() and (frame["collisions"] == 0).all()
+    # --av-share: some visible vehicles drive with the controller too (human's are human)
+    assert frame["avs_mpg"].notna().all() and frame["avs"].max() > 1
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["controllers"]) == {"human", "follower_stopper"}
     paired = summary["paired_vs_human"]["follower_stopper"]["metrics"]["ego_and_followers_mpg"]
@@ -107,6 +111,8 @@ def test_the_controller_benchmark_pairs_each_controller_with_human(calibrated, b
     assert (out / "waves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(EvaluationError, match="--controller must list distinct controllers"):
         _config(controllers=("human", "twin.controllers:human"))
+    with pytest.raises(EvaluationError, match="--av-share needs --controller"):
+        _config(av_share=0.5)
 
 
 def test_paired_changes_and_their_interval():

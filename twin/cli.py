@@ -315,6 +315,13 @@ def _parser() -> argparse.ArgumentParser:
         "pi_saturation, acc or module:function (the benchmark: paired against human; "
         "default behaviour then: calibrated where the store is calibrated, else paper)",
     )
+    p.add_argument(
+        "--av-share",
+        type=float,
+        default=0.0,
+        help="share of the visible vehicles driven by the controller as well as the ego "
+        "(needs --controller; default 0: the ego alone)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=None, help="processes (default: the cores)")
     p.add_argument("--engine", choices=["local", "ray"], default="local")
@@ -583,6 +590,7 @@ def _eval(args) -> int:
         t_until=parse_time(args.t_until) if args.t_until is not None else None,
         seed=args.seed,
         controllers=controllers,
+        av_share=args.av_share,
     )
     workers = args.workers if args.workers is not None else len(os.sched_getaffinity(0))
     result = evaluate(

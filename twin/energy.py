@@ -244,11 +244,18 @@ def followers(rows: pd.DataFrame, ego_id: int, k: int = FOLLOWERS) -> list[int]:
 
 
 def run_figures(
-    rows: pd.DataFrame, ego_id: int, road_model, road: int, length: np.ndarray, dt: float
+    rows: pd.DataFrame,
+    ego_id: int,
+    road_model,
+    road: int,
+    length: np.ndarray,
+    dt: float,
+    avs: list[int] | None = None,
 ) -> dict:
     """The energy figures of a run (``metrics.json`` ``energy``): the ego, its
-    :data:`FOLLOWERS` followers, the two together, and every simulated vehicle of the
-    window, each with distance, fuel, mpg, L/100 km, tractive energy and the seconds of
+    :data:`FOLLOWERS` followers, the two together, every simulated vehicle of the
+    window, and the AVs (the ego and ``avs``, the other vehicles with its controller),
+    each with distance, fuel, mpg, L/100 km, tractive energy and the seconds of
     infeasible acceleration (see :func:`group_figures`)."""
     fuel = log_rows(rows, road_model, road, length)
     with_fuel = rows.assign(fuel_rate=fuel["fuel_rate"], feasible=fuel["feasible"])
@@ -260,4 +267,8 @@ def run_figures(
         "followers": {"ids": behind, **group_figures(vehicles, behind)},
         "ego_and_followers": group_figures(vehicles, [ego_id, *behind]),
         "window": group_figures(vehicles, vehicles.index),
+        "avs": {
+            "ids": [ego_id, *sorted(avs or [])],
+            **group_figures(vehicles, [ego_id, *sorted(avs or [])]),
+        },
     }

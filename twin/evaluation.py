@@ -72,6 +72,7 @@ METRICS = {
     "followers_mpg": "stats",
     "ego_and_followers_mpg": "stats",
     "window_mpg": "stats",
+    "avs_mpg": "stats",
     "ego_and_followers_l_per_100km": "stats",
     "speed_std_behind_mps": "stats",
     "wave_amplitude_behind_mps": "stats",
@@ -109,6 +110,9 @@ class EvalConfig:
         controllers: ego controllers run on every episode (each with every behaviour):
             ``module:function`` or a baseline of :data:`BASELINES`; empty: the traffic
             manager drives the ego (a fidelity evaluation).
+        av_share: [-] share of the visible vehicles given the controller as well as
+            the ego (``--av-share``; the same vehicles for every controller of an
+            episode); needs ``controllers``.
     """
 
     road: str = "westbound"
@@ -121,6 +125,7 @@ class EvalConfig:
     seed: int = 0
     cosim: CosimConfig = SCENARIO_B
     controllers: tuple[str, ...] = ()
+    av_share: float = 0.0
 
     def __post_init__(self):
         try:
@@ -152,6 +157,10 @@ class EvalConfig:
                 f"of {', '.join(BASELINES)}, got {','.join(self.controllers)}"
             )
         object.__setattr__(self, "controllers", controllers)
+        if not (isinstance(self.av_share, int | float) and 0.0 <= self.av_share <= 1.0):
+            raise EvaluationError(f"--av-share must be a share in [0, 1], got {self.av_share!r}")
+        if self.av_share > 0 and not controllers:
+            raise EvaluationError("--av-share needs --controller (the controllers to put on)")
         if not 0.0 <= self.congested_share <= 1.0:
             raise EvaluationError(
                 f"--congested-share must be in [0, 1], got {self.congested_share}"
@@ -305,6 +314,7 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
         behaviour=behaviour,
         camera=replace(config.cosim.camera, enabled=False),
         ego_controller=controller,
+        av_share=config.av_share if controller else 0.0,
     )
     columns = {k: v for k, v in spec.to_dict().items() if k != "index"}
     row = {
@@ -374,6 +384,8 @@ def flatten(figures: dict) -> dict:
         "followers_mpg": energy["followers"]["mpg"],
         "ego_and_followers_mpg": energy["ego_and_followers"]["mpg"],
         "window_mpg": energy["window"]["mpg"],
+        "avs_mpg": energy["avs"]["mpg"],
+        "avs": len(energy["avs"]["ids"]),
         "ego_and_followers_l_per_100km": energy["ego_and_followers"]["l_per_100km"],
         "followers": len(energy["followers"]["ids"]),
         "speed_std_behind_mps": control["speed_std_behind_mps"],

@@ -126,6 +126,23 @@ def test_the_safety_layer_is_on_unless_the_configuration_turns_it_off(name):
     assert getattr(c, name)(off_config).emergency_braking is False
 
 
+@pytest.mark.parametrize("share", [0.0, 1.0])
+def test_av_share_puts_the_controller_on_the_visible_vehicles_too(follow_store, tmp_path, share):
+    out = tmp_path / str(share)
+    args = ["--ego-controller", "twin.controllers:acc", "--set", f"av_share={share}"]
+    assert _run(follow_store, out, *args) == 0
+    avs = json.loads((out / "metrics.json").read_text())["energy"]["avs"]
+    assert len(avs["ids"]) == (2 if share else 1)  # the ego, and the leader with share 1
+    assert avs["mpg"] > 0
+
+
+def test_av_share_is_checked():
+    with pytest.raises(ConfigError, match="av_share needs an ego_controller"):
+        CosimConfig(av_share=0.2)
+    with pytest.raises(ConfigError, match=r"av_share must be a share in \[0, 1\]"):
+        CosimConfig(av_share=1.5, ego_controller="twin.controllers:acc")
+
+
 def test_bad_controller_output_stops_the_run_naming_controller_and_time(
     follow_store, tmp_path, capsys
 ):

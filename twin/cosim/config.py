@@ -58,6 +58,9 @@ class CosimConfig:
             :mod:`twin.traffic.manager`, ``EgoController``), or a controller factory
             such as ``twin.controllers:follower_stopper`` (:mod:`twin.controllers`);
             empty: the traffic manager.
+        av_share: [-] share of the visible vehicles driven by ``ego_controller`` as
+            well as the ego (each recorded vehicle drawn once by the seed and its
+            record, so the same vehicles in every run of an episode); 0 by default.
         ghost_log_rate: [Hz] rate at which the ghost set is written to the log.
         bev_time: [s] after t0 of the bird's-eye picture; ``None``: half the episode.
         bev_video: also write ``bev.mp4`` of the whole episode.
@@ -87,6 +90,7 @@ class CosimConfig:
     spawn_clearance_at_rest: float = 0.3
     spawn_decel: float = 4.0
     ego_controller: str = ""
+    av_share: float = 0.0
     ghost_log_rate: float = 10.0
     bev_time: float | None = None
     bev_video: bool = False
@@ -152,6 +156,13 @@ class CosimConfig:
         if self.ego_controller and self.ego_controller.count(":") != 1:
             raise ConfigError(
                 f"ego_controller must be 'module:function', got {self.ego_controller!r}"
+            )
+        if not (isinstance(self.av_share, int | float) and 0.0 <= self.av_share <= 1.0):
+            raise ConfigError(f"av_share must be a share in [0, 1], got {self.av_share!r}")
+        if self.av_share > 0 and not self.ego_controller:
+            raise ConfigError(
+                "av_share needs an ego_controller to put on the vehicles (e.g. "
+                "twin.controllers:follower_stopper)"
             )
         if self.behaviour not in (*BEHAVIOURS, AUTO):
             raise ConfigError(

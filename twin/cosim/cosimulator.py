@@ -44,6 +44,7 @@ from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStat
 from twin.traffic.manager import EgoController, Obstacles, TrafficManager
 
 MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
+AV_STREAM = 0x41565F  # seeds the AV draws apart from the run's other random choices
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 
@@ -184,6 +185,8 @@ class Cosimulator:
         self._lead_speed = dict.fromkeys(LANES, math.nan)  # smoothed ghost speed per lane
         self._just_spawned = (np.empty(0, np.int64), np.empty(0))  # ids, spawn speeds
         self._touching: set = set()
+        self.av_ids: set[int] = set()  # world ids of the vehicles other than the ego with
+        # the AV controller (config.av_share), kept after they leave the window
 
     # -- lifecycle --------------------------------------------------------------------
 
@@ -244,6 +247,7 @@ class Cosimulator:
             [ego.width], [ego.height], [ego.tid],
         )  # fmt: skip
         self.ego_id = int(self._spawn(ego_state, desired_speed=cfg.vel_default)[0])
+        self.av_ids.discard(self.ego_id)  # the ego's controller is set next
         if self.controller is not None:
             self.manager.set_controller(self.ego_id, self.controller)
         self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
@@ -517,6 +521,10 @@ class Cosimulator:
             planned = self.behaviour.changes_of(tid, x)
             if planned:
                 self._planned[i] = planned
+            if self._is_av(tid):
+                av = load_controller(self.config.ego_controller, self.config)
+                self.manager.set_controller(i, av)
+                self.av_ids.add(i)
         self._base_speed = np.concatenate([self._base_speed, base])
         self._tids = np.concatenate([self._tids, new.tid])
         self._is_sim[new.tid] = True
@@ -526,6 +534,16 @@ class Cosimulator:
             np.concatenate([speeds_before, new.spawn.speed]),
         )
         return ids
+
+    def _is_av(self, tid: int) -> bool:
+        """Whether recorded vehicle ``tid`` is driven by the AV controller
+        (``config.av_share``): one draw from the seed and the record, whatever the
+        spawn order."""
+        share = self.config.av_share
+        if share <= 0:
+            return False
+        draw = np.random.default_rng([self.config.seed, int(tid), AV_STREAM]).random()
+        return bool(draw < share)
 
     # -- checks and records -----------------------------------------------------------
 

@@ -313,6 +313,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             cfg.road.direction,
             store.trajectory_arrays["length"],
             cfg.dt,
+            avs=sorted(sim.av_ids),
         ),
         "control": {
             **control_metrics.control_figures(
