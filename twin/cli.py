@@ -315,6 +315,12 @@ def _parser() -> argparse.ArgumentParser:
         "pi_saturation, acc or module:function (the benchmark: paired against human; "
         "default behaviour then: calibrated where the store is calibrated, else paper)",
     )
+    _add_set(
+        p,
+        "any run setting for every episode, e.g. --set "
+        "controller.follower_stopper.desired_speed=25 or --set controller.policy.model=ppo.zip "
+        "(repeatable)",
+    )
     p.add_argument(
         "--av-share",
         type=float,
@@ -564,10 +570,13 @@ def _info(args) -> int:
 
 
 def _eval(args) -> int:
+    from twin.cosim.config import SCENARIO_B, override, parse_assignments
     from twin.cosim.run import open_data
     from twin.data.calibrate import read_calibration
     from twin.evaluation import EvalConfig, evaluate, summary_lines
     from twin.timeutil import parse_time
+
+    cosim = override(SCENARIO_B, parse_assignments(args.assignments), source="--set")
 
     store = open_data(args.data, progress=not args.quiet)
     controllers = _listed(args.controller)
@@ -591,6 +600,7 @@ def _eval(args) -> int:
         seed=args.seed,
         controllers=controllers,
         av_share=args.av_share,
+        cosim=cosim,
     )
     workers = args.workers if args.workers is not None else len(os.sched_getaffinity(0))
     result = evaluate(

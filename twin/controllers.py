@@ -284,6 +284,24 @@ class Human:
 
 
 @dataclass(frozen=True)
+class PolicySettings:
+    """A trained policy driving the ego (``twin.rl:policy``, the ``rl`` extra).
+
+    Attributes:
+        model: path of a stable-baselines3 model (``.zip``) trained on
+            ``i24twin/WaveDampening-v0``.
+        action: the env's action it was trained with: ``accel`` or ``speed``.
+    """
+
+    model: str = ""
+    action: str = "accel"
+
+    def __post_init__(self):
+        if self.action not in ("accel", "speed"):
+            raise ValueError(f"action must be 'accel' or 'speed', got {self.action!r}")
+
+
+@dataclass(frozen=True)
 class ControllerSettings:
     """The baseline controllers' parameters (the run configuration's ``[controller]``
     tables).
@@ -296,12 +314,14 @@ class ControllerSettings:
             (:func:`twin.traffic.control.required_decel`). ``False``: the
             controller's command alone (``human`` has the drivers' braking anyway).
         follower_stopper, pi_saturation, acc: each controller's parameters.
+        policy: a trained policy's model (``twin.rl:policy``).
     """
 
     emergency_braking: bool = True
     follower_stopper: FollowerStopperParams = field(default_factory=FollowerStopperParams)
     pi_saturation: PISaturationParams = field(default_factory=PISaturationParams)
     acc: ACCParams = field(default_factory=ACCParams)
+    policy: PolicySettings = field(default_factory=PolicySettings)
 
 
 @controller_factory

@@ -257,10 +257,7 @@ class WaveDampeningEnv(gym.Env):
     def _drive(self, obs: Observation) -> EgoCommand:
         """The ego's controller: the agent's last action."""
         self._last = obs
-        if self.action_kind == "accel":
-            return EgoCommand(accel=self._command)
-        accel = SPEED_GAIN * (self._command - obs.speed)
-        return EgoCommand(accel=float(np.clip(accel, *ACCEL_RANGE)))
+        return EgoCommand(accel=action_accel(self.action_kind, self._command, obs.speed))
 
     def _advance(self) -> float:
         """One physics step; the fuel [g] of the AV and its followers in it (their
@@ -287,43 +284,16 @@ class WaveDampeningEnv(gym.Env):
         return float(energy.RAV4_2019.rate(speed, accel[mine], np.tan(pitch)).sum() * dt)
 
     def _observation(self) -> np.ndarray:
-        obs = self._last
-        k = obs.lanes.lanes.index(obs.lane)
-
-        def gap(value):
-            return GAP_CAP if not math.isfinite(value) else min(float(value), GAP_CAP)
-
-        def speed_or_own(value):
-            return obs.speed if not math.isfinite(value) else float(value)
-
         states = self._states
-        ego = states.id == self.sim.ego_id
-        values = [
-            obs.speed,
-            self._ego_accel,
-            gap(obs.lanes.leader_gap[k]),
-            speed_or_own(obs.lanes.leader_speed[k]),
-            gap(obs.lanes.follower_gap[k]),
-            speed_or_own(obs.lanes.follower_speed[k]),
-            *self._ahead(float(states.x[ego][0])),
-        ]
-        vector = np.asarray(values, dtype=np.float64)
+        x = float(states.x[states.id == self.sim.ego_id][0])
+        ahead = ahead_speeds(self.traffic, self.road, self.sim.t, x, self.cosim.vel_default)
+        vector = features(self._last, self._ego_accel, ahead)
         if self.obs_noise > 0:
             vector = vector * (1.0 + self.obs_noise * self.np_random.standard_normal(vector.size))
         vector = np.clip(vector, OBS_LOW, OBS_HIGH).astype(np.float32)
         self._history.append(vector)
         del self._history[: -(self.latency_steps + 1)]
         return self._history[0]
-
-    def _ahead(self, x: float) -> list[float]:
-        """Recorded mean speeds per lane and bin ahead (see the module doc)."""
-        snap = self.traffic.snapshot(self.road, self.sim.t, x, x + AHEAD_BINS[-1][1])
-        out = []
-        for lane in LANES:
-            for a, b in AHEAD_BINS:
-                rows = (snap.lane == lane) & (snap.x >= x + a) & (snap.x < x + b)
-                out.append(float(snap.speed[rows].mean()) if rows.any() else self.cosim.vel_default)
-        return out
 
     def _reward(self, fuel: float) -> float:
         w = self.reward_weights
@@ -344,6 +314,58 @@ class WaveDampeningEnv(gym.Env):
 
         figures, _ = measure(self.sim, self.store, 0.0, 0.0)
         return flatten(figures)
+
+
+def action_accel(kind: str, command: float, speed: float) -> float:
+    """The ego's acceleration [m/s^2] for an action: ``accel`` is it; ``speed`` [m/s] a
+    desired speed tracked by the speed loop from ``speed`` [m/s]."""
+    if kind == "accel":
+        return command
+    return float(np.clip(SPEED_GAIN * (command - speed), *ACCEL_RANGE))
+
+
+def features(obs: Observation, accel: float, ahead: list[float]) -> np.ndarray:
+    """The observation's values (see :data:`OBSERVATION`), before noise and clipping.
+
+    Args:
+        obs: what the traffic manager shows the ego's controller.
+        accel: [m/s^2] the ego's measured acceleration.
+        ahead: the recorded speeds ahead (:func:`ahead_speeds`).
+    """
+    k = obs.lanes.lanes.index(obs.lane)
+
+    def gap(value):
+        return GAP_CAP if not math.isfinite(value) else min(float(value), GAP_CAP)
+
+    def speed_or_own(value):
+        return obs.speed if not math.isfinite(value) else float(value)
+
+    values = [
+        obs.speed,
+        accel,
+        gap(obs.lanes.leader_gap[k]),
+        speed_or_own(obs.lanes.leader_speed[k]),
+        gap(obs.lanes.follower_gap[k]),
+        speed_or_own(obs.lanes.follower_speed[k]),
+        *ahead,
+    ]
+    return np.asarray(values, dtype=np.float64)
+
+
+def ahead_speeds(traffic, road, t: float, x: float, free_speed: float) -> list[float]:
+    """Recorded mean speeds [m/s] ahead of road-frame ``x`` [m] at unix time ``t``, per
+    lane -1..-4 and bin of :data:`AHEAD_BINS`; ``free_speed`` where nobody is recorded.
+
+    Args:
+        traffic: the recorded traffic (``EmpiricalTraffic``). road: the carriageway.
+    """
+    snap = traffic.snapshot(road, t, x, x + AHEAD_BINS[-1][1])
+    out = []
+    for lane in LANES:
+        for a, b in AHEAD_BINS:
+            rows = (snap.lane == lane) & (snap.x >= x + a) & (snap.x < x + b)
+            out.append(float(snap.speed[rows].mean()) if rows.any() else free_speed)
+    return out
 
 
 def register_envs() -> None:

@@ -250,6 +250,7 @@ class Cosimulator:
         self.av_ids.discard(self.ego_id)  # the ego's controller is set next
         if self.controller is not None:
             self.manager.set_controller(self.ego_id, self.controller)
+            _bind(self.controller, self)
         self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
         snap = self._snapshot()
         bounds = self.windows.bounds(snap.x)
@@ -524,6 +525,7 @@ class Cosimulator:
             if self._is_av(tid):
                 av = load_controller(self.config.ego_controller, self.config)
                 self.manager.set_controller(i, av)
+                _bind(av, self)
                 self.av_ids.add(i)
         self._base_speed = np.concatenate([self._base_speed, base])
         self._tids = np.concatenate([self._tids, new.tid])
@@ -655,6 +657,14 @@ def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[flo
     if not lo < hi:
         raise ScenarioError(f"the map ({m0:.0f} to {m1:.0f} m) and data do not overlap")
     return lo, hi
+
+
+def _bind(controller, sim: "Cosimulator") -> None:
+    """Hand the simulation to a controller that asks for it with a ``bind(sim)``
+    method (e.g. to read the recorded traffic ahead, as a connected vehicle could)."""
+    bind = getattr(controller, "bind", None)
+    if callable(bind):
+        bind(sim)
 
 
 def load_controller(spec: str, config=None) -> EgoController | None:
