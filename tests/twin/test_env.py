@@ -90,3 +90,11 @@ def test_bad_settings_are_named(data):
     with pytest.raises(ValueError, match="one finite number"):
         env.step(np.array([np.nan], np.float32))
     env.close()
+
+
+def test_the_package_declares_its_environments_entry_point():
+    from importlib.metadata import entry_points
+
+    (point,) = [e for e in entry_points(group="gymnasium.envs") if e.name == "i24twin"]
+    point.load()()  # registering twice is harmless
+    assert twin.env.ENV_ID in gym.registry
