@@ -39,14 +39,47 @@ from twin.vehicle_classes import vehicle_paints
 
 SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
 SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)
-LIGHT = {
-    "lightDirection": [0.25, -0.35, 1.0],  # sun high in the south: the paper's "high noon"
-    "lightColor": [1.0, 1.0, 1.0],
-    "lightAmbientCoeff": 0.55,
-    "lightDiffuseCoeff": 0.55,
-    "lightSpecularCoeff": 0.05,
-    "shadow": 0,
-}
+
+
+@dataclass(frozen=True)
+class Light:
+    """The light of a picture: the sun and the sky behind the scene.
+
+    Attributes:
+        direction: toward the sun, world frame (east, north, up); need not be unit.
+        color: the sun's RGB, 0..1.
+        ambient, diffuse, specular: the renderer's lighting coefficients.
+        shadows: shadows cast from the sun (drawn by :mod:`sensors.shadows`).
+        sky_top, sky_horizon: RGB 0..255 of the sky, at the top of the picture and
+            at the horizon.
+    """
+
+    direction: tuple[float, float, float] = (0.25, -0.35, 1.0)
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    ambient: float = 0.55
+    diffuse: float = 0.55
+    specular: float = 0.05
+    shadows: bool = False
+    sky_top: tuple[float, float, float] = tuple(SKY_TOP)
+    sky_horizon: tuple[float, float, float] = tuple(SKY_HORIZON)
+
+    def renderer_args(self) -> dict:
+        """Keyword arguments of pybullet's ``getCameraImage``."""
+        return {
+            "lightDirection": list(self.direction),
+            "lightColor": list(self.color),
+            "lightAmbientCoeff": self.ambient,
+            "lightDiffuseCoeff": self.diffuse,
+            "lightSpecularCoeff": self.specular,
+            # TinyRenderer's own shadow map looks at the world's origin: useless on a
+            # mile of road, and it doubles the time (sensors.shadows draws them instead)
+            "shadow": 0,
+        }
+
+
+#: The paper's "high noon": the sun high in the south, no shadows.
+NOON = Light()
+LIGHT = NOON.renderer_args()
 SKY_CLASS = class_id("sky")
 NO_VEHICLE = -1
 PAINT_HASH = 2654435761  # Knuth's multiplicative hash: paints spread over ids
@@ -226,8 +259,10 @@ class SceneView:
             shown=shown,
         )
 
-    def render(self, view: list, projection: list, width: int, height: int) -> Picture:
-        """Render the scene as posed by the last :meth:`vehicles` call.
+    def render(
+        self, view: list, projection: list, width: int, height: int, light: Light = NOON
+    ) -> Picture:
+        """Render the scene as posed by the last :meth:`vehicles` call, in ``light``.
 
         ``view`` and ``projection`` are OpenGL column-major 4x4 matrices (16 floats).
         """
@@ -244,14 +279,15 @@ class SceneView:
                 projection,
                 renderer=renderer,
                 physicsClientId=self.client,
-                **LIGHT,
+                **light.renderer_args(),
             )
         self.raw_s += time.perf_counter() - start
         rgba = np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))
         seg = np.reshape(np.asarray(seg, dtype=np.int32), (height, width)) + 1
         nothing = (seg == 0).view(np.uint8)
         rgb = cv2.cvtColor(rgba, cv2.COLOR_RGBA2RGB)
-        cv2.copyTo(_sky(height, width), nothing, rgb)  # OpenCV: 0.1 ms, numpy: 4 ms
+        sky = _sky(height, width, light.sky_top, light.sky_horizon)
+        cv2.copyTo(sky, nothing, rgb)  # OpenCV: 0.1 ms, numpy: 4 ms
         # the cleared buffer reads a little under 1 (the far plane): mark it exactly
         depth = np.reshape(np.asarray(depth, dtype=np.float32), (height, width)).copy()
         depth[nothing.view(bool)] = 1.0
@@ -339,10 +375,11 @@ class SceneView:
 
 
 @cache
-def _sky(height: int, width: int) -> np.ndarray:
-    """(height, width, 3) uint8: a clear noon sky, deep blue above, pale at the horizon."""
+def _sky(height: int, width: int, top: tuple = tuple(SKY_TOP), horizon: tuple = tuple(SKY_HORIZON)):
+    """(height, width, 3) uint8: a clear sky, ``top`` above, ``horizon`` at the horizon."""
     rows = np.minimum(np.linspace(0.0, 2.0, height), 1.0)[:, None]
-    colour = (SKY_TOP + (SKY_HORIZON - SKY_TOP) * rows).astype(np.uint8)
+    top, horizon = np.asarray(top, np.float64), np.asarray(horizon, np.float64)
+    colour = (top + (horizon - top) * rows).astype(np.uint8)
     sky = np.ascontiguousarray(np.broadcast_to(colour[:, None, :], (height, width, 3)))
     sky.flags.writeable = False
     return sky
