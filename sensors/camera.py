@@ -25,10 +25,14 @@ import numpy as np
 import pandas as pd
 
 from mapgen.build import MapBundle
+from sensors.shadows import Casters, darken, map_casters, shade_factor, shadow_mask
+from sensors.sun import SUN_MODES, episode_light
 from twin.paths import asset
 from twin.physics.render import DrawnVehicles, SceneView, resolve_renderer
 from twin.physics.world import PhysicsWorld
 from twin.timeutil import steps_per_sample
+
+SUN_STREAM = 0x53554E  # seeds an episode's random sun apart from its other draws
 
 MOUNTS_CSV = "camera_mounts.csv"
 REFERENCES = {"front": 0.5, "centre": 0.0, "rear": -0.5}  # of the vehicle's length
@@ -205,6 +209,7 @@ class Frame:
         ego_id: the twin id of the vehicle carrying the camera.
         vehicles: the other vehicles as drawn (3D boxes in the world).
         renderer: ``tiny`` or ``egl``.
+        light: the light it was taken in (:func:`sensors.sun.episode_light`'s record).
     """
 
     camera: CameraSpec
@@ -220,6 +225,7 @@ class Frame:
     ego_id: int
     vehicles: DrawnVehicles
     renderer: str
+    light: dict = field(default_factory=dict)
 
     @property
     def K(self) -> np.ndarray:
@@ -236,6 +242,8 @@ class CameraRig:
         cameras: the rig.
         renderer: ``auto``, ``tiny`` or ``egl`` (see :func:`resolve_renderer`).
         dt: [s] the simulation step; each camera's rate must divide its rate.
+        sun, shadows: the light (see :class:`CameraSettings`).
+        seed: draws the episode's sun when ``sun`` is ``random``.
 
     Raises:
         CameraError: no camera, repeated names, or a rate that does not divide 1/dt.
@@ -247,8 +255,13 @@ class CameraRig:
     cameras: tuple[CameraSpec, ...] = (CameraSpec(),)
     renderer: str = "auto"
     dt: float = 0.01
+    sun: str = "recorded"
+    shadows: bool = True
+    seed: int = 0
     view: SceneView = field(init=False)
     _counts: dict[str, int] = field(init=False)
+    _drawn_light: tuple | None = field(init=False, default=None)
+    _map_casters: Casters = field(init=False)
 
     def __post_init__(self):
         self.cameras = tuple(self.cameras)
@@ -257,8 +270,20 @@ class CameraRig:
             kind = resolve_renderer(self.renderer)
         except ValueError as error:
             raise CameraError(str(error)) from None
+        if self.sun not in SUN_MODES:
+            raise CameraError(f"sun must be one of {', '.join(SUN_MODES)}, got {self.sun!r}")
+        if self.sun == "random":  # one sun for the episode
+            rng = np.random.default_rng([self.seed, SUN_STREAM])
+            self._drawn_light = episode_light("random", 0.0, shadows=self.shadows, rng=rng)
         self.view = SceneView(self.world, self.bundle, kind)
         self._counts = {c.name: 0 for c in self.cameras}
+        self._map_casters = map_casters(self.bundle)
+
+    def light_at(self, time: float):
+        """(Light, its record) of a frame at unix ``time`` [s]."""
+        if self._drawn_light is not None:
+            return self._drawn_light
+        return episode_light(self.sun, time, shadows=self.shadows)
 
     def close(self) -> None:
         self.view.close()
@@ -290,6 +315,11 @@ class CameraRig:
         world_from_ego[:3, :3] = everyone.rotation[ego[0]]
         world_from_ego[:3, 3] = everyone.position[ego[0]]
         length = float(everyone.size[ego[0], 0])
+        light, light_record = self.light_at(time)
+        casters = Casters.join(
+            self._map_casters,
+            Casters.on_ground(everyone.position, everyone.rotation, everyone.size),
+        )  # the ego's own shadow too: it is hidden from its cameras, not from the sun
         frames = []
         for camera in cameras:
             ego_from_camera = camera.vehicle_from_camera(length)
@@ -299,14 +329,28 @@ class CameraRig:
                 camera.projection_matrix(),
                 camera.width,
                 camera.height,
+                light,
             )
+            rgb = picture.rgb
+            if light.shadows:
+                mask = shadow_mask(
+                    casters,
+                    np.asarray(light.direction),
+                    camera.K,
+                    np.linalg.inv(world_from_camera),
+                    camera.width,
+                    camera.height,
+                    camera.near,
+                )
+                shade = shade_factor(light.ambient, light.diffuse, np.asarray(light.direction))
+                rgb = darken(rgb, picture.semantic, mask, shade)
             frames.append(
                 Frame(
                     camera=camera,
                     index=self._counts[camera.name],
                     time=time,
                     sim_time=sim_time,
-                    rgb=picture.rgb,
+                    rgb=rgb,
                     depth=camera.depth_from_buffer(picture.depth_buffer),
                     semantic=picture.semantic,
                     instance=picture.instance,
@@ -315,6 +359,7 @@ class CameraRig:
                     ego_id=int(ego_id),
                     vehicles=drawn,
                     renderer=self.view.renderer.value,
+                    light=light_record,
                 )
             )
             self._counts[camera.name] += 1
@@ -364,6 +409,11 @@ class CameraSettings:
         width, height: [px]; hfov_deg: [deg]; near, far: [m]; rate_hz: [Hz], the same
             for every camera of the rig.
         video: also write each camera's RGB stream as MP4.
+        sun: the light: ``recorded`` (the sun over the segment at the frame's time,
+            from its date and the segment's latitude and longitude), ``noon`` (the
+            paper's high noon, no shadows) or ``random`` (drawn once per episode from
+            the run's seed); see :mod:`sensors.sun`.
+        shadows: the sun casts shadows (``recorded`` and ``random``).
     """
 
     enabled: bool = False
@@ -377,10 +427,14 @@ class CameraSettings:
     far: float = CameraSpec.far
     rate_hz: float = CameraSpec.rate_hz
     video: bool = True
+    sun: str = "recorded"
+    shadows: bool = True
 
     def __post_init__(self):
         if self.renderer not in ("auto", "tiny", "egl"):
             raise CameraError(f"renderer must be auto, tiny or egl, got {self.renderer!r}")
+        if self.sun not in SUN_MODES:
+            raise CameraError(f"sun must be one of {', '.join(SUN_MODES)}, got {self.sun!r}")
         self.rig()
 
     def rig(self) -> tuple[CameraSpec, ...]:

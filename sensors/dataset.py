@@ -367,7 +367,17 @@ def render_episode(
                     "time": ego.t,
                     "speed_mps": round(ego.speed, 3),
                 }
-                rig = CameraRig(sim.world, bundle, cameras, cosim.camera.renderer, cosim.dt)
+                rig = CameraRig(
+                    sim.world,
+                    bundle,
+                    cameras,
+                    cosim.camera.renderer,
+                    cosim.dt,
+                    sun=cosim.camera.sun,
+                    shadows=cosim.camera.shadows,
+                    seed=cosim.seed,
+                )
+                description["light"] = rig.light_at(sim.t)[1]  # at the episode's start
                 try:
                     _take_frames(
                         config, sim, rig, model_triangles(bundle), spec, samples, writer, on_frames
@@ -471,6 +481,7 @@ def sample_labels(frame: Frame, labels: VehicleLabels, kept: np.ndarray, episode
         "time": frame.time,
         "sim_time": round(frame.sim_time, 9),
         "renderer": frame.renderer,
+        "light": frame.light,
         "width": camera.width,
         "height": camera.height,
         "K": frame.K.tolist(),
@@ -540,6 +551,7 @@ def assemble(out: Path, config: DatasetConfig, specs: list[EpisodeSpec]) -> dict
                 "skipped": e["skipped"],
                 "ended_early": e["ended_early"],
                 "ego": e["ego"],
+                "light": e.get("light"),
                 "samples": len(e["samples"]),
             }
             for e in episodes

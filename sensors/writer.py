@@ -226,6 +226,7 @@ def frame_meta(frame: Frame) -> dict:
         "sim_time": round(frame.sim_time, 9),
         "ego_id": frame.ego_id,
         "renderer": frame.renderer,
+        "light": frame.light,
         "width": camera.width,
         "height": camera.height,
         "K": frame.K.tolist(),

@@ -295,7 +295,8 @@ def camera_bench(
                         for _ in range(10):
                             world.step()
                         start = time.perf_counter()
-                        (frame,) = rig.capture(int(ids[ego]), time=0.1 * k, sim_time=0.1 * k)
+                        at = synth.SCENARIO_TIME + 0.1 * k  # the morning sun of the scenarios
+                        (frame,) = rig.capture(int(ids[ego]), time=at, sim_time=0.1 * k)
                         if writer is not None:
                             writer.write(frame)
                         busy += time.perf_counter() - start

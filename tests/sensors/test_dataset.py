@@ -75,6 +75,11 @@ def test_the_dataset_has_every_sample_and_its_manifest(dataset):
     stats = manifest["statistics"]
     assert stats["vehicles_kept"] + stats["vehicles_dont_care"] == stats["vehicles_visible"]
     assert stats["vehicles_kept"] > 0
+    # the light of each episode (the sun over the segment at its time, by default) is in
+    # the manifest and in every label file
+    assert all(e["light"]["sun"] == "recorded" for e in episodes)
+    label = json.loads((out / "training" / "labels" / "000000.json").read_text())
+    assert label["light"]["sun"] == "recorded" and label["light"]["elevation_deg"] is not None
 
 
 def test_kitti_files_read_by_a_devkit_reader(dataset):

@@ -51,7 +51,14 @@ class Cameras:
     def __init__(self, sim: Cosimulator, bundle, folder: Path):
         settings = sim.config.camera
         self.rig = CameraRig(
-            sim.world, bundle, settings.rig(), renderer=settings.renderer, dt=sim.config.dt
+            sim.world,
+            bundle,
+            settings.rig(),
+            renderer=settings.renderer,
+            dt=sim.config.dt,
+            sun=settings.sun,
+            shadows=settings.shadows,
+            seed=sim.config.seed,
         )
         self.writer = FrameWriter(folder, self.rig.cameras, video=settings.video)
         self.render_s = 0.0
@@ -198,7 +205,16 @@ def render_at(
         sim.reset()
         while sim.step_index < round(t / config.dt) and not sim.done:
             sim.step()
-        cameras = CameraRig(sim.world, bundle, tuple(chosen[:1]), config.camera.renderer, config.dt)
+        cameras = CameraRig(
+            sim.world,
+            bundle,
+            tuple(chosen[:1]),
+            config.camera.renderer,
+            config.dt,
+            sun=config.camera.sun,
+            shadows=config.camera.shadows,
+            seed=config.seed,
+        )
         try:
             (frame,) = cameras.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time)
         finally:
