@@ -629,6 +629,26 @@ def coco_document(labels: list[dict], config: DatasetConfig) -> dict:
     }
 
 
+#: distance bands [m] of the statistics, (name, upper bound)
+DISTANCE_BANDS = (
+    ("0-30", 30.0),
+    ("30-60", 60.0),
+    ("60-100", 100.0),
+    ("100-200", 200.0),
+    ("200+", math.inf),
+)
+#: truncation levels (share of the amodal box outside the image), (name, upper bound)
+TRUNCATION_LEVELS = (("none", 0.0), ("up_to_0.3", 0.3), ("up_to_0.6", 0.6), ("over_0.6", math.inf))
+
+
+def _distance_band(distance: float) -> str:
+    return next(name for name, upper in DISTANCE_BANDS if distance < upper)
+
+
+def _truncation_level(truncation: float) -> str:
+    return next(name for name, upper in TRUNCATION_LEVELS if truncation <= upper)
+
+
 def statistics(episodes: list[dict], labels: list[dict]) -> dict:
     """Counts and distributions of a dataset's episodes and labelled vehicles."""
     vehicles = [v for record in labels for v in record["vehicles"]]
@@ -643,6 +663,9 @@ def statistics(episodes: list[dict], labels: list[dict]) -> dict:
         )
 
     levels = Counter(v["occlusion_level"] for v in kept)
+    bands = Counter(_distance_band(v["distance_m"]) for v in kept)
+    per_sample = [sum(v["kept"] for v in record["vehicles"]) for record in labels]
+    truncation = Counter(_truncation_level(v["truncation"]) for v in kept)
     return {
         "episodes": len(episodes),
         "episodes_congested": sum(e["episode"]["congested"] for e in episodes),
@@ -656,6 +679,9 @@ def statistics(episodes: list[dict], labels: list[dict]) -> dict:
         "per_class": {c.name: sum(v["class"] == c.name for v in kept) for c in categories()},
         "occlusion_levels": {str(k): levels.get(k, 0) for k in (0, 1, 2)},
         "truncated": sum(v["truncation"] > 0 for v in kept),
+        "truncation_levels": {name: truncation.get(name, 0) for name, _ in TRUNCATION_LEVELS},
+        "distance_bands": {name: bands.get(name, 0) for name, _ in DISTANCE_BANDS},
+        "kept_per_sample_quantiles": quantiles(per_sample),
         "distance_m": quantiles([v["distance_m"] for v in kept]),
         "height_px": quantiles([v["visible_box"][3] - v["visible_box"][1] + 1 for v in kept]),
         "speed_mps": quantiles([v["speed_mps"] for v in kept]),

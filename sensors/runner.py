@@ -242,6 +242,8 @@ def summary(result: DatasetResult) -> str:
         f"({stats['kept_per_sample']} a sample), DontCare {stats['vehicles_dont_care']}",
         f"kept by class: {per_class or 'none'}; occlusion levels 0/1/2: "
         f"{levels['0']}/{levels['1']}/{levels['2']}; truncated {stats['truncated']}",
+        "kept by distance: "
+        + ", ".join(f"{band} m {n}" for band, n in stats["distance_bands"].items()),
     ]
     if stats["distance_m"]:
         d, h = stats["distance_m"], stats["height_px"]

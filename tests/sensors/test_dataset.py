@@ -75,6 +75,13 @@ def test_the_dataset_has_every_sample_and_its_manifest(dataset):
     stats = manifest["statistics"]
     assert stats["vehicles_kept"] + stats["vehicles_dont_care"] == stats["vehicles_visible"]
     assert stats["vehicles_kept"] > 0
+    # the statistics the perception user reads: distance bands, truncation, per sample
+    assert sum(stats["distance_bands"].values()) == stats["vehicles_kept"]
+    assert list(stats["distance_bands"]) == ["0-30", "30-60", "60-100", "100-200", "200+"]
+    assert sum(stats["truncation_levels"].values()) == stats["vehicles_kept"]
+    assert stats["truncation_levels"]["none"] == stats["vehicles_kept"] - stats["truncated"]
+    per_sample = stats["kept_per_sample_quantiles"]
+    assert per_sample["min"] <= stats["kept_per_sample"] <= per_sample["max"]
     # the light of each episode (the sun over the segment at its time, by default) is in
     # the manifest and in every label file
     assert all(e["light"]["sun"] == "recorded" for e in episodes)
