@@ -28,11 +28,12 @@ from mapgen.build import MapBundle
 from sensors.shadows import Casters, darken, map_casters, shade_factor, shadow_mask
 from sensors.sun import SUN_MODES, episode_light
 from twin.paths import asset
-from twin.physics.render import DrawnVehicles, SceneView, resolve_renderer
+from twin.physics.render import REPLAY_BASE, DrawnVehicles, SceneView, resolve_renderer
 from twin.physics.world import PhysicsWorld
 from twin.timeutil import steps_per_sample
 
 SUN_STREAM = 0x53554E  # seeds an episode's random sun apart from its other draws
+MAX_INSTANCE_ID = 65534  # instance images hold id + 1 in 16 bits
 
 MOUNTS_CSV = "camera_mounts.csv"
 REFERENCES = {"front": 0.5, "centre": 0.0, "rear": -0.5}  # of the vehicle's length
@@ -262,6 +263,7 @@ class CameraRig:
     _counts: dict[str, int] = field(init=False)
     _drawn_light: tuple | None = field(init=False, default=None)
     _map_casters: Casters = field(init=False)
+    _replay_ids: dict = field(init=False, default_factory=dict)
 
     def __post_init__(self):
         self.cameras = tuple(self.cameras)
@@ -278,6 +280,42 @@ class CameraRig:
         self.view = SceneView(self.world, self.bundle, kind)
         self._counts = {c.name: 0 for c in self.cameras}
         self._map_casters = map_casters(self.bundle)
+
+    def _pose_replayed(self, replayed) -> DrawnVehicles:
+        """Pose the replayed vehicles (none: release them); their drawn boxes."""
+        if replayed is None or len(replayed) == 0:
+            self.view.pose_replayed(np.empty(0, np.int64), [], np.empty((0, 3)), [], [])
+            return _no_vehicles()
+        ids = np.array([self._replay_id(int(t)) for t in replayed.tid.tolist()], np.int64)
+        sizes = self.view.pose_replayed(
+            ids, replayed.vehicle_class, replayed.size, replayed.position, replayed.rotation
+        )
+        n = ids.size
+        return DrawnVehicles(
+            id=ids,
+            vehicle_class=np.asarray(replayed.vehicle_class, np.int64),
+            size=sizes,
+            position=replayed.position,
+            rotation=replayed.rotation,
+            speed=replayed.speed,
+            shown=np.ones(n, bool),
+            replayed=np.ones(n, bool),
+            record_id=np.asarray(replayed.record_id, object),
+            road=np.asarray(replayed.road, np.int64),
+        )
+
+    def _replay_id(self, tid: int) -> int:
+        """The instance id of recorded trajectory ``tid`` in this episode."""
+        known = self._replay_ids.get(tid)
+        if known is None:
+            known = REPLAY_BASE + len(self._replay_ids)
+            if known >= MAX_INSTANCE_ID:
+                raise CameraError(
+                    f"more than {MAX_INSTANCE_ID - REPLAY_BASE} recorded vehicles seen in one "
+                    "episode: the 16-bit instance images cannot tell them apart"
+                )
+            self._replay_ids[tid] = known
+        return known
 
     def light_at(self, time: float):
         """(Light, its record) of a frame at unix ``time`` [s]."""
@@ -299,15 +337,28 @@ class CameraRig:
         *,
         time: float = 0.0,
         sim_time: float = 0.0,
+        replayed=None,
+        record_of=None,
     ) -> list[Frame]:
         """Render ``cameras`` (default: all) of the rig on vehicle ``ego_id`` now.
 
+        Args:
+            replayed: recorded vehicles drawn beside the simulated ones
+                (:class:`sensors.replay.Replayed`), each with an id of its own from
+                ``REPLAY_BASE`` up, the same for a record all episode long.
+            record_of: ``record_of(ids) -> (record ids, roads)`` of simulated vehicles,
+                for their labels.
+
         Raises:
             KeyError: ``ego_id`` is not an active vehicle.
+            CameraError: more replayed vehicles in an episode than instance ids.
         """
         cameras = self.cameras if cameras is None else cameras
         everyone = self.view.vehicles(hide=[ego_id])
-        drawn = everyone.take(everyone.shown)
+        if record_of is not None:
+            records, roads = record_of(everyone.id)
+            everyone = replace(everyone, record_id=np.asarray(records, object), road=roads)
+        drawn = DrawnVehicles.join(everyone.take(everyone.shown), self._pose_replayed(replayed))
         ego = np.flatnonzero(everyone.id == ego_id)
         if ego.size == 0:
             raise KeyError(f"vehicle {ego_id} is not active in the physics world")
@@ -319,6 +370,11 @@ class CameraRig:
         casters = Casters.join(
             self._map_casters,
             Casters.on_ground(everyone.position, everyone.rotation, everyone.size),
+            Casters.on_ground(
+                drawn.position[drawn.replayed],
+                drawn.rotation[drawn.replayed],
+                drawn.size[drawn.replayed],
+            ),
         )  # the ego's own shadow too: it is hidden from its cameras, not from the sun
         frames = []
         for camera in cameras:
@@ -364,6 +420,14 @@ class CameraRig:
             )
             self._counts[camera.name] += 1
         return frames
+
+
+def _no_vehicles() -> DrawnVehicles:
+    empty = np.empty(0, np.int64)
+    return DrawnVehicles(
+        empty, empty, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3, 3)), np.empty(0),
+        np.empty(0, bool),
+    )  # fmt: skip
 
 
 def check_rig(cameras: tuple[CameraSpec, ...], dt: float) -> None:

@@ -58,7 +58,8 @@ from sensors.episodes import (
 from sensors.episodes import measure_cells as _measure_cells
 from sensors.kitti import calibration_text, categories, encode_depth, label_lines
 from sensors.labels import VehicleLabels, frame_labels, model_triangles
-from sensors.writer import BackgroundWriter, encode_instance, write_pngs
+from sensors.replay import FrameTraffic
+from sensors.writer import BackgroundWriter, encode_instance, vehicle_source, write_pngs
 from twin import __version__
 from twin.atomic import AtomicFolder, atomic_file, marked_as
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
@@ -393,11 +394,20 @@ def render_episode(
 
 def _take_frames(config, sim, rig, models, spec, samples, writer, on_frames) -> None:
     warmup, every = config.warmup_steps, config.frame_every
-    frames = 0
+    frames, traffic = 0, None
     while frames < config.frames_per_episode:
         step = sim.step_index
         if step >= warmup and (step - warmup) % every == 0:
-            for frame in rig.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time):
+            if traffic is None:
+                traffic = FrameTraffic(sim, sim.world.road, max(c.far for c in rig.cameras))
+            captured = rig.capture(
+                sim.ego_id,
+                time=sim.t,
+                sim_time=sim.sim_time,
+                replayed=traffic.replayed(),
+                record_of=traffic.record_of,
+            )
+            for frame in captured:
                 labels = frame_labels(frame, models)
                 kept = config.filters.keep(labels)
                 stem = f"{len(samples):06d}"
@@ -447,6 +457,7 @@ def sample_labels(frame: Frame, labels: VehicleLabels, kept: np.ndarray, episode
     kitti = [c.kitti_type for c in categories()]
     coco = [c.coco_id for c in categories()]
     vehicles = []
+    where = {int(v): k for k, v in enumerate(frame.vehicles.id.tolist())}
     for i in range(len(labels)):
         left, top, right, bottom = labels.visible_box[i].tolist()
         crop = frame.instance[top : bottom + 1, left : right + 1] == labels.id[i]
@@ -455,6 +466,7 @@ def sample_labels(frame: Frame, labels: VehicleLabels, kept: np.ndarray, episode
         vehicles.append(
             {
                 "id": int(labels.id[i]),
+                **vehicle_source(frame.vehicles, where[int(labels.id[i])]),
                 "class": names[k],
                 "kitti_type": kitti[k],
                 "category_id": coco[k],
@@ -608,6 +620,9 @@ def coco_document(labels: list[dict], config: DatasetConfig) -> dict:
                     "iscrowd": 0,
                     "segmentation": vehicle["mask"],
                     "track_id": vehicle["id"],
+                    "record_id": vehicle.get("record_id"),
+                    "source": vehicle.get("source"),
+                    "road": vehicle.get("road"),
                     "occlusion_level": vehicle["occlusion_level"],
                     "truncation": vehicle["truncation"],
                     "distance_m": vehicle["distance_m"],

@@ -205,17 +205,37 @@ def encode_instance(instance: np.ndarray) -> np.ndarray:
     return (instance + 1).astype(np.uint16)
 
 
+def vehicle_source(vehicles, i: int) -> dict:
+    """Where drawn vehicle ``i`` comes from: ``source`` (``simulated``, a physics body,
+    or ``replayed`` from the recording), its ``record_id`` (I-24 MOTION ``_id``) and
+    its ``road``."""
+    road = int(vehicles.road[i])
+    return {
+        "source": "replayed" if vehicles.replayed[i] else "simulated",
+        "record_id": str(vehicles.record_id[i]) or None,
+        "road": {1: "eastbound", -1: "westbound"}.get(road),
+    }
+
+
+def _centre(vehicles, i: int) -> np.ndarray:
+    """World centre of drawn vehicle ``i``'s box."""
+    return vehicles.position[i] + vehicles.rotation[i][:, 2] * 0.5 * vehicles.size[i, 2]
+
+
 def frame_meta(frame: Frame) -> dict:
     """The JSON-ready description of a frame: time, calibration, poses, vehicles."""
     counts = np.bincount(frame.instance.reshape(-1) + 1)
     vehicles = frame.vehicles
+    origin = frame.world_from_camera[:3, 3]
     in_view = [
         {
             "id": int(twin_id),
-            "class": VEHICLE_CLASSES[int(k)],
+            "class": VEHICLE_CLASSES[int(vehicles.vehicle_class[i])],
             "pixels": int(counts[twin_id + 1]),
+            **vehicle_source(vehicles, i),
+            "distance_m": round(float(np.linalg.norm(_centre(vehicles, i) - origin)), 3),
         }
-        for twin_id, k in zip(vehicles.id.tolist(), vehicles.vehicle_class.tolist(), strict=True)
+        for i, twin_id in enumerate(vehicles.id.tolist())
         if twin_id + 1 < counts.size and counts[twin_id + 1] > 0
     ]
     camera = frame.camera

@@ -214,6 +214,20 @@ class Cosimulator:
         """[s] since t0."""
         return self.step_index * self.config.dt
 
+    @property
+    def simulated(self) -> np.ndarray:
+        """(trajectories,) bool by store index: the recorded vehicles simulated now
+        (read-only)."""
+        view = self._is_sim.view()
+        view.flags.writeable = False
+        return view
+
+    def records_of(self, ids) -> np.ndarray:
+        """The I-24 MOTION ``_id`` of each simulated vehicle ``ids`` (twin ids)."""
+        states = self.world.states()
+        tids = self._tids[np.searchsorted(states.id, np.asarray(ids, np.int64))]
+        return np.asarray(self.traffic.store.trajectory_arrays["id"])[tids]
+
     def reset(self) -> None:
         """Steps 1 and 2: the ego is the recorded vehicle closest to the requested lane,
         x and time; it and the recorded vehicles of the visible window are spawned at

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from sensors.camera import CameraRig, Frame
+from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
 from twin import __version__, energy
 from twin.atomic import AtomicFolder, marked_as
@@ -63,12 +64,23 @@ class Cameras:
         self.writer = FrameWriter(folder, self.rig.cameras, video=settings.video)
         self.render_s = 0.0
         self.frames = 0
+        self.traffic: FrameTraffic | None = None
 
     def __call__(self, sim: Cosimulator) -> None:
         due = self.rig.due(sim.step_index)
         if due:
             start = time.perf_counter()
-            frames = self.rig.capture(sim.ego_id, due, time=sim.t, sim_time=sim.sim_time)
+            if self.traffic is None:  # after the reset: the episode's time is known
+                far = max(c.far for c in self.rig.cameras)
+                self.traffic = FrameTraffic(sim, sim.world.road, far)
+            frames = self.rig.capture(
+                sim.ego_id,
+                due,
+                time=sim.t,
+                sim_time=sim.sim_time,
+                replayed=self.traffic.replayed(),
+                record_of=self.traffic.record_of,
+            )
             self.render_s += time.perf_counter() - start
             for frame in frames:
                 self.writer.write(frame)
@@ -216,7 +228,14 @@ def render_at(
             seed=config.seed,
         )
         try:
-            (frame,) = cameras.capture(sim.ego_id, time=sim.t, sim_time=sim.sim_time)
+            traffic = FrameTraffic(sim, bundle.road, chosen[0].far)
+            (frame,) = cameras.capture(
+                sim.ego_id,
+                time=sim.t,
+                sim_time=sim.sim_time,
+                replayed=traffic.replayed(),
+                record_of=traffic.record_of,
+            )
         finally:
             cameras.close()
     return frame

@@ -81,6 +81,9 @@ class Light:
 NOON = Light()
 LIGHT = NOON.renderer_args()
 SKY_CLASS = class_id("sky")
+#: Ids of replayed vehicles start here: above any twin id of a run, and within the
+#: 16-bit instance images (65534 at most)
+REPLAY_BASE = 40000
 NO_VEHICLE = -1
 PAINT_HASH = 2654435761  # Knuth's multiplicative hash: paints spread over ids
 
@@ -155,6 +158,11 @@ class DrawnVehicles:
         rotation: (n, 3, 3) body-to-world rotation (x forward, y left, z up).
         speed: (n,) [m/s] along the vehicle's heading.
         shown: (n,) bool, False for the vehicles hidden from this picture.
+        replayed: (n,) bool: drawn from the recording (never a physics body), with an
+            id from :data:`REPLAY_BASE` up; else simulated, with its twin id.
+        record_id: (n,) the I-24 MOTION ``_id`` of the recording it comes from ("" where
+            not known).
+        road: (n,) +1 eastbound, -1 westbound (0 where not known).
     """
 
     id: np.ndarray
@@ -164,9 +172,27 @@ class DrawnVehicles:
     rotation: np.ndarray
     speed: np.ndarray
     shown: np.ndarray
+    replayed: np.ndarray | None = None
+    record_id: np.ndarray | None = None
+    road: np.ndarray | None = None
+
+    def __post_init__(self):
+        n = self.id.size
+        if self.replayed is None:
+            object.__setattr__(self, "replayed", np.zeros(n, bool))
+        if self.record_id is None:
+            object.__setattr__(self, "record_id", np.full(n, "", dtype=object))
+        if self.road is None:
+            object.__setattr__(self, "road", np.zeros(n, np.int64))
 
     def take(self, index) -> "DrawnVehicles":
         return DrawnVehicles(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    @classmethod
+    def join(cls, *parts: "DrawnVehicles") -> "DrawnVehicles":
+        return cls(
+            **{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)}
+        )
 
 
 class SceneView:
@@ -228,7 +254,10 @@ class SceneView:
         parked out of sight) and return all active vehicles with their drawn boxes."""
         states = self.world.states()
         params = self.world.params
-        for gone in set(self._proxies) - set(states.id.tolist()):
+        if states.id.size and int(states.id.max()) >= REPLAY_BASE:
+            raise RuntimeError(f"twin ids reached {REPLAY_BASE}, where replayed ids begin")
+        simulated = {i for i in self._proxies if i < REPLAY_BASE}
+        for gone in simulated - set(states.id.tolist()):
             self._release(gone)
         keys = [
             (int(k), *(max(1, round(v / SIZE_STEP)) for v in size))
@@ -258,6 +287,28 @@ class SceneView:
             speed=states.speed,
             shown=shown,
         )
+
+    def pose_replayed(
+        self, ids: np.ndarray, vehicle_class: np.ndarray, size: np.ndarray, position, rotation
+    ) -> np.ndarray:
+        """Pose a proxy on each replayed vehicle (``ids`` from :data:`REPLAY_BASE` up,
+        (n,) classes, (n, 3) sizes, bottom centres and (n, 3, 3) rotations in the world);
+        the replayed proxies not among ``ids`` go back to the pool. Returns the drawn
+        sizes (n, 3) [m] (the models' sizes are rounded as the simulated ones')."""
+        ids = np.asarray(ids, np.int64)
+        for gone in {i for i in self._proxies if i >= REPLAY_BASE} - set(ids.tolist()):
+            self._release(gone)
+        keys = [
+            (int(k), *(max(1, round(v / SIZE_STEP)) for v in box))
+            for k, box in zip(vehicle_class, np.asarray(size), strict=True)
+        ]
+        quaternions = quaternions_of(np.asarray(rotation))
+        for i, twin_id in enumerate(ids.tolist()):
+            body = self._proxy(twin_id, keys[i])
+            p.resetBasePositionAndOrientation(
+                body, position[i].tolist(), quaternions[i].tolist(), physicsClientId=self.client
+            )
+        return np.asarray([k[1:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
 
     def render(
         self, view: list, projection: list, width: int, height: int, light: Light = NOON
@@ -372,6 +423,34 @@ class SceneView:
             )
         self._semantic_lut[body + 1] = semantic
         self._instance_lut[body + 1] = instance
+
+
+def quaternions_of(rotation: np.ndarray) -> np.ndarray:
+    """(n, 4) quaternions (x, y, z, w, pybullet's order) of (n, 3, 3) rotations
+    (Shepperd's method: from the largest of the trace and the diagonal, stable for any
+    angle)."""
+    r = np.asarray(rotation, np.float64).reshape(-1, 3, 3)
+    q = np.empty((len(r), 4))
+    trace = r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]
+    pick = np.argmax(np.column_stack([trace, r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]]), axis=1)
+    for k, m in enumerate(r):
+        if pick[k] == 0:
+            t = 2.0 * np.sqrt(1.0 + trace[k])
+            q[k] = [
+                (m[2, 1] - m[1, 2]) / t,
+                (m[0, 2] - m[2, 0]) / t,
+                (m[1, 0] - m[0, 1]) / t,
+                t / 4,
+            ]
+        else:
+            i = pick[k] - 1
+            j, h = (i + 1) % 3, (i + 2) % 3
+            t = 2.0 * np.sqrt(max(1.0 + m[i, i] - m[j, j] - m[h, h], 1e-12))
+            v = np.empty(4)
+            v[i], v[j], v[h] = t / 4, (m[j, i] + m[i, j]) / t, (m[h, i] + m[i, h]) / t
+            v[3] = (m[h, j] - m[j, h]) / t
+            q[k] = v
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 @cache
