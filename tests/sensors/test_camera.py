@@ -234,3 +234,27 @@ def _quaternion(rotation):
         (rotation[1, 0] - rotation[0, 1]) / (4 * w),
         w,
     ]
+
+
+def test_vehicles_outside_the_view_are_skipped_without_changing_the_frame(built_map, monkeypatch):
+    """A vehicle behind the front camera is hidden from the renderer (TinyRenderer does
+    not clip: it would scan it); the frame is the same as when nothing is skipped."""
+    from twin.physics.render import SceneView
+
+    frames = []
+    for cull in (True, False):
+        if not cull:
+            monkeypatch.setattr(SceneView, "_cull_vehicles", lambda self, clip: None)
+        with PhysicsWorld(built_map) as world:
+            ego, _ = spawn(world, EGO_X, -2, 0)
+            behind, _ = spawn(world, EGO_X - 30.0, -2, 4)
+            spawn(world, EGO_X + 25.0, -3, 1)
+            world.step()
+            rig = CameraRig(world, built_map, (CameraSpec(width=160, height=120),), "tiny")
+            frames.append(rig.capture(ego, time=1.0)[0])
+            if cull:
+                body = rig.view._proxies[behind][0]
+                assert body in rig.view._hidden
+            rig.close()
+    for name in ("rgb", "depth", "semantic", "instance"):
+        assert np.array_equal(getattr(frames[0], name), getattr(frames[1], name)), name

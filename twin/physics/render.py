@@ -241,6 +241,8 @@ class SceneView:
         self._shapes: dict[tuple, int] = {}
         self._free: dict[tuple, list[int]] = {}
         self._proxies: dict[int, tuple[int, tuple]] = {}  # twin id -> (body, key)
+        self._paint_of: dict[int, list] = {}  # proxy body -> its paint (RGBA)
+        self._hidden: set[int] = set()  # proxy bodies hidden as outside the frustum
         self.raw_s = 0.0  # [s] spent in pybullet's renderer, for benchmarks
 
     def close(self) -> None:
@@ -320,7 +322,9 @@ class SceneView:
         renderer = (
             p.ER_BULLET_HARDWARE_OPENGL if self.renderer is Renderer.EGL else p.ER_TINY_RENDERER
         )
-        self._cull(np.reshape(projection, (4, 4)).T @ np.reshape(view, (4, 4)).T)
+        clip_from_world = np.reshape(projection, (4, 4)).T @ np.reshape(view, (4, 4)).T
+        self._cull(clip_from_world)
+        self._cull_vehicles(clip_from_world)
         start = time.perf_counter()
         with filtered_native_output() if self._plugin is not None else nullcontext():
             _, _, rgba, depth, seg = p.getCameraImage(
@@ -370,6 +374,28 @@ class SceneView:
             p.changeVisualShape(self._tiles[k], -1, rgbaColor=color, physicsClientId=self.client)
         self._shown = ~outside
 
+    def _cull_vehicles(self, clip_from_world: np.ndarray) -> None:
+        """Hide the vehicle models whose boxes lie wholly outside the view frustum (half
+        of a camera's neighbours are behind it), show them again when they come in."""
+        if not self._proxies:
+            return
+        bodies = [body for body, _ in self._proxies.values()]
+        boxes = np.array([p.getAABB(b, physicsClientId=self.client) for b in bodies])
+        pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], bool)
+        corners = np.where(pick[None], boxes[:, None, 1, :], boxes[:, None, 0, :])
+        clip = np.concatenate([corners, np.ones((*corners.shape[:2], 1))], axis=2)
+        clip = clip @ clip_from_world.T
+        x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
+        outside = (
+            (x < -w).all(1) | (x > w).all(1) | (y < -w).all(1) | (y > w).all(1)
+            | (z < -w).all(1) | (z > w).all(1)
+        )  # fmt: skip
+        for body, hide in zip(bodies, outside.tolist(), strict=True):
+            if hide != (body in self._hidden):
+                color = [1.0, 1.0, 1.0, 0.0] if hide else self._paint_of[body]
+                p.changeVisualShape(body, -1, rgbaColor=color, physicsClientId=self.client)
+                (self._hidden.add if hide else self._hidden.discard)(body)
+
     # -- proxies ----------------------------------------------------------------------
 
     def _proxy(self, twin_id: int, key: tuple) -> int:
@@ -399,6 +425,8 @@ class SceneView:
             )
         paints = self._paints[key[0]]
         paint = paints[(twin_id * PAINT_HASH) % 2**32 % len(paints)]
+        self._paint_of[body] = [*paint, 1.0]
+        self._hidden.discard(body)
         p.changeVisualShape(body, -1, rgbaColor=[*paint, 1.0], physicsClientId=self.client)
         self._label(body, self._vehicle_semantic[key[0]], twin_id)
         self._proxies[twin_id] = (body, key)
