@@ -222,6 +222,15 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=0, help="terrain seed")
     p.set_defaults(handler=_map_build)
+    p = map_commands.add_parser(
+        "export",
+        help="the map for other tools: OpenDRIVE 1.6 (CARLA, esmini, SUMO's netconvert)",
+    )
+    p.add_argument("--format", choices=["opendrive"], default="opendrive")
+    p.add_argument("--out", type=Path, required=True, help="file to write, e.g. i24.xodr")
+    p.add_argument("--map", type=Path, default=None, help="map folder (default: the cached map)")
+    p.add_argument("--seed", type=int, default=0, help="terrain seed of the cached map")
+    p.set_defaults(handler=_map_export)
     p = map_commands.add_parser("preview", help="render a top view and a driver's-eye view")
     p.add_argument("--out", type=Path, default=Path("map.png"))
     p.add_argument("--map", type=Path, default=None, help="map folder (default: the cached map)")
@@ -710,13 +719,24 @@ def _map(folder: Path | None, seed: int):
 
 def _map_build(args) -> int:
     from mapgen.build import build_map, default_map
+    from mapgen.opendrive import XODR, write_opendrive
 
     bundle = build_map(args.out, seed=args.seed) if args.out else default_map(args.seed)
     triangles = bundle.description["triangles"]
+    xodr = write_opendrive(bundle, bundle.folder / XODR)
     print(
         f"map {bundle.key} (seed {args.seed}) in {bundle.folder}: "
-        f"{triangles['visual']:,} visual and {triangles['collision']:,} collision triangles"
+        f"{triangles['visual']:,} visual and {triangles['collision']:,} collision triangles; "
+        f"OpenDRIVE {xodr.name}"
     )
+    return 0
+
+
+def _map_export(args) -> int:
+    from mapgen.opendrive import write_opendrive
+
+    out = write_opendrive(_map(args.map, args.seed), args.out)
+    print(f"wrote {out} (OpenDRIVE 1.6)")
     return 0
 
 
