@@ -238,6 +238,16 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(handler=_map_preview)
 
     p = commands.add_parser(
+        "export",
+        help="a run for other simulators: SUMO (network, routes of its recorded vehicles, "
+        "the twin's trajectories as FCD, a sumocfg)",
+    )
+    p.add_argument("run", type=Path, help="a run folder (twin run --out)")
+    p.add_argument("--format", choices=["sumo"], default="sumo")
+    p.add_argument("--out", type=Path, required=True, help="folder to write")
+    p.set_defaults(handler=_export)
+
+    p = commands.add_parser(
         "dataset",
         help="labelled camera datasets (KITTI, COCO) from many episodes of recorded traffic",
         description="Draw episodes from the recorded traffic (congested and free flow), run "
@@ -728,6 +738,19 @@ def _map_build(args) -> int:
         f"map {bundle.key} (seed {args.seed}) in {bundle.folder}: "
         f"{triangles['visual']:,} visual and {triangles['collision']:,} collision triangles; "
         f"OpenDRIVE {xodr.name}"
+    )
+    return 0
+
+
+def _export(args) -> int:
+    from mapgen.build import default_map
+    from twin.export_sumo import export_run
+
+    done = export_run(args.run, args.out, default_map(progress=False))
+    print(
+        f"wrote {done['folder']}: {done['vehicles']} vehicles in routes.rou.xml, "
+        f"{done['fcd_samples']:,} FCD samples, {done['duration_s']:g} s "
+        f"(run it: sumo -c {Path(done['folder']) / 'i24.sumocfg'})"
     )
     return 0
 

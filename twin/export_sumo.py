@@ -1,0 +1,182 @@
+"""A twin run as Eclipse SUMO inputs: replay the same episode in SUMO next to the
+twin's result.
+
+``twin export RUN --format sumo --out DIR`` writes into ``DIR``:
+
+- ``i24.xodr`` and ``i24.net.xml``: the segment (:mod:`mapgen.opendrive`) and SUMO's
+  network of it (``netconvert``, coordinates kept: SUMO's x, y are the twin's world);
+- ``routes.rou.xml``: every recorded vehicle of the run (the ego, the visible
+  vehicles and the ghosts), departing at the time, lane, position and speed the run
+  first had it (without SUMO's insertion checks: recorded queues are tighter than its
+  safe gaps), on its carriageway's edge, with a vehicle type of its own size;
+- ``twin.fcd.xml``: the twin's trajectories in SUMO's floating-car-data format
+  (every vehicle at 10 Hz: front bumper x, y, z, angle, speed, lane and position);
+- ``i24.sumocfg``: SUMO's configuration of the episode (``sumo -c i24.sumocfg``).
+
+Times are seconds from the run's t0; SUMO lanes count from the outside (index 4 is the
+twin's HOV lane -1, index 1 its lane -4).
+"""
+
+import math
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mapgen.opendrive import write_opendrive
+from twin.atomic import AtomicFolder
+from twin.data.i24 import VEHICLE_CLASSES, Road
+from twin.errors import TwinError
+
+FCD_PERIOD = 0.1  # [s]
+EDGES = {Road.EASTBOUND: "-1", Road.WESTBOUND: "1"}  # netconvert's ids of the two sides
+HEAVY = {"semi", "truck"}
+
+
+class ExportError(TwinError):
+    """A run cannot be exported: not a run folder, or SUMO is missing."""
+
+
+def sumo_home() -> Path:
+    """SUMO's home (the ``eclipse-sumo`` package).
+
+    Raises:
+        ExportError: it is not installed.
+    """
+    try:
+        import sumo
+    except ImportError:
+        raise ExportError(
+            "exporting to SUMO needs Eclipse SUMO: python3 -m pip install eclipse-sumo"
+        ) from None
+    return Path(sumo.SUMO_HOME)
+
+
+def sumo_lane(lane: int) -> int:
+    """SUMO's lane index of the twin's lane -1..-4 (SUMO counts from the outside, 0
+    the shoulder)."""
+    return 5 + int(lane)
+
+
+def export_run(run: Path, out: Path, bundle) -> dict:
+    """Write the SUMO inputs of run folder ``run`` into ``out`` (atomically); returns
+    what was written (counts and file names).
+
+    Raises:
+        ExportError: ``run`` is not a run folder, or SUMO is missing or fails.
+    """
+    from twin.cosim.config import load_config
+    from twin.cosim.run import is_run
+
+    run, out = Path(run), Path(out)
+    if not is_run(run):
+        raise ExportError(f"{run} is not a run folder (twin run --out makes one)")
+    home = sumo_home()
+    config = load_config(run / "config.toml")
+    rows = pd.read_parquet(run / "trajectories.parquet")
+    road_model = bundle.road
+    recognise = lambda p: (p / "i24.sumocfg").is_file()  # noqa: E731
+    with AtomicFolder(out, recognise=recognise, kind="SUMO export", error=ExportError) as folder:
+        xodr = write_opendrive(bundle, folder.tmp / "i24.xodr")
+        done = subprocess.run(
+            [str(home / "bin" / "netconvert"), "--opendrive-files", str(xodr),
+             "--output-file", str(folder.tmp / "i24.net.xml"),
+             "--offset.disable-normalization", "true", "--opendrive.import-all-lanes", "true",
+             "--no-warnings", "true"],
+            capture_output=True, text=True, env={"SUMO_HOME": str(home)},
+        )  # fmt: skip
+        if done.returncode != 0:
+            raise ExportError(f"netconvert failed: {done.stderr.strip()[-500:]}")
+        vehicles = _routes(rows, road_model, folder.tmp / "routes.rou.xml")
+        samples = _fcd(rows, road_model, folder.tmp / "twin.fcd.xml")
+        _config(config.t_max, folder.tmp / "i24.sumocfg")
+    return {"folder": str(out), "vehicles": vehicles, "fcd_samples": samples,
+            "duration_s": config.t_max}  # fmt: skip
+
+
+def _routes(rows: pd.DataFrame, road_model, path: Path) -> int:
+    first = rows.sort_values(["time", "record_id"]).groupby("record_id", sort=False).head(1)
+    first = first.sort_values(["time", "record_id"], kind="stable")
+    root = ET.Element("routes")
+    for road in (Road.EASTBOUND, Road.WESTBOUND):
+        ET.SubElement(root, "route", id=f"r{EDGES[road]}", edges=EDGES[road])
+    kept = 0
+    for row in first.itertuples(index=False):
+        road = Road.parse(int(row.road))
+        lane = int(row.lane)
+        if lane not in (-1, -2, -3, -4):
+            continue  # between lanes at its first row: no lane to depart on
+        start = road_model.x_range(road)[0]
+        name = VEHICLE_CLASSES[int(row.vehicle_class)]
+        ET.SubElement(  # a type of its own: its recorded size
+            root, "vType", id=f"t{row.record_id}", vClass="truck" if name in HEAVY else
+            "passenger", length=f"{row.length:.2f}", width=f"{row.width:.2f}",
+            minGap="1.0",  # recorded queues stand 1 to 2 m apart (SUMO's default is 2.5)
+        )  # fmt: skip
+        ET.SubElement(
+            root, "vehicle", id=str(row.record_id), type=f"t{row.record_id}",
+            route=f"r{EDGES[road]}", depart=f"{row.time:.2f}", departLane=str(sumo_lane(lane)),
+            departPos=f"{max(row.x + row.length - start, 0.0):.2f}",
+            departSpeed=f"{max(row.speed, 0.0):.2f}",
+            # at its recorded place and speed even where SUMO's safe gap is larger (queues)
+            insertionChecks="none",
+        )  # fmt: skip
+        kept += 1
+    tree = ET.ElementTree(root)
+    ET.indent(tree)
+    tree.write(path, encoding="utf-8", xml_declaration=True)
+    return kept
+
+
+def _fcd(rows: pd.DataFrame, road_model, path: Path) -> int:
+    tick = np.round(rows["time"].to_numpy() / FCD_PERIOD)
+    sampled = rows[np.isclose(rows["time"].to_numpy(), tick * FCD_PERIOD, atol=1e-6)]
+    sampled = sampled.sort_values(["time", "record_id"], kind="stable")
+    direction = sampled["road"].to_numpy().astype(np.int64)
+    front = sampled["x"].to_numpy() + sampled["length"].to_numpy()
+    lo = np.where(direction > 0, road_model.x_range(1)[0], road_model.x_range(-1)[0])
+    hi = np.where(direction > 0, road_model.x_range(1)[1], road_model.x_range(-1)[1])
+    position, _, pitch = road_model.to_world(
+        direction, np.clip(front, lo, hi), sampled["y"].to_numpy()
+    )
+    angle = (90.0 - np.degrees(sampled["heading"].to_numpy())) % 360.0
+    with open(path, "w", encoding="utf-8") as f:
+        f.write('<?xml version="1.0" encoding="UTF-8"?>\n<fcd-export>\n')
+        current = None
+        for i, row in enumerate(sampled.itertuples(index=False)):
+            if row.time != current:
+                if current is not None:
+                    f.write("  </timestep>\n")
+                current = row.time
+                f.write(f'  <timestep time="{row.time:.2f}">\n')
+            lane = int(row.lane)
+            edge = EDGES[Road.parse(int(row.road))]
+            lane_id = f"{edge}_{sumo_lane(lane)}" if lane in (-1, -2, -3, -4) else ""
+            x, y, z = position[i]
+            f.write(
+                f'    <vehicle id="{row.record_id}" x="{x:.2f}" y="{y:.2f}" z="{z:.2f}" '
+                f'angle="{angle[i]:.2f}" type="{VEHICLE_CLASSES[int(row.vehicle_class)]}" '
+                f'speed="{max(row.speed, 0.0):.2f}" pos="{front[i] - lo[i]:.2f}" '
+                f'lane="{lane_id}" slope="{math.degrees(pitch[i]):.2f}" '
+                f'role="{row.role}"/>\n'
+            )
+        if current is not None:
+            f.write("  </timestep>\n")
+        f.write("</fcd-export>\n")
+    return len(sampled)
+
+
+def _config(duration: float, path: Path) -> None:
+    root = ET.Element("configuration")
+    inputs = ET.SubElement(root, "input")
+    ET.SubElement(inputs, "net-file", value="i24.net.xml")
+    ET.SubElement(inputs, "route-files", value="routes.rou.xml")
+    time = ET.SubElement(root, "time")
+    ET.SubElement(time, "begin", value="0")
+    ET.SubElement(time, "end", value=f"{duration:g}")
+    ET.SubElement(time, "step-length", value=f"{FCD_PERIOD:g}")
+    tree = ET.ElementTree(root)
+    ET.indent(tree)
+    tree.write(path, encoding="utf-8", xml_declaration=True)
