@@ -26,6 +26,11 @@ def test_sumo_runs_the_exported_episode_with_every_vehicle(run, tmp_path, capsys
     out = tmp_path / "sumo"
     assert main(["export", str(run), "--format", "sumo", "--out", str(out)]) == 0
     assert "vehicles in routes.rou.xml" in capsys.readouterr().out
+    # the HOV lane's double solid line: nobody but emergency vehicles crosses it
+    for edge in ET.parse(out / "i24.net.xml").getroot().findall("edge"):
+        if edge.get("id") in ("1", "-1"):
+            lanes = {lane.get("index"): lane for lane in edge.findall("lane")}
+            assert lanes["3"].get("changeLeft") == lanes["4"].get("changeRight") == "emergency"
     rows = pd.read_parquet(run / "trajectories.parquet")
     routes = ET.parse(out / "routes.rou.xml").getroot().findall("vehicle")
     recorded = set(rows.loc[rows["lane"].isin([-1, -2, -3, -4]), "record_id"])

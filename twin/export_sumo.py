@@ -4,7 +4,9 @@ twin's result.
 ``twin export RUN --format sumo --out DIR`` writes into ``DIR``:
 
 - ``i24.xodr`` and ``i24.net.xml``: the segment (:mod:`mapgen.opendrive`) and SUMO's
-  network of it (``netconvert``, coordinates kept: SUMO's x, y are the twin's world);
+  network of it (``netconvert``, coordinates kept: SUMO's x, y are the twin's world),
+  with the HOV lane's double solid line as SUMO's lane-change permissions (only
+  emergency vehicles cross; netconvert does not read OpenDRIVE's ``laneChange``);
 - ``routes.rou.xml``: every recorded vehicle of the run (the ego, the visible
   vehicles and the ghosts), departing at the time, lane, position and speed the run
   first had it (without SUMO's insertion checks: recorded queues are tighter than its
@@ -89,11 +91,29 @@ def export_run(run: Path, out: Path, bundle) -> dict:
         )  # fmt: skip
         if done.returncode != 0:
             raise ExportError(f"netconvert failed: {done.stderr.strip()[-500:]}")
+        _hov_line(folder.tmp / "i24.net.xml")
         vehicles = _routes(rows, road_model, folder.tmp / "routes.rou.xml")
         samples = _fcd(rows, road_model, folder.tmp / "twin.fcd.xml")
         _config(config.t_max, folder.tmp / "i24.sumocfg")
     return {"folder": str(out), "vehicles": vehicles, "fcd_samples": samples,
             "duration_s": config.t_max}  # fmt: skip
+
+
+def _hov_line(net: Path) -> None:
+    """The HOV lane's double solid line in SUMO's network: netconvert (1.28) does not
+    read OpenDRIVE's ``laneChange``, so no class but emergency vehicles may change
+    between the HOV lane and lane -2, on both edges."""
+    tree = ET.parse(net)
+    for edge in tree.getroot().findall("edge"):
+        if edge.get("id") not in EDGES.values():
+            continue
+        for lane in edge.findall("lane"):
+            index = int(lane.get("index"))
+            if index == sumo_lane(-2):
+                lane.set("changeLeft", "emergency")
+            elif index == sumo_lane(-1):
+                lane.set("changeRight", "emergency")
+    tree.write(net, encoding="utf-8", xml_declaration=True)
 
 
 def _routes(rows: pd.DataFrame, road_model, path: Path) -> int:
