@@ -21,6 +21,7 @@ physical parameters the world gives it.
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 
 import numpy as np
 
@@ -820,21 +821,26 @@ class TrafficManager:
         idm = self._d.idm()
         if k == 0:
             return idm
+        return IDMParams(
+            *(
+                np.concatenate([getattr(idm, name), np.full(k, value)])
+                for name, value in zip(IDM_FIELDS, self._mean_driver, strict=True)
+            )
+        )
+
+    @cached_property
+    def _mean_driver(self) -> tuple:
+        """The IDM parameters of the class table's mean driver (for obstacles); read
+        once: the table is fixed for a manager's life."""
         drivers = self.config.drivers
         share = self.classes.column("share")
-        mean = (
+        return (
             float(share @ self.classes.column("desired_speed_mps")),
             float(share @ self.classes.column("time_headway_s")),
             drivers.min_gap,
             float(share @ self.classes.column("max_accel_mps2")),
             drivers.comfortable_decel,
             drivers.delta,
-        )
-        return IDMParams(
-            *(
-                np.concatenate([getattr(idm, name), np.full(k, value)])
-                for name, value in zip(IDM_FIELDS, mean, strict=True)
-            )
         )
 
     # -- user controllers -------------------------------------------------------------
