@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mapgen.params import load_params
 from twin.atomic import atomic_file
 from twin.data.i24 import LANE_WIDTH
 
@@ -181,10 +182,12 @@ def _objects(road, road_model, description, s0: float) -> None:
         a, b = deck["deck_stations_m"]
         outer = description["cross_section"]["outer_edge_y_m"]
         z = deck["deck_bottom_z_m"] - float(road_model.surface_z((a + b) / 2))
+        shape = load_params().overpass
         ET.SubElement(
             objects, "object", type="none", subtype="overpass", name=deck["name"],
             id="overpass", s=_f((a + b) / 2 - s0), t="0", zOffset=_f(z), length=_f(b - a),
-            width=_f(2 * (outer + 12.0)), height="2.65", hdg="0", pitch="0", roll="0",
+            width=_f(2 * (outer + shape.abutment_offset)),
+            height=_f(shape.deck_depth + shape.parapet_height), hdg="0", pitch="0", roll="0",
             orientation="none",
         )  # fmt: skip
     for pole in found.get("poles", []):
@@ -192,7 +195,8 @@ def _objects(road, road_model, description, s0: float) -> None:
             objects, "object", type="pole", subtype="I-24 MOTION camera pole",
             name=f"pole {pole['pole']}", id=f"pole{pole['pole']}",
             s=_f(pole["station_m"] - s0), t=_f(-pole["lateral_m"]), zOffset="0",
-            height=_f(pole["height_m"]), radius="0.35", hdg="0", pitch="0", roll="0",
+            height=_f(pole["height_m"]), radius=_f(load_params().poles.base_radius), hdg="0",
+            pitch="0", roll="0",
             orientation="none",
         )  # fmt: skip
     for k, post in enumerate(found.get("posts", [])):

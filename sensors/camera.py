@@ -337,17 +337,17 @@ class CameraRig:
         *,
         time: float = 0.0,
         sim_time: float = 0.0,
-        replayed=None,
-        record_of=None,
+        traffic=None,
     ) -> list[Frame]:
         """Render ``cameras`` (default: all) of the rig on vehicle ``ego_id`` now.
 
         Args:
-            replayed: recorded vehicles drawn beside the simulated ones
-                (:class:`sensors.replay.Replayed`), each with an id of its own from
-                ``REPLAY_BASE`` up, the same for a record all episode long.
-            record_of: ``record_of(ids) -> (record ids, roads)`` of simulated vehicles,
-                for their labels.
+            traffic: the recording around a cosimulation
+                (:class:`sensors.replay.FrameTraffic`): its recorded vehicles are drawn
+                beside the simulated ones, each with an id of its own from
+                ``REPLAY_BASE`` up (the same for a record all episode long), and the
+                simulated ones are labelled with their records. ``None``: only the
+                physics world's vehicles.
 
         Raises:
             KeyError: ``ego_id`` is not an active vehicle.
@@ -355,9 +355,11 @@ class CameraRig:
         """
         cameras = self.cameras if cameras is None else cameras
         everyone = self.view.vehicles(hide=[ego_id])
-        if record_of is not None:
-            records, roads = record_of(everyone.id)
+        replayed = None
+        if traffic is not None:
+            records, roads = traffic.record_of(everyone.id)
             everyone = replace(everyone, record_id=np.asarray(records, object), road=roads)
+            replayed = traffic.replayed()
         drawn = DrawnVehicles.join(everyone.take(everyone.shown), self._pose_replayed(replayed))
         ego = np.flatnonzero(everyone.id == ego_id)
         if ego.size == 0:

@@ -404,8 +404,7 @@ def _take_frames(config, sim, rig, models, spec, samples, writer, on_frames) -> 
                 sim.ego_id,
                 time=sim.t,
                 sim_time=sim.sim_time,
-                replayed=traffic.replayed(),
-                record_of=traffic.record_of,
+                traffic=traffic,
             )
             for frame in captured:
                 labels = frame_labels(frame, models)

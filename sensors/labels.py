@@ -38,6 +38,7 @@ from mapgen.build import MapBundle
 from mapgen.semantics import class_id, semantic_classes
 from sensors.camera import Frame
 from twin.data.i24 import VEHICLE_CLASSES
+from twin.physics.render import UNIT_BOX
 
 PARTLY_OCCLUDED = 0.1  # hidden share from which a vehicle is "partly occluded" (level 1)
 LARGELY_OCCLUDED = 0.5  # hidden share from which it is "largely occluded" (level 2)
@@ -48,7 +49,7 @@ NOT_OCCLUDERS = ("sky", "road", "shoulder", "lane_marking", "terrain")
 BOX_EDGES = np.array(
     [(a, a | bit) for bit in (1, 2, 4) for a in range(8) if not a & bit], dtype=np.int64
 )
-BOX_CORNERS = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], np.float64)
+BOX_CORNERS = UNIT_BOX
 
 
 @dataclass(frozen=True, eq=False)

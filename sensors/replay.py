@@ -94,12 +94,14 @@ class RecordedView:
         position, heading, pitch = self.road_model.to_world(road, np.clip(x, lo, hi), y)
         # the heading from the recorded path a moment later (lane changes show)
         later = self.traffic.snapshot(road, t + HEADING_LEAD, lo, hi)
-        where = {int(k): i for i, k in enumerate(later.tid.tolist())}
-        ahead = np.array([where.get(int(k), -1) for k in tid.tolist()])
-        found = ahead >= 0
         forward = np.column_stack([np.cos(heading), np.sin(heading), np.tan(pitch)])
+        found = np.zeros(tid.size, bool)
+        if later.tid.size:
+            order = np.argsort(later.tid, kind="stable")
+            at = order[np.minimum(np.searchsorted(later.tid[order], tid), order.size - 1)]
+            found = later.tid[at] == tid
         if found.any():
-            rows_later = ahead[found]
+            rows_later = at[found]
             x2 = later.x[rows_later] + 0.5 * later.length[rows_later]
             p2, _, _ = self.road_model.to_world(road, np.clip(x2, lo, hi), later.y[rows_later])
             step = p2 - position[found]

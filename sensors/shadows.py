@@ -15,17 +15,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from mapgen.params import load_params
 from mapgen.semantics import class_id
+from twin.physics.render import UNIT_BOX
 
 #: the classes a shadow falls on (the flat ground); vehicles, barrier, poles and the
 #: overpass in front of a shadow keep their pixels
 GROUND_CLASSES = tuple(class_id(n) for n in ("road", "shoulder", "lane_marking", "terrain"))
 _GROUND_LUT = np.isin(np.arange(256), GROUND_CLASSES).astype(np.uint8)
-# corners of a unit box numbered by bits (x, y, z), bottom face first
-_UNIT = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=np.float64)
-POLE_WIDTH = 0.55  # [m] a pole's mast, 0.7 m at the base to 0.4 m at the top
-DECK_DEPTH = 2.65  # [m] the overpass deck and its parapets (assets/map.toml: 1.8 + 0.85)
-ABUTMENT_OFFSET = 12.0  # [m] the deck's ends outside the shoulder edges (assets/map.toml)
 MIN_SUN_UP = 0.05  # [-] the sun's upward component below which no shadows are drawn
 
 
@@ -72,7 +69,7 @@ def shadow_polygons(casters: Casters, sun: np.ndarray) -> np.ndarray:
     """
     sun = np.asarray(sun, np.float64)
     sun = sun / np.linalg.norm(sun)
-    local = (_UNIT - [0.5, 0.5, 0.0])[None] * casters.size[:, None, :]
+    local = (UNIT_BOX - [0.5, 0.5, 0.0])[None] * casters.size[:, None, :]
     corners = np.einsum("nij,nkj->nki", casters.rotation, local) + casters.bottom[:, None, :]
     height = corners[..., 2] - casters.ground[:, None]  # above the caster's ground
     return corners - height[..., None] * (sun / sun[2])
@@ -125,6 +122,9 @@ def map_casters(bundle) -> Casters:
     """The map's shadow casters: each lighting pole (mast and head as one box) and the
     overpass deck with its parapets (``road.json``'s objects and ``assets/map.toml``)."""
     road, objects = bundle.road, bundle.description["objects"]
+    params = load_params()
+    pole_width = params.poles.base_radius + params.poles.top_radius  # the mean diameter
+    deck = params.overpass
     forward, right = road.direction_vector, road.right_vector
     axes = np.zeros((3, 3))
     axes[:2, 0], axes[:2, 1], axes[2, 2] = forward, right, 1.0
@@ -136,15 +136,17 @@ def map_casters(bundle) -> Casters:
     for pole in objects.get("poles", []):
         z = float(road.surface_z(pole["station_m"]))
         bottoms.append(world(pole["station_m"], pole["lateral_m"], z))
-        sizes.append([POLE_WIDTH, POLE_WIDTH, pole["height_m"]])
+        sizes.append([pole_width, pole_width, pole["height_m"]])
         grounds.append(z)
-    deck = objects.get("overpass")
-    if deck:
-        s0, s1 = deck["deck_stations_m"]
+    overpass = objects.get("overpass")
+    if overpass:
+        s0, s1 = overpass["deck_stations_m"]
         centre = 0.5 * (s0 + s1)
         outer = bundle.description["cross_section"]["outer_edge_y_m"]
-        bottoms.append(world(centre, 0.0, deck["deck_bottom_z_m"]))
-        sizes.append([s1 - s0, 2.0 * (outer + ABUTMENT_OFFSET), DECK_DEPTH])
+        bottoms.append(world(centre, 0.0, overpass["deck_bottom_z_m"]))
+        sizes.append(
+            [s1 - s0, 2.0 * (outer + deck.abutment_offset), deck.deck_depth + deck.parapet_height]
+        )
         grounds.append(float(road.surface_z(centre)))
     n = len(bottoms)
     return Casters(

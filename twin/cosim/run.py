@@ -78,8 +78,7 @@ class Cameras:
                 due,
                 time=sim.t,
                 sim_time=sim.sim_time,
-                replayed=self.traffic.replayed(),
-                record_of=self.traffic.record_of,
+                traffic=self.traffic,
             )
             self.render_s += time.perf_counter() - start
             for frame in frames:
@@ -233,8 +232,7 @@ def render_at(
                 sim.ego_id,
                 time=sim.t,
                 sim_time=sim.sim_time,
-                replayed=traffic.replayed(),
-                record_of=traffic.record_of,
+                traffic=traffic,
             )
         finally:
             cameras.close()

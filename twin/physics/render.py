@@ -226,9 +226,7 @@ class SceneView:
         self._tiles = [visual_body(self.client, t.visual, t.part.color) for t in bundle.tiles]
         lo = np.array([t.bounds[0] for t in bundle.tiles])
         hi = np.array([t.bounds[1] for t in bundle.tiles])
-        pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], bool)
-        corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])  # (tiles, 8, 3)
-        self._corners = np.concatenate([corners, np.ones((*corners.shape[:2], 1))], axis=2)
+        self._corners = box_corners(lo, hi)  # (tiles, 8, 4)
         self._shown = np.ones(len(self._tiles), dtype=bool)
         self._models = [str(bundle.vehicles[name]) for name in VEHICLE_CLASSES]
         self._vehicle_semantic = np.array([class_id(n) for n in VEHICLE_CLASSES], np.uint8)
@@ -359,16 +357,7 @@ class SceneView:
         TinyRenderer does not clip: a triangle behind the camera is still scanned over
         its screen box, so a whole map drawn from inside costs about twice as much.
         """
-        clip = self._corners @ clip_from_world.T  # (tiles, 8, 4)
-        x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
-        outside = (
-            (x < -w).all(1)
-            | (x > w).all(1)
-            | (y < -w).all(1)
-            | (y > w).all(1)
-            | (z < -w).all(1)
-            | (z > w).all(1)
-        )
+        outside = outside_frustum(self._corners, clip_from_world)
         for k in np.flatnonzero(outside == self._shown).tolist():
             color = [1.0, 1.0, 1.0, 0.0] if outside[k] else self._colors[k]
             p.changeVisualShape(self._tiles[k], -1, rgbaColor=color, physicsClientId=self.client)
@@ -381,15 +370,7 @@ class SceneView:
             return
         bodies = [body for body, _ in self._proxies.values()]
         boxes = np.array([p.getAABB(b, physicsClientId=self.client) for b in bodies])
-        pick = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], bool)
-        corners = np.where(pick[None], boxes[:, None, 1, :], boxes[:, None, 0, :])
-        clip = np.concatenate([corners, np.ones((*corners.shape[:2], 1))], axis=2)
-        clip = clip @ clip_from_world.T
-        x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
-        outside = (
-            (x < -w).all(1) | (x > w).all(1) | (y < -w).all(1) | (y > w).all(1)
-            | (z < -w).all(1) | (z > w).all(1)
-        )  # fmt: skip
+        outside = outside_frustum(box_corners(boxes[:, 0], boxes[:, 1]), clip_from_world)
         for body, hide in zip(bodies, outside.tolist(), strict=True):
             if hide != (body in self._hidden):
                 color = [1.0, 1.0, 1.0, 0.0] if hide else self._paint_of[body]
@@ -453,32 +434,34 @@ class SceneView:
         self._instance_lut[body + 1] = instance
 
 
+#: corners of a unit box, numbered by bits (x, y, z): 0 is (0, 0, 0), 7 is (1, 1, 1)
+UNIT_BOX = np.array([[(k >> axis) & 1 for axis in range(3)] for k in range(8)], np.float64)
+
+
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(n, 8, 4) homogeneous corners of axis-aligned boxes from (n, 3) ``lo``, ``hi``."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    corners = np.where(UNIT_BOX[None] > 0, hi[:, None, :], lo[:, None, :])
+    return np.concatenate([corners, np.ones((*corners.shape[:2], 1))], axis=2)
+
+
+def outside_frustum(corners: np.ndarray, clip_from_world: np.ndarray) -> np.ndarray:
+    """(n,) bool: the boxes (homogeneous corners (n, 8, 4)) wholly on the outer side of
+    one of the view frustum's planes."""
+    clip = corners @ clip_from_world.T
+    x, y, z, w = clip[..., 0], clip[..., 1], clip[..., 2], clip[..., 3]
+    return (
+        (x < -w).all(1) | (x > w).all(1) | (y < -w).all(1) | (y > w).all(1)
+        | (z < -w).all(1) | (z > w).all(1)
+    )  # fmt: skip
+
+
 def quaternions_of(rotation: np.ndarray) -> np.ndarray:
-    """(n, 4) quaternions (x, y, z, w, pybullet's order) of (n, 3, 3) rotations
-    (Shepperd's method: from the largest of the trace and the diagonal, stable for any
-    angle)."""
+    """(n, 4) quaternions (x, y, z, w, pybullet's order) of (n, 3, 3) rotations."""
+    from scipy.spatial.transform import Rotation
+
     r = np.asarray(rotation, np.float64).reshape(-1, 3, 3)
-    q = np.empty((len(r), 4))
-    trace = r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]
-    pick = np.argmax(np.column_stack([trace, r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]]), axis=1)
-    for k, m in enumerate(r):
-        if pick[k] == 0:
-            t = 2.0 * np.sqrt(1.0 + trace[k])
-            q[k] = [
-                (m[2, 1] - m[1, 2]) / t,
-                (m[0, 2] - m[2, 0]) / t,
-                (m[1, 0] - m[0, 1]) / t,
-                t / 4,
-            ]
-        else:
-            i = pick[k] - 1
-            j, h = (i + 1) % 3, (i + 2) % 3
-            t = 2.0 * np.sqrt(max(1.0 + m[i, i] - m[j, j] - m[h, h], 1e-12))
-            v = np.empty(4)
-            v[i], v[j], v[h] = t / 4, (m[j, i] + m[i, j]) / t, (m[h, i] + m[i, h]) / t
-            v[3] = (m[h, j] - m[j, h]) / t
-            q[k] = v
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
+    return Rotation.from_matrix(r).as_quat() if len(r) else np.empty((0, 4))
 
 
 @cache
