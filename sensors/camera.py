@@ -66,7 +66,7 @@ class CameraSpec:
 
     name: str = "front"
     reference: str = "front"
-    mount: tuple[float, float, float] = (-1.9, 0.0, 1.4)  # behind the windshield
+    mount: tuple[float, float, float] = (-1.9, 0.0, 1.65)  # on the roof, KITTI's height
     yaw_deg: float = 0.0
     pitch_deg: float = 0.0
     roll_deg: float = 0.0

@@ -66,8 +66,10 @@ def test_frame_holds_images_calibration_and_poses(scene):
     assert frame.semantic.dtype == np.uint8 and frame.instance.dtype == np.int64
     f = 0.5 * w / math.tan(math.radians(40.0))
     np.testing.assert_allclose(frame.K, [[f, 0, 319.5], [0, f, 239.5], [0, 0, 1]])
-    # the camera sits 1.4 m above the ground, 1.9 m behind the ego's front, looking ahead
-    np.testing.assert_allclose(frame.ego_from_camera[:3, 3], [0.5 * 4.7 - 1.9, 0.0, 1.4], atol=0.03)
+    # the camera sits 1.65 m above the ground, 1.9 m behind the ego's front, looking ahead
+    np.testing.assert_allclose(
+        frame.ego_from_camera[:3, 3], [0.5 * 4.7 - 1.9, 0.0, 1.65], atol=0.03
+    )
     optical_axis = frame.ego_from_camera[:3, 2]
     np.testing.assert_allclose(optical_axis, [1.0, 0.0, 0.0], atol=1e-12)
     ego_world = frame.world_from_camera @ np.linalg.inv(frame.ego_from_camera)

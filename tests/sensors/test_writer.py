@@ -170,11 +170,19 @@ def test_egl_renderer_gives_the_same_labels(built_map, tmp_path):
         pytest.skip(f"no working EGL here: {result.stderr.strip().splitlines()[-1:]}")
     data = np.load(tmp_path / "egl.npz")
     # the same classes and ids; the two rasterisers place edges up to a pixel apart
-    # (measured on llvmpipe: 98.1 % of semantic pixels agree, 98.7 % shifted by one)
-    assert set(np.unique(data["egl_semantic"])) == set(np.unique(data["tiny_semantic"]))
-    assert set(np.unique(data["egl_instance"])) == set(np.unique(data["tiny_instance"]))
+    # (measured on llvmpipe: 98.1 % of semantic pixels agree, 98.7 % shifted by one), so
+    # a sliver of a pixel or two (a distant pole's edge) may be drawn by one only
+    for name in ("semantic", "instance"):
+        tiny, egl = data["tiny_" + name], data["egl_" + name]
+        assert _seen(tiny, 3) <= _seen(egl, 1) and _seen(egl, 3) <= _seen(tiny, 1), name
     assert np.mean(data["tiny_semantic"] == data["egl_semantic"]) > 0.97
     assert np.mean(data["tiny_instance"] == data["egl_instance"]) > 0.99
     both = np.isfinite(data["tiny_depth"]) & np.isfinite(data["egl_depth"])
     error = np.abs(data["egl_depth"][both] / data["tiny_depth"][both] - 1.0)
     assert np.median(error) < 0.02  # measured 0.7 %: the same one-pixel offset on the road
+
+
+def _seen(labels: np.ndarray, pixels: int) -> set:
+    """The labels covering at least ``pixels`` pixels."""
+    values, counts = np.unique(labels, return_counts=True)
+    return set(values[counts >= pixels].tolist())
