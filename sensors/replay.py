@@ -40,6 +40,10 @@ class Replayed:
     def __len__(self) -> int:
         return int(self.tid.size)
 
+    def take(self, index) -> "Replayed":
+        """The vehicles at ``index`` (indices or a boolean mask)."""
+        return Replayed(*(getattr(self, f)[index] for f in _FIELDS))
+
 
 class RecordedView:
     """What of the recording a camera on a simulated ego can see, replayed.

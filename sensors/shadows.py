@@ -102,20 +102,26 @@ def shadow_mask(
         | (uv[..., 1] < 0).all(1) | (uv[..., 1] >= height).all(1)
     )  # fmt: skip
     ahead &= ~(front & off)
-    for world, polygon in zip(points[ahead], camera[ahead], strict=True):
+    flat = points[ahead][..., :2].astype(np.float32)
+    for k, polygon, whole in zip(range(len(flat)), camera[ahead], front[ahead], strict=True):
         # the points lie on a horizontal plane: their hull is the hull of their x, y
-        hull = cv2.convexHull(world[:, :2].astype(np.float32), returnPoints=False)
-        clipped = _clip_near(polygon[hull.reshape(-1)], near)
+        hull = polygon[cv2.convexHull(flat[k], returnPoints=False).reshape(-1)]
+        clipped = hull if whole else _clip_near(hull, near)  # whole: in front, in view
         if len(clipped) < 3:
             continue
-        pixels = clipped @ K.T
-        uv = pixels[:, :2] / pixels[:, 2:3]
-        if (uv[:, 0].max() < 0 or uv[:, 0].min() >= width or uv[:, 1].max() < 0
+        uv = uv_of(clipped, K)
+        if not whole and (uv[:, 0].max() < 0 or uv[:, 0].min() >= width or uv[:, 1].max() < 0
                 or uv[:, 1].min() >= height):  # fmt: skip
             continue
         uv = np.clip(uv, -4.0 * max(width, height), 4.0 * max(width, height))
         cv2.fillPoly(mask, [np.round(uv * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
     return mask.view(bool)
+
+
+def uv_of(points: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(n, 2) pixel coordinates of (n, 3) camera-frame points in front of the camera."""
+    pixels = points @ K.T
+    return pixels[:, :2] / pixels[:, 2:3]
 
 
 def map_casters(bundle) -> Casters:

@@ -68,3 +68,39 @@ def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_stor
     assert line["bench"] == "env" and line["env_steps_per_s"] > 0
     assert line["vector_workers"] == 1 and line["vector_env_steps_per_s"] > 0
     assert main(["bench", "env", "--steps", "0"]) == 2
+
+
+def test_bench_camera_draws_the_recording_around_its_scene(doc, tmp_path, capsys, monkeypatch):
+    """The recorded traffic within the far plane is drawn beside the bench's vehicles
+    (here one car on each carriageway), and none of it where the bench's own vehicles
+    drive (a recorded car among them, at MM 60.85, is left out)."""
+    from sensors.camera import CameraRig
+    from tests.conftest import write_day
+    from twin.data.ingest import ingest
+
+    docs = [
+        doc("6386d89efb3ff533c12d0001", direction=1, mm=60.85, y_ft=-18.0, n=100),  # among
+        doc("6386d89efb3ff533c12d0002", direction=1, mm=61.0, y_ft=-18.0, n=100),  # ahead
+        doc("6386d89efb3ff533c12d0003", direction=-1, mm=60.9, n=100),  # across the barrier
+    ]
+    ingest([write_day(tmp_path / "day.json", docs)], tmp_path / "store", progress=False)
+    drawn = []
+    capture = CameraRig.capture
+
+    def spy(self, ego_id, *args, traffic=None, **kwargs):
+        frames = capture(self, ego_id, *args, traffic=traffic, **kwargs)
+        vehicles = frames[0].vehicles
+        drawn.append(sorted(vehicles.record_id[vehicles.replayed].tolist()))
+        return frames
+
+    monkeypatch.setattr(CameraRig, "capture", spy)
+    argv = ["bench", "camera", "--data", str(tmp_path / "store"), "--frames", "2"]
+    assert main([*argv, "--repeats", "1"]) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["bench"] == "camera" and line["pipeline_fps"] > 0 and line["raw_ms"] > 0
+    assert line["replayed_vehicles_median"] == 2
+    assert drawn and all(
+        ids == ["6386d89efb3ff533c12d0002", "6386d89efb3ff533c12d0003"] for ids in drawn
+    )
+    assert main([*argv, "--repeats", "1", "--no-replay"]) == 0
+    assert json.loads(capsys.readouterr().out.strip())["replayed_vehicles_median"] == 0

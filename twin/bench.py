@@ -239,12 +239,24 @@ def run_bench(store=None, *, scenario: str = "B", repeats: int = 3) -> dict:
 
 
 def camera_bench(
-    *, renderer: str = "tiny", vehicles: int = 100, frames: int = 30, repeats: int = 3
+    store=None,
+    *,
+    renderer: str = "tiny",
+    vehicles: int = 100,
+    frames: int = 30,
+    repeats: int = 3,
+    replay: bool = True,
 ) -> dict:
     """Frames per second of the default front camera (640x480 RGB, depth, semantic and
     instance) on an ego in the middle of ``vehicles`` vehicles (the ego included) in
     the four eastbound lanes, nose to tail over about 300 m, at 27 m/s; 0.1 s of physics
     between frames, so the camera sees the scene from a new place each frame.
+
+    With ``replay``, the recorded traffic of ``store`` (default: the embedded data)
+    from the scenarios' time on is drawn too, as in ``twin run --camera``: every
+    recorded vehicle within the far plane on both carriageways (the westbound wave
+    across the barrier, the eastbound traffic past the bench's own vehicles), but
+    the eastbound ones where the bench's vehicles drive.
 
     Two passes of ``frames`` frames each repeat: the capture alone (renderer, labels,
     depth, poses), then the whole pipeline with the files written (PNGs, JSON, MP4; the
@@ -257,13 +269,17 @@ def camera_bench(
     from mapgen.build import default_map
     from sensors.camera import CameraRig, CameraSpec
     from sensors.writer import FrameWriter
+    from twin.data.default import default_store
     from twin.data.i24 import LANE_WIDTH
     from twin.physics.world import PhysicsWorld, SpawnStates
     from twin.vehicle_classes import vehicle_classes
 
     table = vehicle_classes()
     bundle = default_map()
-    capture, pipeline = [], []
+    recording = None
+    if replay:
+        recording = EmpiricalTraffic(store if store is not None else default_store(progress=False))
+    capture, pipeline, replayed = [], [], []
     for repeat in range(repeats):
         rng = np.random.default_rng(repeat)
         lane = np.arange(vehicles) % 4
@@ -286,6 +302,9 @@ def camera_bench(
             ids = world.spawn(states)
             world.set_controls(accel=np.zeros(vehicles))
             rig = CameraRig(world, bundle, (CameraSpec(),), renderer=renderer)
+            traffic = None
+            if recording is not None:
+                traffic = _BenchRecording(recording, world, bundle.road, frames)
             try:
                 for with_files in (False, True):
                     writer = FrameWriter(Path(tmp), rig.cameras) if with_files else None
@@ -296,7 +315,12 @@ def camera_bench(
                             world.step()
                         start = time.perf_counter()
                         at = synth.SCENARIO_TIME + 0.1 * k  # the morning sun of the scenarios
-                        (frame,) = rig.capture(int(ids[ego]), time=at, sim_time=0.1 * k)
+                        if traffic is not None:
+                            traffic.t = at
+                        (frame,) = rig.capture(
+                            int(ids[ego]), time=at, sim_time=0.1 * k, traffic=traffic
+                        )
+                        replayed.append(int(np.count_nonzero(frame.vehicles.replayed)))
                         if writer is not None:
                             writer.write(frame)
                         busy += time.perf_counter() - start
@@ -317,6 +341,7 @@ def camera_bench(
         "size": "640x480",
         "frames": frames,
         "repeats": repeats,
+        "replayed_vehicles_median": float(np.median(replayed)),
         "raw_ms": round(float(pipeline[1]) * 1e3, 2),
         "raw_fps": round(1.0 / float(pipeline[1]), 2),
         "capture_ms": round(float(capture[0]) * 1e3, 2),
@@ -327,6 +352,36 @@ def camera_bench(
             100.0 * float(pipeline[0] / pipeline[1] - 1), 1
         ),
     }
+
+
+class _BenchRecording:
+    """The recording drawn around the camera bench's scene (for ``CameraRig.capture``):
+    the recorded vehicles within the far plane of the ego at time ``t`` (set before each
+    capture), but the eastbound ones among the bench's own vehicles (their stations
+    and 10 m either side), which are not recorded."""
+
+    def __init__(self, recording, world, road_model, frames: int):
+        from sensors.camera import CameraSpec
+        from sensors.replay import HEADING_LEAD, RecordedView
+
+        self.world, self.road_model = world, road_model
+        self.t = synth.SCENARIO_TIME
+        self.view = RecordedView(recording, road_model, CameraSpec.far)
+        self.view.preload(self.t, self.t + 0.1 * frames + HEADING_LEAD)
+        self.none = np.zeros(len(recording.store.trajectory_arrays["id"]), dtype=bool)
+
+    def replayed(self):
+        states = self.world.states()
+        station = self.road_model.station(1, states.x)
+        replayed = self.view.around(self.t, float(np.median(station)), self.none)
+        own = self.road_model.to_road(replayed.position).x if len(replayed) else np.empty(0)
+        among = (replayed.road > 0) & (own >= station.min() - 10.0) & (own <= station.max() + 10.0)
+        return replayed.take(~among)
+
+    def record_of(self, ids):
+        ids = np.asarray(ids, np.int64)
+        records = np.array([f"bench-{i}" for i in ids.tolist()], dtype=object)
+        return records, np.ones(ids.size, np.int64)
 
 
 def dataset_bench(

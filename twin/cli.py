@@ -392,6 +392,15 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--renderer", choices=["tiny", "egl"], default="tiny")
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="recording drawn around the scene (default: the embedded data)",
+    )
+    p.add_argument(
+        "--no-replay", action="store_true", help="without the recorded traffic around the scene"
+    )
     p.set_defaults(handler=_bench_camera)
     p = bench_commands.add_parser(
         "dataset", help="labelled 640x480 frames per second of twin dataset, by workers"
@@ -822,7 +831,13 @@ def _bench_camera(args) -> int:
 
     return _emit(
         "camera",
-        camera_bench(renderer=args.renderer, frames=args.frames, repeats=args.repeats),
+        camera_bench(
+            None if args.no_replay else _store(args.data),
+            renderer=args.renderer,
+            frames=args.frames,
+            repeats=args.repeats,
+            replay=not args.no_replay,
+        ),
     )
 
 
