@@ -13,6 +13,7 @@ A map folder::
                                 so the cameras skip what lies behind or beyond them
       vehicles/<class>.obj      a model per vehicle class for the cameras, unit box
                                 (mapgen.vehicles), with its material and palette
+      vehicles/<class>-lod<k>.obj  the same with fewer triangles, for distant vehicles
 
 All meshes are in the world frame of :mod:`mapgen.road` (east-north-up metres); the
 GLB alone turns it to glTF's +Y up. The folder is written whole (temporary name,
@@ -22,7 +23,7 @@ so a second run does not rebuild.
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ from mapgen.meshes import SceneMeshes, build_meshes
 from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
-from mapgen.vehicles import write_vehicle_models
+from mapgen.vehicles import ModelLevel, write_vehicle_models
 from twin.atomic import AtomicFolder, marked_as
 from twin.data import i24
 from twin.errors import MapError
@@ -94,6 +95,9 @@ class MapBundle:
         parts: the visual parts, in a fixed order.
         collision: ``road`` and ``obstacles`` OBJ paths.
         vehicles: vehicle class name -> OBJ path of its model (unit box).
+        vehicle_lods: vehicle class name -> its levels of detail, the full model
+            first (:class:`mapgen.vehicles.ModelLevel`, ``file`` an absolute path);
+            only the full model in maps built before levels of detail.
         tiles: the visual parts in tiles, for the cameras.
         description: the whole of ``road.json``.
     """
@@ -103,6 +107,7 @@ class MapBundle:
     parts: tuple[MapPart, ...]
     collision: dict[str, Path]
     vehicles: dict[str, Path]
+    vehicle_lods: dict[str, tuple[ModelLevel, ...]]
     tiles: tuple[MapTile, ...]
     description: dict
 
@@ -165,7 +170,11 @@ def build_map(out: Path, *, seed: int = DEFAULT_SEED) -> MapBundle:
             _write_obj(mesh, folder.tmp / entry["visual"], normals=True)
         for name, mesh in meshes.collision.items():
             _write_obj(mesh, folder.tmp / "collision" / f"{name}.obj", normals=False)
-        write_vehicle_models(folder.tmp / "vehicles")
+        levels = write_vehicle_models(folder.tmp / "vehicles")
+        description["vehicle_lods"] = {
+            name: [{**asdict(level), "file": f"vehicles/{level.file}"} for level in models]
+            for name, models in levels.items()
+        }
         (folder.tmp / SCENE_GLB).write_bytes(_glb(meshes, params, description))
         (folder.tmp / ROAD_JSON).write_text(json.dumps(description, indent=1) + "\n")
     return load_map(out)
@@ -202,12 +211,26 @@ def load_map(folder: Path) -> MapBundle:
     )
     collision = {name: folder / path for name, path in description["collision"].items()}
     vehicles = {name: folder / path for name, path in description["vehicles"].items()}
+    vehicle_lods = {
+        name: tuple(
+            ModelLevel(
+                file=str(folder / level["file"]),
+                triangles=int(level["triangles"]),
+                error_m=float(level["error_m"]),
+                size_m=tuple(level["size_m"]),
+            )
+            for level in description.get("vehicle_lods", {}).get(name, [])
+        )
+        or (ModelLevel(file=str(path), triangles=0, error_m=0.0, size_m=(1.0, 1.0, 1.0)),)
+        for name, path in vehicles.items()
+    }
     by_name = {part.name: part for part in parts}
     tiles = tuple(
         MapTile(part=by_name[t["part"]], visual=folder / t["visual"], bounds=np.array(t["bounds"]))
         for t in description["tiles"]
     )
     files = [p.visual for p in parts] + [*collision.values(), *vehicles.values()]
+    files += [Path(level.file) for levels in vehicle_lods.values() for level in levels]
     files += [t.visual for t in tiles]
     for path in [*files, folder / SCENE_GLB]:
         if not path.is_file():
@@ -218,6 +241,7 @@ def load_map(folder: Path) -> MapBundle:
         parts=parts,
         collision=collision,
         vehicles=vehicles,
+        vehicle_lods=vehicle_lods,
         tiles=tiles,
         description=description,
     )

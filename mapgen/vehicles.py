@@ -8,6 +8,13 @@ vehicle's length, width and height, so the model's bounding box is the vehicle's
 3D box exactly. Colours come from a small palette texture: the paint entry is white
 and takes the vehicle's paint colour (pybullet multiplies the texture by the
 shape's colour); glass, tyres and trim are dark whatever the paint.
+
+Levels of detail: the wheels are most of a model's triangles (36 of a sedan's 40 + 144),
+so level 1 draws each wheel as a square (12 triangles) and level 2 draws none. Each
+level's error is the largest distance between its surface and the full model's
+(their Hausdorff distance, measured on points 2.5 cm apart), so that past
+``error * f`` metres (f the camera's focal length in pixels) its silhouette is within
+a pixel of the full model's; the renderer picks the level per vehicle and camera rig.
 """
 
 from dataclasses import dataclass
@@ -33,6 +40,8 @@ PALETTE_PNG = "palette.png"
 MATERIAL = "vehicles.mtl"
 WHEEL_WIDTH = 0.24  # [m]
 WHEEL_SECTIONS = 10
+LOD_WHEEL_SECTIONS = (WHEEL_SECTIONS, 4, 0)  # by level of detail; 0: no wheels
+LOD_SPACING = 0.05  # [m] of the points the levels' errors are measured on
 
 
 @dataclass(frozen=True)
@@ -45,11 +54,30 @@ class Prism:
     palette: int
 
 
-def write_vehicle_models(folder: Path) -> dict[str, str]:
-    """Write ``<class>.obj`` for every class, their material and palette into ``folder``.
+@dataclass(frozen=True)
+class ModelLevel:
+    """One level of detail of a class's model.
+
+    Attributes:
+        file: OBJ file name. triangles: its triangle count.
+        error_m: [m] the largest distance between its surface and the full model's at
+            the class's mean size (0 for the full model).
+        size_m: [m] (length, width, height) of the model at the class's mean size,
+            which the unit box stands for.
+    """
+
+    file: str
+    triangles: int
+    error_m: float
+    size_m: tuple[float, float, float]
+
+
+def write_vehicle_models(folder: Path) -> dict[str, list[ModelLevel]]:
+    """Write every class's model at each level of detail (``<class>.obj``,
+    ``<class>-lod1.obj``, ...), their material and palette into ``folder``.
 
     Returns:
-        class name -> OBJ file name.
+        class name -> its levels of detail, the full model first.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -59,16 +87,104 @@ def write_vehicle_models(folder: Path) -> dict[str, str]:
     (folder / MATERIAL).write_text(
         f"newmtl vehicle\nKa 1 1 1\nKd 1 1 1\nKs 0.1 0.1 0.1\nmap_Kd {PALETTE_PNG}\n"
     )
-    names = {}
+    levels = {}
     for name in VEHICLE_CLASSES:
-        prisms = vehicle_prisms(name)
-        (folder / f"{name}.obj").write_text(_obj(prisms))
-        names[name] = f"{name}.obj"
-    return names
+        full = _triangles(vehicle_prisms(name))
+        low, high = full.reshape(-1, 3).min(axis=0), full.reshape(-1, 3).max(axis=0)
+        size = tuple(float(v) for v in high - low)
+        levels[name] = []
+        for level, sections in enumerate(LOD_WHEEL_SECTIONS):
+            prisms = vehicle_prisms(name, wheel_sections=sections)
+            file = f"{name}.obj" if level == 0 else f"{name}-lod{level}.obj"
+            (folder / file).write_text(_obj(prisms, (low, high)))
+            mine = _triangles(prisms)
+            error = 0.0 if level == 0 else hausdorff(full, mine, LOD_SPACING)
+            levels[name].append(ModelLevel(file, len(mine), round(error, 4), size))
+    return levels
 
 
-def vehicle_prisms(name: str) -> list[Prism]:
-    """The parts of class ``name`` in metres at its mean size, before normalising."""
+def hausdorff(a: np.ndarray, b: np.ndarray, spacing: float) -> float:
+    """[m] Hausdorff distance between the surfaces of triangles ``a`` and ``b`` ((n, 3, 3)
+    each): the exact distances to the other surface of points at most ``spacing``
+    apart on each, plus ``spacing`` (an upper bound). Triangles the two share are at
+    distance 0 and need no points (the levels of detail differ in their wheels only)."""
+
+    def directed(p: np.ndarray, q: np.ndarray) -> float:
+        q_low, q_high = q.min(axis=1), q.max(axis=1)
+        far = 0.0
+        for tri in p[~_rows_in(p, q)]:
+            # only the triangles of q that may hold the nearest point of one of tri's:
+            # none is farther than the nearest to a corner plus tri's size
+            reach = point_triangle_distance(tri, q).max() + 2.0 * np.ptp(tri, axis=0).max()
+            gap = np.maximum(q_low - tri.max(axis=0), tri.min(axis=0) - q_high).max(axis=1)
+            points = _surface_points(tri[None], spacing)
+            far = max(far, float(point_triangle_distance(points, q[gap <= reach]).max()))
+        return far
+
+    return max(directed(a, b), directed(b, a)) + spacing
+
+
+def point_triangle_distance(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(n,) [m] distance of each of ``points`` (n, 3) to the nearest of ``triangles``
+    (m, 3, 3): the closest point on each triangle by its Voronoi regions (Ericson,
+    Real-Time Collision Detection, 5.1.5), all pairs at once."""
+    p = points[:, None, :]
+    a, b, c = (triangles[None, :, k, :] for k in range(3))
+    ab, ac, ap, bp, cp = b - a, c - a, p - a, p - b, p - c
+
+    def dot(u, v):
+        return np.einsum("...k,...k->...", u, v)
+
+    d1, d2, d3, d4, d5, d6 = (
+        dot(ab, ap),
+        dot(ac, ap),
+        dot(ab, bp),
+        dot(ac, bp),
+        dot(ab, cp),
+        dot(ac, cp),
+    )
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        on_ab = a + (d1 / (d1 - d3))[..., None] * ab
+        on_ac = a + (d2 / (d2 - d6))[..., None] * ac
+        on_bc = b + ((d4 - d3) / ((d4 - d3) + (d5 - d6)))[..., None] * (c - b)
+        inside = 1.0 / (va + vb + vc)
+        on_face = a + (vb * inside)[..., None] * ab + (vc * inside)[..., None] * ac
+    regions = [
+        (d1 <= 0) & (d2 <= 0),
+        (d3 >= 0) & (d4 <= d3),
+        (vc <= 0) & (d1 >= 0) & (d3 <= 0),
+        (d6 >= 0) & (d5 <= d6),
+        (vb <= 0) & (d2 >= 0) & (d6 <= 0),
+        (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0),
+    ]
+    choices = [a, b, on_ab, c, on_ac, on_bc]
+    closest = np.select([r[..., None] for r in regions], choices, on_face)
+    return np.sqrt(dot(p - closest, p - closest)).min(axis=1)
+
+
+def _rows_in(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(n,) bool: each triangle of ``p`` is (to 1e-9 m) one of ``q``'s."""
+    keys = {tuple(np.round(t, 9).ravel()) for t in q}
+    return np.array([tuple(np.round(t, 9).ravel()) in keys for t in p], dtype=bool)
+
+
+def _surface_points(triangles: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on each triangle on a barycentric grid whose steps are at most ``spacing``."""
+    points = []
+    for tri in triangles:
+        edge = np.linalg.norm(tri - np.roll(tri, 1, axis=0), axis=1).max()
+        n = max(1, int(np.ceil(edge / spacing)))
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+        keep = i + j <= n
+        u, v = i[keep, None] / n, j[keep, None] / n
+        points.append(tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]))
+    return np.concatenate(points)
+
+
+def vehicle_prisms(name: str, *, wheel_sections: int = WHEEL_SECTIONS) -> list[Prism]:
+    """The parts of class ``name`` in metres at its mean size, before normalising, with
+    wheels of ``wheel_sections`` sides (0: none)."""
     table = vehicle_classes()
     row = table.frame[table.frame["name"] == name]
     if row.empty:
@@ -87,10 +203,10 @@ def vehicle_prisms(name: str) -> list[Prism]:
     else:  # the tyres' outer faces flush with the body's sides
         sides = [(-half_track, WHEEL_WIDTH - half_track), (half_track - WHEEL_WIDTH, half_track)]
     wheels = []
-    for x in axles:
+    for x in axles if wheel_sections else ():
         circle = tuple(
             (x + radius * np.cos(a), radius + radius * np.sin(a))
-            for a in np.linspace(0.0, 2.0 * np.pi, WHEEL_SECTIONS, endpoint=False)
+            for a in np.linspace(0.0, 2.0 * np.pi, wheel_sections, endpoint=False)
         )
         wheels += [Prism(circle, y0, y1, TYRE) for y0, y1 in sides]
     return body + wheels
@@ -246,15 +362,20 @@ def _signed_area(xz: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(z, -1) - np.roll(x, -1) * z))
 
 
-def _obj(prisms: list[Prism]) -> str:
-    """Wavefront OBJ of the prisms normalised to the unit box, textured by the palette.
+def _triangles(prisms: list[Prism]) -> np.ndarray:
+    """(n, 3, 3) [m] triangles of the prisms."""
+    return np.concatenate([v[t] for v, t in map(_prism_mesh, prisms)])
+
+
+def _obj(prisms: list[Prism], bounds: tuple[np.ndarray, np.ndarray]) -> str:
+    """Wavefront OBJ of the prisms, the box ``bounds`` (low and high corners [m]: the
+    full model's) normalised to the unit box, textured by the palette.
 
     Normals stay those of the model at its mean size: the renderer rotates normals
     but does not rescale them.
     """
     meshes = [_prism_mesh(prism) for prism in prisms]
-    vertices = np.concatenate([v for v, _ in meshes])
-    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    low, high = bounds
     scale = high - low
     offset = np.array([low[0] + 0.5 * scale[0], low[1] + 0.5 * scale[1], low[2]])
     lines = [f"mtllib {MATERIAL}", "usemtl vehicle"]

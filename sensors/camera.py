@@ -278,17 +278,37 @@ class CameraRig:
             rng = np.random.default_rng([self.seed, SUN_STREAM])
             self._drawn_light = episode_light("random", 0.0, shadows=self.shadows, rng=rng)
         self.view = SceneView(self.world, self.bundle, kind)
+        self.view.lod_focal = max(max(c.K[0][0], c.K[1][1]) for c in self.cameras)
         self._counts = {c.name: 0 for c in self.cameras}
         self._map_casters = map_casters(self.bundle)
 
-    def _pose_replayed(self, replayed) -> DrawnVehicles:
+    def _eye(self, ego_id: int, cameras) -> tuple[np.ndarray | None, float]:
+        """The centre of vehicle ``ego_id`` [m, world] and how far from it its
+        ``cameras`` are at most [m], for the levels of detail; (None, 0) where it is not
+        active (``capture`` says so)."""
+        states = self.world.states()
+        at = np.flatnonzero(states.id == ego_id)
+        if at.size == 0:
+            return None, 0.0
+        params = self.world.params
+        length, height = float(params.length[at[0]]), float(params.height[at[0]])
+        reach = max(np.linalg.norm(c.vehicle_from_camera(length)[:3, 3]) for c in cameras)
+        return states.position[at[0]], reach + height
+
+    def _pose_replayed(self, replayed, eye=None, margin: float = 0.0) -> DrawnVehicles:
         """Pose the replayed vehicles (none: release them); their drawn boxes."""
         if replayed is None or len(replayed) == 0:
             self.view.pose_replayed(np.empty(0, np.int64), [], np.empty((0, 3)), [], [])
             return _no_vehicles()
         ids = np.array([self._replay_id(int(t)) for t in replayed.tid.tolist()], np.int64)
         sizes = self.view.pose_replayed(
-            ids, replayed.vehicle_class, replayed.size, replayed.position, replayed.rotation
+            ids,
+            replayed.vehicle_class,
+            replayed.size,
+            replayed.position,
+            replayed.rotation,
+            eye=eye,
+            margin=margin,
         )
         n = ids.size
         return DrawnVehicles(
@@ -354,13 +374,16 @@ class CameraRig:
             CameraError: more replayed vehicles in an episode than instance ids.
         """
         cameras = self.cameras if cameras is None else cameras
-        everyone = self.view.vehicles(hide=[ego_id])
+        eye, margin = self._eye(ego_id, cameras)
+        everyone = self.view.vehicles(hide=[ego_id], eye=eye, margin=margin)
         replayed = None
         if traffic is not None:
             records, roads = traffic.record_of(everyone.id)
             everyone = replace(everyone, record_id=np.asarray(records, object), road=roads)
             replayed = traffic.replayed()
-        drawn = DrawnVehicles.join(everyone.take(everyone.shown), self._pose_replayed(replayed))
+        drawn = DrawnVehicles.join(
+            everyone.take(everyone.shown), self._pose_replayed(replayed, eye, margin)
+        )
         ego = np.flatnonzero(everyone.id == ego_id)
         if ego.size == 0:
             raise KeyError(f"vehicle {ego_id} is not active in the physics world")

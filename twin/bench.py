@@ -279,7 +279,7 @@ def camera_bench(
     recording = None
     if replay:
         recording = EmpiricalTraffic(store if store is not None else default_store(progress=False))
-    capture, pipeline, replayed = [], [], []
+    capture, pipeline, replayed, triangles = [], [], [], []
     for repeat in range(repeats):
         rng = np.random.default_rng(repeat)
         lane = np.arange(vehicles) % 4
@@ -321,6 +321,7 @@ def camera_bench(
                             int(ids[ego]), time=at, sim_time=0.1 * k, traffic=traffic
                         )
                         replayed.append(int(np.count_nonzero(frame.vehicles.replayed)))
+                        triangles.append(rig.view.vehicle_triangles())
                         if writer is not None:
                             writer.write(frame)
                         busy += time.perf_counter() - start
@@ -342,6 +343,9 @@ def camera_bench(
         "frames": frames,
         "repeats": repeats,
         "replayed_vehicles_median": float(np.median(replayed)),
+        # vehicle model triangles a frame: at their levels of detail, and full models
+        "vehicle_triangles_median": float(np.median([t[0] for t in triangles])),
+        "vehicle_triangles_full_median": float(np.median([t[1] for t in triangles])),
         "raw_ms": round(float(pipeline[1]) * 1e3, 2),
         "raw_fps": round(1.0 / float(pipeline[1]), 2),
         "capture_ms": round(float(capture[0]) * 1e3, 2),

@@ -228,7 +228,17 @@ class SceneView:
         hi = np.array([t.bounds[1] for t in bundle.tiles])
         self._corners = box_corners(lo, hi)  # (tiles, 8, 4)
         self._shown = np.ones(len(self._tiles), dtype=bool)
-        self._models = [str(bundle.vehicles[name]) for name in VEHICLE_CLASSES]
+        self._levels = [bundle.vehicle_lods[name] for name in VEHICLE_CLASSES]
+        levels = max(len(models) for models in self._levels)
+        self._level_error = np.zeros((len(VEHICLE_CLASSES), levels))  # [m] at model size
+        self._level_error[:, 1:] = np.inf  # levels a map lacks are never drawn
+        self._model_size = np.ones((len(VEHICLE_CLASSES), 3))  # [m] the models' own sizes
+        for k, levels in enumerate(self._levels):
+            self._level_error[k, : len(levels)] = [level.error_m for level in levels]
+            self._model_size[k] = levels[0].size_m
+        #: [px] focal length of the sharpest camera drawing the scene (0: full models
+        #: always); set by the camera rig
+        self.lod_focal = 0.0
         self._vehicle_semantic = np.array([class_id(n) for n in VEHICLE_CLASSES], np.uint8)
         self._paints = vehicle_paints()
         self._semantic_lut = np.full(1, SKY_CLASS, dtype=np.uint8)  # index: body + 1
@@ -249,9 +259,31 @@ class SceneView:
                 p.unloadPlugin(self._plugin, physicsClientId=self.client)
         self._plugin = None
 
-    def vehicles(self, hide=()) -> DrawnVehicles:
+    def levels(self, vehicle_class, size, position, eye=None, margin: float = 0.0) -> np.ndarray:
+        """(n,) level of detail to draw each vehicle with ((n,) classes, (n, 3) sizes and
+        positions [m]) for cameras within ``margin`` [m] of ``eye`` (world): the
+        coarsest level whose error, scaled to the vehicle's size, stays within a pixel
+        of the full model's silhouette at :attr:`lod_focal` (an error e at distance d
+        is at most e * f / (d - e) pixels). Full models without an eye or focal length.
+        """
+        vehicle_class = np.asarray(vehicle_class, np.int64)
+        n = vehicle_class.size
+        if eye is None or self.lod_focal <= 0.0 or n == 0:
+            return np.zeros(n, np.int64)
+        size = np.asarray(size, np.float64).reshape(n, 3)
+        stretch = (size / self._model_size[vehicle_class]).max(axis=1)
+        # from any camera to the nearest point of the vehicle's box, at least
+        distance = np.linalg.norm(np.asarray(position).reshape(n, 3) - eye, axis=1)
+        reach = distance - 0.5 * np.linalg.norm(size, axis=1) - margin
+        error = self._level_error[vehicle_class] * stretch[:, None]  # (n, levels)
+        within = error * (self.lod_focal + 1.0) <= reach[:, None]
+        return (within.shape[1] - 1 - np.argmax(within[:, ::-1], axis=1)).astype(np.int64)
+
+    def vehicles(self, hide=(), eye=None, margin: float = 0.0) -> DrawnVehicles:
         """Pose a proxy on every active vehicle of the world (those in ``hide`` are
-        parked out of sight) and return all active vehicles with their drawn boxes."""
+        parked out of sight) and return all active vehicles with their drawn boxes.
+        ``eye`` and ``margin``: where the cameras are, for the levels of detail
+        (:meth:`levels`)."""
         states = self.world.states()
         params = self.world.params
         if states.id.size and int(states.id.max()) >= REPLAY_BASE:
@@ -259,16 +291,12 @@ class SceneView:
         simulated = {i for i in self._proxies if i < REPLAY_BASE}
         for gone in simulated - set(states.id.tolist()):
             self._release(gone)
-        keys = [
-            (int(k), *(max(1, round(v / SIZE_STEP)) for v in size))
-            for k, size in zip(
-                params.vehicle_class,
-                np.column_stack([params.length, params.width, params.height]),
-                strict=True,
-            )
-        ]
+        sizes = np.column_stack([params.length, params.width, params.height])
         rotation = rotation_matrices(states.orientation)
         ground = states.position - rotation[:, :, 2] * params.cg_height[:, None]
+        centre = ground + rotation[:, :, 2] * (0.5 * params.height[:, None])
+        level = self.levels(params.vehicle_class, sizes, centre, eye, margin)
+        keys = _keys(params.vehicle_class, level, sizes)
         hidden = set(np.atleast_1d(np.asarray(hide, dtype=np.int64)).tolist())
         shown = ~np.isin(states.id, list(hidden))
         for i, twin_id in enumerate(states.id.tolist()):
@@ -277,7 +305,7 @@ class SceneView:
             p.resetBasePositionAndOrientation(
                 body, place, states.orientation[i].tolist(), physicsClientId=self.client
             )
-        size = np.asarray([k[1:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
+        size = np.asarray([k[2:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
         return DrawnVehicles(
             id=states.id,
             vehicle_class=params.vehicle_class.astype(np.int64),
@@ -289,26 +317,45 @@ class SceneView:
         )
 
     def pose_replayed(
-        self, ids: np.ndarray, vehicle_class: np.ndarray, size: np.ndarray, position, rotation
+        self,
+        ids: np.ndarray,
+        vehicle_class: np.ndarray,
+        size: np.ndarray,
+        position,
+        rotation,
+        eye=None,
+        margin: float = 0.0,
     ) -> np.ndarray:
         """Pose a proxy on each replayed vehicle (``ids`` from :data:`REPLAY_BASE` up,
         (n,) classes, (n, 3) sizes, bottom centres and (n, 3, 3) rotations in the world);
         the replayed proxies not among ``ids`` go back to the pool. Returns the drawn
-        sizes (n, 3) [m] (the models' sizes are rounded as the simulated ones')."""
+        sizes (n, 3) [m] (the models' sizes are rounded as the simulated ones').
+        ``eye`` and ``margin``: where the cameras are (:meth:`levels`)."""
         ids = np.asarray(ids, np.int64)
         for gone in {i for i in self._proxies if i >= REPLAY_BASE} - set(ids.tolist()):
             self._release(gone)
-        keys = [
-            (int(k), *(max(1, round(v / SIZE_STEP)) for v in box))
-            for k, box in zip(vehicle_class, np.asarray(size), strict=True)
-        ]
-        quaternions = quaternions_of(np.asarray(rotation))
+        size = np.asarray(size, np.float64).reshape(-1, 3)
+        rotation = np.asarray(rotation, np.float64).reshape(-1, 3, 3)
+        centre = np.asarray(position, np.float64).reshape(-1, 3) + rotation[:, :, 2] * (
+            0.5 * size[:, 2:3]
+        )
+        keys = _keys(vehicle_class, self.levels(vehicle_class, size, centre, eye, margin), size)
+        quaternions = quaternions_of(rotation)
         for i, twin_id in enumerate(ids.tolist()):
             body = self._proxy(twin_id, keys[i])
             p.resetBasePositionAndOrientation(
                 body, position[i].tolist(), quaternions[i].tolist(), physicsClientId=self.client
             )
-        return np.asarray([k[1:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
+        return np.asarray([k[2:] for k in keys], dtype=np.float64).reshape(-1, 3) * SIZE_STEP
+
+    def vehicle_triangles(self) -> tuple[int, int]:
+        """Triangles of the vehicle models posed now (in the frustum or not): at their
+        levels of detail, and were they all full models."""
+        keys = [key for _, key in self._proxies.values()]
+        return (
+            sum(self._levels[k][level].triangles for k, level, *_ in keys),
+            sum(self._levels[k][0].triangles for k, *_ in keys),
+        )
 
     def render(
         self, view: list, projection: list, width: int, height: int, light: Light = NOON
@@ -380,23 +427,28 @@ class SceneView:
     # -- proxies ----------------------------------------------------------------------
 
     def _proxy(self, twin_id: int, key: tuple) -> int:
-        """The proxy body drawing vehicle ``twin_id``, taken from the pool on first use."""
+        """The proxy body drawing vehicle ``twin_id`` with model ``key`` (class, level of
+        detail, size in SIZE_STEP), taken from the pool on first use or when the key
+        changes (a vehicle crossing to another level)."""
         held = self._proxies.get(twin_id)
         if held is not None:
-            return held[0]
+            if held[1] == key:
+                return held[0]
+            self._release(twin_id)
         free = self._free.setdefault(key, [])
         if free:
             body = free.pop()
         else:
             if key not in self._shapes:
+                model = self._levels[key[0]][key[1]].file
                 shape = p.createVisualShape(
                     p.GEOM_MESH,
-                    fileName=self._models[key[0]],
-                    meshScale=[v * SIZE_STEP for v in key[1:]],
+                    fileName=model,
+                    meshScale=[v * SIZE_STEP for v in key[2:]],
                     physicsClientId=self.client,
                 )
                 if shape < 0:
-                    raise RuntimeError(f"pybullet could not load {self._models[key[0]]}")
+                    raise RuntimeError(f"pybullet could not load {model}")
                 self._shapes[key] = shape
             body = p.createMultiBody(
                 baseMass=0.0,
@@ -432,6 +484,16 @@ class SceneView:
             )
         self._semantic_lut[body + 1] = semantic
         self._instance_lut[body + 1] = instance
+
+
+def _keys(vehicle_class, level, size) -> list[tuple]:
+    """The model key of each vehicle: (class, level of detail, length, width, height in
+    SIZE_STEP): vehicles of one key share a model and a pool of proxies."""
+    steps = np.maximum(1, np.round(np.asarray(size, np.float64) / SIZE_STEP)).astype(np.int64)
+    return [
+        (int(k), int(lv), *map(int, st))
+        for k, lv, st in zip(vehicle_class, level, steps.reshape(-1, 3), strict=True)
+    ]
 
 
 #: corners of a unit box, numbered by bits (x, y, z): 0 is (0, 0, 0), 7 is (1, 1, 1)
