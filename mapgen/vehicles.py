@@ -12,7 +12,7 @@ shape's colour); glass, tyres and trim are dark whatever the paint.
 Levels of detail: the wheels are most of a model's triangles (36 of a sedan's 40 + 144),
 so level 1 draws each wheel as a square (12 triangles) and level 2 draws none. Each
 level's error is the largest distance between its surface and the full model's
-(their Hausdorff distance, measured on points 2.5 cm apart), so that past
+(their Hausdorff distance, bounded from above on points 5 cm apart), so that past
 ``error * f`` metres (f the camera's focal length in pixels) its silhouette is within
 a pixel of the full model's; the renderer picks the level per vehicle and camera rig.
 """

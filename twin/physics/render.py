@@ -294,7 +294,7 @@ class SceneView:
         sizes = np.column_stack([params.length, params.width, params.height])
         rotation = rotation_matrices(states.orientation)
         ground = states.position - rotation[:, :, 2] * params.cg_height[:, None]
-        centre = ground + rotation[:, :, 2] * (0.5 * params.height[:, None])
+        centre = _box_centres(ground, rotation, params.height)
         level = self.levels(params.vehicle_class, sizes, centre, eye, margin)
         keys = _keys(params.vehicle_class, level, sizes)
         hidden = set(np.atleast_1d(np.asarray(hide, dtype=np.int64)).tolist())
@@ -336,9 +336,7 @@ class SceneView:
             self._release(gone)
         size = np.asarray(size, np.float64).reshape(-1, 3)
         rotation = np.asarray(rotation, np.float64).reshape(-1, 3, 3)
-        centre = np.asarray(position, np.float64).reshape(-1, 3) + rotation[:, :, 2] * (
-            0.5 * size[:, 2:3]
-        )
+        centre = _box_centres(np.asarray(position, np.float64).reshape(-1, 3), rotation, size[:, 2])
         keys = _keys(vehicle_class, self.levels(vehicle_class, size, centre, eye, margin), size)
         quaternions = quaternions_of(rotation)
         for i, twin_id in enumerate(ids.tolist()):
@@ -484,6 +482,12 @@ class SceneView:
             )
         self._semantic_lut[body + 1] = semantic
         self._instance_lut[body + 1] = instance
+
+
+def _box_centres(bottom: np.ndarray, rotation: np.ndarray, height: np.ndarray) -> np.ndarray:
+    """(n, 3) centres of boxes from their (n, 3) bottom centres, (n, 3, 3) rotations and
+    (n,) heights."""
+    return bottom + rotation[:, :, 2] * (0.5 * np.asarray(height)[:, None])
 
 
 def _keys(vehicle_class, level, size) -> list[tuple]:
