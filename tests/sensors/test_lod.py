@@ -161,3 +161,23 @@ def test_the_silhouette_check_sees_a_level_drawn_too_near(built_map):
         assert rig.view._proxies[vehicle][1][1] == 2
         assert _farthest_miss(_mask(coarse, vehicle), _mask(full, vehicle)) > 5.0
         rig.close()
+
+
+def test_vehicles_beside_the_cameras_get_the_full_model(built_map):
+    """A vehicle nearer than the cameras' reach (alongside the ego, where the side
+    cameras look) is drawn in full, not at the coarsest level."""
+    with PhysicsWorld(built_map) as world:
+        ego, _ = spawn(world, EGO_X, -2, 0)
+        world.step()
+        rig = CameraRig(world, built_map, (CameraSpec(),), renderer="tiny", sun="noon")
+        eye, margin = rig._eye(ego, rig.cameras)
+        table = vehicle_classes()
+        size = [[table.column(c)[0] for c in ("length_m", "width_m", "height_m")]]
+        beside = eye + np.array([0.0, 3.66, 0.0])
+        for distance in (0.0, 3.66, margin):
+            at = eye + np.array([distance, 0.0, 0.0])
+            assert rig.view.levels([0], size, at[None], eye, margin)[0] == 0
+        assert rig.view.levels([0], size, beside[None], eye, margin)[0] == 0
+        far = eye + np.array([250.0, 0.0, 0.0])
+        assert rig.view.levels([0], size, far[None], eye, margin)[0] == 2
+        rig.close()

@@ -274,7 +274,8 @@ class SceneView:
         stretch = (size / self._model_size[vehicle_class]).max(axis=1)
         # from any camera to the nearest point of the vehicle's box, at least
         distance = np.linalg.norm(np.asarray(position).reshape(n, 3) - eye, axis=1)
-        reach = distance - 0.5 * np.linalg.norm(size, axis=1) - margin
+        # (none nearer than the cameras: the full model, whose error is 0, fits there)
+        reach = np.maximum(distance - 0.5 * np.linalg.norm(size, axis=1) - margin, 0.0)
         error = self._level_error[vehicle_class] * stretch[:, None]  # (n, levels)
         within = error * (self.lod_focal + 1.0) <= reach[:, None]
         return (within.shape[1] - 1 - np.argmax(within[:, ::-1], axis=1)).astype(np.int64)
