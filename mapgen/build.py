@@ -36,10 +36,10 @@ from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
 from mapgen.vehicles import ModelLevel, write_vehicle_models
-from twin.atomic import AtomicFolder, marked_as
-from twin.data import i24
-from twin.errors import MapError
-from twin.paths import asset, cache_dir
+from twin.core import i24
+from twin.core.atomic import AtomicFolder, marked_as
+from twin.core.errors import MapError
+from twin.core.paths import asset, cache_dir
 
 FORMAT = "i24-twin-map"
 FORMAT_VERSION = 2

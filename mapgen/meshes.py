@@ -16,7 +16,7 @@ import trimesh
 from mapgen.params import MapParams, Terrain
 from mapgen.road import RoadModel, mile_marker_of, station_of
 from mapgen.sources import Sources
-from twin.data.i24 import LANE_WIDTH, N_LANES, lane_center
+from twin.core.i24 import LANE_WIDTH, N_LANES, lane_center
 
 INNER_EDGE = LANE_WIDTH  # [m] the yellow line: 12 ft from the median centre line
 LANES_OUTER_EDGE = (N_LANES + 1) * LANE_WIDTH  # [m] the white edge line

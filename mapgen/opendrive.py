@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from mapgen.params import load_params
-from twin.atomic import atomic_file
-from twin.data.i24 import LANE_WIDTH
+from twin.core.atomic import atomic_file
+from twin.core.i24 import LANE_WIDTH
 
 XODR = "i24.xodr"  # its name in a map folder (twin map build)
 SHOULDER_WIDTH = 3.048  # [m] 10 ft

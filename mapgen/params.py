@@ -1,7 +1,7 @@
 """The map's geometry parameters, read from ``assets/map.toml`` into frozen dataclasses.
 
 Every length is in metres. What DESIGN.md fixes (lane width, lane count, the yellow
-edge line 12 ft from the median centre line) comes from :mod:`twin.data.i24` and is
+edge line 12 ft from the median centre line) comes from :mod:`twin.core.i24` and is
 not repeated here.
 """
 
@@ -10,8 +10,8 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, get_type_hints
 
-from twin.errors import MapError
-from twin.paths import asset
+from twin.core.errors import MapError
+from twin.core.paths import asset
 
 MAP_TOML = "map.toml"
 

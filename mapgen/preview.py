@@ -11,8 +11,8 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from mapgen.road import mile_marker_of
-from twin.atomic import atomic_file
-from twin.data.i24 import Road, lane_center
+from twin.core.atomic import atomic_file
+from twin.core.i24 import Road, lane_center
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
 from twin.physics.render import LIGHT, SKY_HORIZON, SKY_TOP

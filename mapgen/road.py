@@ -28,7 +28,8 @@ import numpy as np
 from mapgen import geodesy
 from mapgen.params import MapParams
 from mapgen.sources import PROFILE_STEP_MI, Sources
-from twin.data.i24 import (
+from twin.core.errors import MapError
+from twin.core.i24 import (
     LANE_WIDTH,
     MILE,
     N_LANES,
@@ -39,7 +40,6 @@ from twin.data.i24 import (
     lane_of,
     mile_marker,
 )
-from twin.errors import MapError
 
 EARTH_RADIUS = 6_371_000.0  # [m] mean radius, for the curvature drop of a tangent plane
 STATION_TOLERANCE = 1e-6  # [m] beyond the map's ends still accepted as on the map
@@ -59,7 +59,7 @@ class RoadCoordinates(NamedTuple):
     """Road-frame coordinates of world points (arrays of shape (n,)).
 
     ``road`` is the direction of the carriageway (+1 eastbound, -1 westbound; see
-    :meth:`twin.data.i24.Road.parse`), ``lane`` is -1..-4 or 0 off the lanes, and
+    :meth:`twin.core.i24.Road.parse`), ``lane`` is -1..-4 or 0 off the lanes, and
     ``height`` [m] is above the pavement (NaN off the map's ends).
     """
 
@@ -248,7 +248,7 @@ class RoadModel:
         """World pose of road-frame points on the pavement.
 
         Args:
-            road: a :class:`~twin.data.i24.Road` (or its name, or +1/-1) for all
+            road: a :class:`~twin.core.i24.Road` (or its name, or +1/-1) for all
                 points, or (n,) int directions, one per point.
             x: (n,) [m] along travel from the segment entry.
             y: (n,) [m] from the median centre line outward.
@@ -319,7 +319,7 @@ class RoadModel:
 
     @staticmethod
     def lane_at(y: np.ndarray) -> np.ndarray:
-        """Lane id (-1..-4, 0 off the lanes) of road-frame y; see :func:`twin.data.i24.lane_of`."""
+        """Lane id (-1..-4, 0 off the lanes) of road-frame y; see :func:`twin.core.i24.lane_of`."""
         return lane_of(y)
 
     def _slope_ahead(self, s: np.ndarray, direction: np.ndarray) -> np.ndarray:

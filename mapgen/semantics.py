@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from twin.errors import MapError
-from twin.paths import asset
+from twin.core.errors import MapError
+from twin.core.paths import asset
 
 SEMANTIC_CSV = "semantic_classes.csv"
 

@@ -3,7 +3,7 @@
 These are the I-24 MOTION auxiliary files (Gloudemans et al. 2023; see
 ``assets/i24_aux/README_auxiliary_data.txt``), shipped with the twin so that a map
 can be built without ``../shared``. Each reader checks its columns and values and
-raises :class:`~twin.errors.MapError` naming the file and the problem.
+raises :class:`~twin.core.errors.MapError` naming the file and the problem.
 """
 
 from dataclasses import dataclass
@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from twin.data.i24 import FT
-from twin.errors import MapError
-from twin.paths import asset
+from twin.core.errors import MapError
+from twin.core.i24 import FT
+from twin.core.paths import asset
 
 AUX_DIR = "i24_aux"
 MILE_MARKERS = "mile_marker_layer.csv"

@@ -23,8 +23,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from twin.data.i24 import VEHICLE_CLASSES
-from twin.vehicle_classes import vehicle_classes
+from twin.core.i24 import VEHICLE_CLASSES
+from twin.core.vehicle_classes import vehicle_classes
 
 PALETTE = np.array(
     [

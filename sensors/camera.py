@@ -27,10 +27,10 @@ import pandas as pd
 from mapgen.build import MapBundle
 from sensors.shadows import Casters, darken, map_casters, shade_factor, shadow_mask
 from sensors.sun import SUN_MODES, episode_light
-from twin.paths import asset
+from twin.core.paths import asset
+from twin.core.timeutil import steps_per_sample
 from twin.physics.render import REPLAY_BASE, DrawnVehicles, SceneView, resolve_renderer
 from twin.physics.world import PhysicsWorld
-from twin.timeutil import steps_per_sample
 
 SUN_STREAM = 0x53554E  # seeds an episode's random sun apart from its other draws
 MAX_INSTANCE_ID = 65534  # instance images hold id + 1 in 16 bits

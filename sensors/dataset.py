@@ -61,10 +61,10 @@ from sensors.labels import VehicleLabels, frame_labels, model_triangles
 from sensors.replay import FrameTraffic
 from sensors.writer import BackgroundWriter, encode_instance, vehicle_source, write_pngs
 from twin import __version__
-from twin.atomic import AtomicFolder, atomic_file, marked_as
+from twin.core.atomic import AtomicFolder, atomic_file, marked_as
+from twin.core.errors import NoVehicleNearError, TwinError
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.data.store import TrajectoryStore
-from twin.errors import NoVehicleNearError, TwinError
 
 FORMAT = "i24-twin-dataset"
 FORMAT_VERSION = 1
@@ -221,8 +221,8 @@ def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int)
     Raises:
         SamplingError: no cell of the data can hold an episode.
     """
+    from twin.core.i24 import Road
     from twin.cosim.cosimulator import road_limits
-    from twin.data.i24 import Road
     from twin.data.traffic import EmpiricalTraffic
 
     check_roads(store, config.sampling)

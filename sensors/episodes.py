@@ -20,11 +20,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.errors import TwinError
+from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
 from twin.data.waves import speed_field
-from twin.errors import TwinError
 from twin.physics.world import MAX_SPEED
 
 READ_CHUNK = 120.0  # [s] of samples read from the store at a time

@@ -34,9 +34,9 @@ import pandas as pd
 
 from sensors import writer
 from sensors.labels import VehicleLabels
-from twin.data.i24 import VEHICLE_CLASSES
-from twin.errors import TwinError
-from twin.paths import asset
+from twin.core.errors import TwinError
+from twin.core.i24 import VEHICLE_CLASSES
+from twin.core.paths import asset
 
 CATEGORIES_CSV = "dataset_categories.csv"
 KITTI_TYPES = ("Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc")

@@ -37,7 +37,7 @@ import trimesh
 from mapgen.build import MapBundle
 from mapgen.semantics import class_id, semantic_classes
 from sensors.camera import Frame
-from twin.data.i24 import VEHICLE_CLASSES
+from twin.core.i24 import VEHICLE_CLASSES
 from twin.physics.render import UNIT_BOX
 
 PARTLY_OCCLUDED = 0.1  # hidden share from which a vehicle is "partly occluded" (level 1)

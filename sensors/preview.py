@@ -8,7 +8,7 @@ import numpy as np
 
 from mapgen.semantics import semantic_classes
 from sensors.camera import Frame
-from twin.atomic import atomic_file
+from twin.core.atomic import atomic_file
 
 DEPTH_RANGE = (1.0, 150.0)  # [m] of the depth colour map (log scale)
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.data.i24 import Road
+from twin.core.i24 import Road
 
 HEADING_LEAD = 0.2  # [s] the heading is the recorded path's direction over this time
 STILL = 0.05  # [m] moving less than this over HEADING_LEAD: the road's heading

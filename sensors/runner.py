@@ -34,7 +34,7 @@ from sensors.dataset import (
     render_episode,
     resolved_renderer,
 )
-from twin.atomic import AtomicFolder, remove_stale
+from twin.core.atomic import AtomicFolder, remove_stale
 from twin.data.store import TrajectoryStore
 from twin.engines import ENGINES, run_jobs, tick, where, worker_data
 

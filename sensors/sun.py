@@ -15,7 +15,7 @@ from functools import cache
 
 import numpy as np
 
-from twin.paths import asset
+from twin.core.paths import asset
 
 SUN_MODES = ("recorded", "noon", "random")
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from mapgen.semantics import semantic_classes
 from sensors.camera import CameraSpec, Frame
-from twin.data.i24 import VEHICLE_CLASSES
+from twin.core.i24 import VEHICLE_CLASSES
 
 DEPTH_SCALE = 1000.0  # [units per m] of the depth PNGs: millimetres
 UINT16_MAX = 65535

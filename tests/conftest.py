@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.data import i24
+from twin.core import i24
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import PRESET_A, PRESET_B, SCENARIO_TIME, synthesize, write_i24_json

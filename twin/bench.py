@@ -95,9 +95,9 @@ def physics_bench(*, counts=(100, 200), steps: int = 500, repeats: int = 3) -> d
     of the I-24 mesh, holding their speed (a vehicle collision would make the engine's
     contact solver part of the figure)."""
     from mapgen.build import default_map
-    from twin.data.i24 import LANE_WIDTH
+    from twin.core.i24 import LANE_WIDTH
+    from twin.core.vehicle_classes import vehicle_classes
     from twin.physics.world import PhysicsWorld, SpawnStates
-    from twin.vehicle_classes import vehicle_classes
 
     table = vehicle_classes()
     bundle = default_map()
@@ -269,10 +269,10 @@ def camera_bench(
     from mapgen.build import default_map
     from sensors.camera import CameraRig, CameraSpec
     from sensors.writer import FrameWriter
+    from twin.core.i24 import LANE_WIDTH
+    from twin.core.vehicle_classes import vehicle_classes
     from twin.data.default import default_store
-    from twin.data.i24 import LANE_WIDTH
     from twin.physics.world import PhysicsWorld, SpawnStates
-    from twin.vehicle_classes import vehicle_classes
 
     table = vehicle_classes()
     bundle = default_map()

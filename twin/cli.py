@@ -8,7 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from twin import __version__
-from twin.errors import TwinError
+from twin.core.errors import TwinError
 
 DATA_HELP = "store folder, I-24 JSON or embedded:morning (default: the embedded data)"
 
@@ -450,8 +450,8 @@ def _add_set(parser: argparse.ArgumentParser, help: str) -> None:
 
 
 def _run_config(args):
+    from twin.core.timeutil import parse_time
     from twin.cosim.config import PRESETS, SCENARIO_B, load_config, override, parse_assignments
-    from twin.timeutil import parse_time
 
     base = PRESETS[args.scenario] if args.scenario else None
     config = base or SCENARIO_B
@@ -598,11 +598,11 @@ def _info(args) -> int:
 
 
 def _eval(args) -> int:
+    from twin.core.timeutil import parse_time
     from twin.cosim.config import SCENARIO_B, override, parse_assignments
     from twin.cosim.run import open_data
     from twin.data.calibrate import read_calibration
     from twin.evaluation import EvalConfig, evaluate, summary_lines
-    from twin.timeutil import parse_time
 
     cosim = override(SCENARIO_B, parse_assignments(args.assignments), source="--set")
 
@@ -650,8 +650,8 @@ def _listed(text: str | None) -> tuple[str, ...]:
 
 
 def _calibrate(args) -> int:
+    from twin.core.timeutil import parse_time
     from twin.data.calibrate import calibrate, describe_calibration, write_calibration
-    from twin.timeutil import parse_time
 
     store = _store(args.store)
     t_from = parse_time(args.t_from) if args.t_from is not None else None
@@ -666,8 +666,8 @@ def _calibrate(args) -> int:
 
 
 def _synth(args) -> int:
+    from twin.core.timeutil import parse_time
     from twin.data import synth
-    from twin.timeutil import parse_time
 
     config = synth.ALL_PRESETS[args.preset]
     changes = {"seed": args.seed, "car_following": args.car_following}
@@ -691,8 +691,8 @@ def _synth(args) -> int:
 
 
 def _plot(args) -> int:
+    from twin.core.timeutil import parse_time
     from twin.data.plot import time_space_plot
-    from twin.timeutil import parse_time
 
     store = _store(args.store)
     start = parse_time(args.start) if args.start is not None else store.time_range(args.road)[0]
@@ -702,8 +702,8 @@ def _plot(args) -> int:
 
 
 def _waves(args) -> int:
+    from twin.core.timeutil import parse_time
     from twin.data import wave_analysis as wa
-    from twin.timeutil import parse_time
 
     real = wa.reference()
     if args.tables is not None:

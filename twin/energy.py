@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from twin.data import i24
+from twin.core import i24
 
 GALLONS_PER_HOUR_PER_GRAM_PER_S = 1.268  # [gal/h per g/s] the source's gasoline conversion
 GRAMS_PER_GALLON = 3600.0 / GALLONS_PER_HOUR_PER_GRAM_PER_S  # [g/gal] about 2,839

@@ -21,8 +21,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from functools import cache
 from pathlib import Path
 
+from twin.core.errors import TwinError
 from twin.data.store import TrajectoryStore
-from twin.errors import TwinError
 
 ENGINES = ("local", "ray")
 POLL_S = 0.2  # [s] how often the local engine passes workers' progress on

@@ -44,8 +44,8 @@ import gymnasium as gym
 import numpy as np
 
 from twin import energy
+from twin.core.i24 import LANES
 from twin.cosim.config import SCENARIO_B, CosimConfig
-from twin.data.i24 import LANES
 from twin.traffic.manager import EgoCommand, Observation
 
 ENV_ID = "i24twin/WaveDampening-v0"
@@ -181,8 +181,8 @@ class WaveDampeningEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """A new episode: ``options={"episode": i}`` picks one, else drawn."""
         from sensors.episodes import draw_episode
+        from twin.core.errors import NoVehicleNearError
         from twin.cosim.cosimulator import Cosimulator, ScenarioError
-        from twin.errors import NoVehicleNearError
 
         super().reset(seed=seed)
         self.close()

@@ -30,14 +30,14 @@ import numpy as np
 
 from sensors.episodes import EpisodeSampling, EpisodeSpec, check_roads, draw_episode, measure_cells
 from twin import __version__, benchmark
-from twin.atomic import atomic_file, remove_stale
+from twin.core.atomic import atomic_file, remove_stale
+from twin.core.errors import NoVehicleNearError, TwinError
+from twin.core.i24 import Road
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.calibrate import read_calibration
-from twin.data.i24 import Road
 from twin.data.store import TrajectoryStore
 from twin.engines import run_jobs, where, worker_data
-from twin.errors import NoVehicleNearError, TwinError
 
 FORMAT = "i24-twin-eval"
 VERSION = 1

@@ -28,9 +28,9 @@ import numpy as np
 import pandas as pd
 
 from mapgen.opendrive import write_opendrive
-from twin.atomic import AtomicFolder
-from twin.data.i24 import VEHICLE_CLASSES, Road
-from twin.errors import TwinError
+from twin.core.atomic import AtomicFolder
+from twin.core.errors import TwinError
+from twin.core.i24 import VEHICLE_CLASSES, Road
 
 FCD_PERIOD = 0.1  # [s]
 EDGES = {Road.EASTBOUND: "-1", Road.WESTBOUND: "1"}  # netconvert's ids of the two sides

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.controllers import controller_factory
+from twin.core.errors import TwinError
 from twin.env import (
     CONTROL_DT,
     OBS_HIGH,
@@ -29,7 +30,6 @@ from twin.env import (
     ahead_speeds,
     features,
 )
-from twin.errors import TwinError
 from twin.traffic.manager import EgoCommand, Observation
 
 EXTRA = "the rl extra (pip install -e '.[rl]': stable-baselines3 with PyTorch)"

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from twin.paths import asset
+from twin.core.paths import asset
 
 FT = 0.3048
 MILE = 1609.344

@@ -13,7 +13,7 @@ import trimesh
 from mapgen import build
 from mapgen.build import build_map, default_map, load_map, map_key
 from twin.cli import main
-from twin.errors import MapError
+from twin.core.errors import MapError
 
 VALIDATOR_SCRIPT = """
 const validator = require(process.argv[2]);

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from tests.mapgen import oracles
-from twin.data import i24
+from twin.core import i24
 
 CONCAVE = p.GEOM_FORCE_CONCAVE_TRIMESH | p.GEOM_CONCAVE_INTERNAL_EDGE
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mapgen.opendrive import LANES, write_opendrive
-from twin.data.i24 import LANE_WIDTH, Road, lane_center
+from twin.core.i24 import LANE_WIDTH, Road, lane_center
 
 
 @pytest.fixture(scope="module")

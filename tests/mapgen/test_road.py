@@ -11,7 +11,7 @@ from mapgen.params import load_params
 from mapgen.road import RoadModel
 from mapgen.sources import load_sources
 from tests.mapgen import oracles
-from twin.data import i24
+from twin.core import i24
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ import pytest
 from mapgen.params import load_params
 from mapgen.sources import SOURCE_FILES, load_sources
 from tests.conftest import SHARED
-from twin.errors import MapError
-from twin.paths import asset
+from twin.core.errors import MapError
+from twin.core.paths import asset
 
 
 @pytest.mark.parametrize("name", SOURCE_FILES)

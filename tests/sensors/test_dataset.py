@@ -31,9 +31,9 @@ from sensors.episodes import EpisodeSampling, measure_cells
 from sensors.kitti import decode_depth
 from sensors.runner import generate
 from tests.sensors import kitti_devkit
+from twin.core.i24 import Road
 from twin.cosim.config import override
 from twin.cosim.cosimulator import road_limits
-from twin.data.i24 import Road
 from twin.data.traffic import EmpiricalTraffic
 
 EPISODE_COUNT, FRAMES = 3, 3

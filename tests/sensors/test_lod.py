@@ -10,9 +10,9 @@ from mapgen.vehicles import hausdorff, point_triangle_distance
 from sensors.camera import CameraRig, CameraSpec
 from sensors.replay import Replayed
 from tests.sensors.test_camera import EGO_X, spawn
-from twin.data.i24 import VEHICLE_CLASSES, Road, lane_center
+from twin.core.i24 import VEHICLE_CLASSES, Road, lane_center
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.world import PhysicsWorld
-from twin.vehicle_classes import vehicle_classes
 
 
 def test_levels_have_fewer_triangles_and_measured_errors(built_map):

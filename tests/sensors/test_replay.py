@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from sensors.writer import frame_meta
+from twin.core.i24 import Road
 from twin.cosim.config import SCENARIO_B, override
-from twin.data.i24 import Road
 from twin.data.traffic import EmpiricalTraffic
 from twin.physics.render import REPLAY_BASE
 

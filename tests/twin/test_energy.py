@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from twin import energy
-from twin.data.i24 import LANE_WIDTH, MILE
+from twin.core.i24 import LANE_WIDTH, MILE
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
 from twin.physics.world import PhysicsWorld, SpawnStates
 

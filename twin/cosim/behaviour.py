@@ -26,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twin.core.errors import TwinError
+from twin.core.i24 import Road
 from twin.data import following
 from twin.data.calibrate import read_calibration, read_fits
-from twin.data.i24 import Road
 from twin.data.store import TrajectoryStore
-from twin.errors import TwinError
 from twin.traffic.calibration import PARAMS, ParameterDistribution, class_group
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")

@@ -13,13 +13,13 @@ from typing import Any
 
 from sensors.camera import CameraError, CameraSettings, check_rig
 from twin.controllers import ControllerSettings
+from twin.core import i24
+from twin.core.errors import TwinError
+from twin.core.i24 import Road
+from twin.core.timeutil import steps_per_sample
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
-from twin.data import i24
-from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
-from twin.errors import TwinError
 from twin.physics.world import MAX_SPEED, PhysicsConfig
-from twin.timeutil import steps_per_sample
 from twin.traffic.manager import TrafficConfig
 
 MPH = 0.44704  # [m/s per mph]

@@ -34,12 +34,12 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from twin.controllers import is_factory
+from twin.core.errors import ControllerError, TwinError
+from twin.core.i24 import LANES, lane_of
 from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
-from twin.data.i24 import LANES, lane_of
 from twin.data.traffic import EmpiricalTraffic, RecordedVehicle, Snapshot
-from twin.errors import ControllerError, TwinError
 from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
 from twin.traffic.manager import EgoController, Obstacles, TrafficManager
 

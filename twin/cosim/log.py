@@ -27,7 +27,7 @@ fuel_rate  float64 [g/s] fuel of the CIRCLES RAV4 model at the realised speed,
 fuel_feasible bool the acceleration is within what that powertrain can deliver (null
                    for ghosts)
 heading    float64 [rad] world yaw (ghosts: the road's)
-vehicle_class int8 index into ``twin.data.i24.VEHICLE_CLASSES``
+vehicle_class int8 index into ``twin.core.i24.VEHICLE_CLASSES``
 length, width, height float32 [m]
 ========== ======= ==========================================================
 """

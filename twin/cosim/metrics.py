@@ -17,7 +17,7 @@
 import numpy as np
 import pandas as pd
 
-from twin.data.i24 import LANE_WIDTH, LANES
+from twin.core.i24 import LANE_WIDTH, LANES
 from twin.data.traffic import EmpiricalTraffic
 from twin.data.waves import speed_field
 

@@ -11,8 +11,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from twin.atomic import atomic_file
-from twin.data import i24
+from twin.core import i24
+from twin.core.atomic import atomic_file
 from twin.data.plot import SPEED_RANGE, save_figure
 
 BEV_WIDTH = 1600  # [px]

@@ -27,7 +27,9 @@ from sensors.camera import CameraRig, Frame
 from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
 from twin import __version__, energy
-from twin.atomic import AtomicFolder, marked_as
+from twin.core.atomic import AtomicFolder, marked_as
+from twin.core.errors import StoreError
+from twin.core.paths import cache_dir
 from twin.cosim import control_metrics, metrics, plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
@@ -35,8 +37,6 @@ from twin.cosim.log import write_parquet
 from twin.data import following
 from twin.data.store import TrajectoryStore, is_store
 from twin.data.traffic import EmpiricalTraffic
-from twin.errors import StoreError
-from twin.paths import cache_dir
 from twin.traffic.manager import EgoController
 
 RUN_FORMAT = "i24-twin-run"

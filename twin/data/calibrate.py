@@ -26,13 +26,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from twin import __version__
-from twin.atomic import atomic_file
+from twin.core.atomic import atomic_file
+from twin.core.errors import StoreError
+from twin.core.i24 import Road
+from twin.core.timeutil import format_local
 from twin.data import following
 from twin.data.following import CalibrationDataError
-from twin.data.i24 import Road
 from twin.data.store import TrajectoryStore
-from twin.errors import StoreError
-from twin.timeutil import format_local
 from twin.traffic import calibration
 from twin.traffic.calibration import PARAMS, START, FitSettings
 from twin.traffic.idm import IDMParams

@@ -6,7 +6,7 @@ and the ``twin data`` commands with no store use the default one: preset A
 and ingested like real data. ``embedded:morning`` (``--data embedded:morning``) is
 preset C, a realistic westbound morning; it is built only when first asked for, so
 that the first ``twin run`` stays short. Each is built once and cached under
-:func:`twin.paths.cache_dir`, keyed by a hash of everything it is made from.
+:func:`twin.core.paths.cache_dir`, keyed by a hash of everything it is made from.
 """
 
 import hashlib
@@ -14,11 +14,11 @@ import inspect
 from dataclasses import replace
 from pathlib import Path
 
+from twin.core.paths import asset, cache_dir
 from twin.data import ingest as ingest_module
 from twin.data import synth
 from twin.data.ingest import IngestOptions, ingest
 from twin.data.store import TrajectoryStore, is_store
-from twin.paths import asset, cache_dir
 from twin.traffic import drivers, idm, lanes
 
 DEFAULT_SEED = 0

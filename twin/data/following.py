@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.data.i24 import Road, lane_of
+from twin.core.errors import TwinError
+from twin.core.i24 import Road, lane_of
 from twin.data.store import TrajectoryStore
-from twin.errors import TwinError
 
 GRID_DT = 0.1  # [s] the grid the trajectories are resampled on
 MAX_SAMPLE_GAP = 0.5  # [s] grid times farther than this from a sample are not used

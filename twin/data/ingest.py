@@ -2,7 +2,7 @@
 
 A day file is one JSON array of trajectory documents, many GB large. It is parsed
 as a stream (ijson), each document is validated and converted to the road frame
-(:mod:`twin.data.i24`), and samples are spilled to disk in time buckets as they
+(:mod:`twin.core.i24`), and samples are spilled to disk in time buckets as they
 come, so peak memory depends on the traffic in one time bucket, not on file size.
 A final pass sorts each bucket by (trajectory, time) and writes one Parquet row
 group per bucket. Everything is written under a temporary folder beside the
@@ -27,15 +27,15 @@ import pyarrow as pa
 import pyarrow.ipc as ipc
 from tqdm import tqdm
 
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.errors import DataFormatError
+from twin.core.i24 import Road
 from twin.data.store import (
     SAMPLE_SCHEMA,
     TRAJECTORY_SCHEMA,
     StoreWriter,
     check_replaceable,
 )
-from twin.errors import DataFormatError
 
 MIN_MARGIN = 400.0  # [m] ghost windows need this much road beyond each end of the segment
 MAX_DIMENSION_FT = 200.0  # [ft] longer than any road vehicle: a tracking error

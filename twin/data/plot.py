@@ -10,11 +10,11 @@ import matplotlib.dates as mdates
 import matplotlib.pyplot as plt
 import numpy as np
 
-from twin.atomic import atomic_file
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.atomic import atomic_file
+from twin.core.i24 import Road
+from twin.core.timeutil import CST, format_local
 from twin.data.store import TrajectoryStore
-from twin.timeutil import CST, format_local
 
 SPEED_RANGE = (0.0, 35.0)  # [m/s] colour scale
 MAX_POINTS_PER_LANE = 400_000

@@ -25,11 +25,11 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.atomic import AtomicFolder, marked_as
-from twin.data import i24
-from twin.data.i24 import Road
-from twin.errors import StoreError
-from twin.timeutil import format_local, local_days
+from twin.core import i24
+from twin.core.atomic import AtomicFolder, marked_as
+from twin.core.errors import StoreError
+from twin.core.i24 import Road
+from twin.core.timeutil import format_local, local_days
 
 FORMAT = "i24-twin-store"
 FORMAT_VERSION = 1
@@ -79,7 +79,7 @@ def check_replaceable(out: Path) -> None:
 
 class StoreWriter(AtomicFolder):
     """Writes a store under a temporary folder beside ``out`` and renames it into place
-    (see :class:`twin.atomic.AtomicFolder`)."""
+    (see :class:`twin.core.atomic.AtomicFolder`)."""
 
     def __init__(self, out: Path):
         super().__init__(out, recognise=is_store, kind="store", error=StoreError)

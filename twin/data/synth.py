@@ -24,13 +24,13 @@ import numpy as np
 import orjson
 from tqdm import tqdm
 
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.i24 import Road
+from twin.core.vehicle_classes import vehicle_classes
 from twin.traffic.drivers import DriverDistribution
 from twin.traffic.gipps import GippsParams, gipps_acceleration
 from twin.traffic.idm import IDMParams, idm_acceleration
 from twin.traffic.lanes import Occupancy
-from twin.vehicle_classes import vehicle_classes
 
 SCENARIO_TIME = 1669812350.0  # [s] unix, 2022-11-30 06:45:50 CST: the paper's scenarios
 HOUR = 3600.0  # [s]

@@ -20,11 +20,11 @@ from functools import cached_property
 import numpy as np
 import pandas as pd
 
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.errors import NoVehicleNearError
+from twin.core.i24 import Road
+from twin.core.timeutil import format_local
 from twin.data.store import TrajectoryStore
-from twin.errors import NoVehicleNearError
-from twin.timeutil import format_local
 
 _EPS = 1e-6  # [s] tolerance on validity ends; unix times near 1.7e9 s resolve 2.4e-7 s
 

@@ -40,12 +40,12 @@ import numpy as np
 import pandas as pd
 from scipy.signal import find_peaks
 
-from twin.atomic import AtomicFolder, marked_as
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.atomic import AtomicFolder, marked_as
+from twin.core.errors import TwinError
+from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
 from twin.data.waves import speed_field
-from twin.errors import TwinError
 
 MPH = i24.MILE / 3600.0  # [m/s] per mph
 REFERENCE_MPH = 15.0  # the critical speed of the tables (``_15``)
@@ -581,7 +581,7 @@ RELATIVE_BOUND = 0.30
 def reference() -> dict:
     """The real 2022-11-22 westbound figures (``assets/i24_waves_2022-11-22.json``, made
     by :func:`summary` from the shared tables; a test checks it against them)."""
-    from twin.paths import asset
+    from twin.core.paths import asset
 
     return json.loads(asset(REFERENCE_ASSET).read_text())
 

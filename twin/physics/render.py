@@ -30,12 +30,12 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from mapgen.semantics import class_id
-from twin.data.i24 import VEHICLE_CLASSES
+from twin.core.i24 import VEHICLE_CLASSES
+from twin.core.vehicle_classes import vehicle_paints
 from twin.physics.bullet import filtered_native_output
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import visual_body
 from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld, rotation_matrices
-from twin.vehicle_classes import vehicle_paints
 
 SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
 SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from twin.vehicle_classes import VehicleClassTable
+from twin.core.vehicle_classes import VehicleClassTable
 
 GRAVITY = 9.81  # [m/s^2]
 AIR_DENSITY = 1.2  # [kg/m^3]

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.data.i24 import Road
+from twin.core.i24 import Road
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
 from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
-from twin.vehicle_classes import vehicle_classes
 
 _chain = itertools.chain.from_iterable
 RAY_GROUP = 1  # pybullet's default group of a ray

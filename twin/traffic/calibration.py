@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from twin.core.i24 import HOV_LANE, LANES
 from twin.data.following import (
     SPEED_BIN_NAMES,
     FollowingRuns,
@@ -35,7 +36,6 @@ from twin.data.following import (
     GridTraffic,
     LaneChanges,
 )
-from twin.data.i24 import HOV_LANE, LANES
 from twin.traffic.idm import IDMParams, twin_idm_acceleration
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.data.i24 import LANES, lane_center
+from twin.core.i24 import LANES, lane_center
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.world import PhysicsWorld, SpawnStates
 from twin.traffic.manager import TrafficManager
-from twin.vehicle_classes import vehicle_classes
 
 ENTRY_MARGIN = 20.0  # [m] from the map's ends to the entry and the exit
 ENTRY_GAP = 12.0  # [m] room (back to back) a re-entering vehicle needs ahead of it

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twin.core.vehicle_classes import VehicleClassTable
 from twin.traffic.idm import IDMParams
-from twin.vehicle_classes import VehicleClassTable
 
 CLIP_SD = 2.0  # draws are clipped to this many standard deviations
 

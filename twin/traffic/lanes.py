@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.data.i24 import N_LANES
+from twin.core.i24 import N_LANES
 
 LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x
 

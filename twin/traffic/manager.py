@@ -25,8 +25,9 @@ from functools import cached_property
 
 import numpy as np
 
-from twin.data.i24 import HOV_LANE, LANE_WIDTH, LANES, N_LANES, lane_center
-from twin.errors import ControllerError
+from twin.core.errors import ControllerError
+from twin.core.i24 import HOV_LANE, LANE_WIDTH, LANES, N_LANES, lane_center
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import GRAVITY, VehicleParams
 from twin.traffic.control import path_shape, required_decel, stanley_steer
 from twin.traffic.drivers import DriverDistribution
@@ -38,7 +39,6 @@ from twin.traffic.idm import (
 )
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
-from twin.vehicle_classes import vehicle_classes
 
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours

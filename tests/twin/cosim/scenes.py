@@ -2,7 +2,7 @@
 vehicles placed in lanes at road-frame x, ingested into a store like real data."""
 
 from tests.conftest import make_doc, write_day
-from twin.data import i24
+from twin.core import i24
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import SCENARIO_TIME

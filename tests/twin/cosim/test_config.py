@@ -1,5 +1,6 @@
 import pytest
 
+from twin.core.i24 import Road
 from twin.cosim.config import (
     PRESETS,
     SCENARIO_A,
@@ -12,7 +13,6 @@ from twin.cosim.config import (
     parse_assignments,
     to_toml,
 )
-from twin.data.i24 import Road
 from twin.data.synth import SCENARIO_TIME
 
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, rows_of, step_until, tid_of, vehicle
+from twin.core.errors import NoVehicleNearError
 from twin.cosim.config import CosimConfig
 from twin.cosim.cosimulator import Cosimulator, ScenarioError
 from twin.data.traffic import EmpiricalTraffic
-from twin.errors import NoVehicleNearError
 
 EGO = 1  # the recorded ego of every scene: lane -2, x = 700 m at T0, 20 m/s
 

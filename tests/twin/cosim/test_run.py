@@ -11,9 +11,9 @@ import pytest
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
 from twin import energy
 from twin.cli import main
+from twin.core.i24 import MILE
 from twin.cosim import metrics
 from twin.cosim.config import load_config
-from twin.data.i24 import MILE
 from twin.data.traffic import EmpiricalTraffic
 
 COLUMNS = [

@@ -8,11 +8,11 @@ import shutil
 import pytest
 
 from twin.cli import main
+from twin.core.errors import StoreError
 from twin.data import synth
 from twin.data.calibrate import CALIBRATION, FITS, read_calibration, read_fits
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.errors import StoreError
 
 
 @pytest.fixture

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from twin.data import i24
-from twin.data.i24 import Road
+from twin.core import i24
+from twin.core.i24 import Road
 
 
 def test_segment_ends_map_to_zero_and_one_mile():

@@ -3,7 +3,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from twin.data import i24
+from twin.core import i24
 from twin.data.synth import PRESET_B, PRESET_C, SCENARIO_TIME, _Simulation, synthesize
 from twin.data.traffic import EmpiricalTraffic
 from twin.data.waves import speed_field, wave_front_speed

@@ -2,11 +2,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_doc, write_day
+from twin.core.errors import NoVehicleNearError
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import SCENARIO_TIME
 from twin.data.traffic import EmpiricalTraffic
-from twin.errors import NoVehicleNearError
 
 
 def _reference(store, road, t, x_min, x_max):

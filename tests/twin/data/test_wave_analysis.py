@@ -10,11 +10,11 @@ import pytest
 
 from tests.conftest import SHARED
 from twin.cli import main
-from twin.data import i24
+from twin.core import i24
+from twin.core.i24 import Road
+from twin.core.paths import asset
 from twin.data import wave_analysis as wa
 from twin.data.default import embedded_store
-from twin.data.i24 import Road
-from twin.paths import asset
 
 REAL = SHARED / "data" / "i24_waves" / "2022-11-22"
 

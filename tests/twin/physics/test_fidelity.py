@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from twin.data.i24 import LANE_WIDTH, VEHICLE_CLASSES
+from twin.core.i24 import LANE_WIDTH, VEHICLE_CLASSES
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
 from twin.physics.world import PhysicsWorld, SpawnStates
-from twin.vehicle_classes import vehicle_classes
 
 LANE_2 = 2.5 * LANE_WIDTH  # [m] centre of lane -2
 

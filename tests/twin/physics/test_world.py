@@ -5,9 +5,9 @@ import resource
 import numpy as np
 import pytest
 
-from twin.data.i24 import LANE_WIDTH, SEGMENT_LENGTH
+from twin.core.i24 import LANE_WIDTH, SEGMENT_LENGTH
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.world import PhysicsConfig, PhysicsWorld, SpawnStates
-from twin.vehicle_classes import vehicle_classes
 
 
 @pytest.fixture

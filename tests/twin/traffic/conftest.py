@@ -6,11 +6,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from twin.data.i24 import lane_center
+from twin.core.i24 import lane_center
+from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import VehicleParams
 from twin.physics.world import PhysicsWorld, SpawnStates
 from twin.traffic.manager import TrafficConfig, TrafficManager
-from twin.vehicle_classes import vehicle_classes
 
 
 def class_sizes(vehicle_class):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import make_manager
-from twin.data.i24 import lane_center
+from twin.core.i24 import lane_center
 from twin.physics.world import PhysicsWorld
 from twin.traffic.circuit import Circuit, CircuitSpec
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import make_manager, run, spawn
-from twin.data.i24 import LANE_WIDTH, lane_center
+from twin.core.i24 import LANE_WIDTH, lane_center
 from twin.traffic.control import path_shape, stanley_steer
 
 

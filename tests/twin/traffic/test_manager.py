@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import PointMasses, make_manager, point_mass_manager, run, spawn
-from twin.data.i24 import lane_center
-from twin.errors import ControllerError
+from twin.core.errors import ControllerError
+from twin.core.i24 import lane_center
 from twin.traffic.manager import (
     EgoCommand,
     Obstacles,

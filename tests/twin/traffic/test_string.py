@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import PointMasses, point_mass_manager
-from twin.data.i24 import lane_center
+from twin.core.i24 import lane_center
 from twin.traffic.manager import Obstacles
 
 DT = 0.01  # [s]

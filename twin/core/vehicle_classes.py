@@ -6,8 +6,8 @@ from functools import cache
 import numpy as np
 import pandas as pd
 
-from twin.data.i24 import VEHICLE_CLASSES
-from twin.paths import asset
+from twin.core.i24 import VEHICLE_CLASSES
+from twin.core.paths import asset
 
 COLUMNS = (
     "class_id",

@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.errors import TwinError
+from twin.core.errors import TwinError
 
 
 class AtomicFolder:
