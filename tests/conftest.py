@@ -96,7 +96,7 @@ def calibrated_wave_store(tmp_path_factory, wave_store) -> TrajectoryStore:
     """A copy of ``wave_store`` calibrated on its westbound road (``twin calibrate``)."""
     import shutil
 
-    from twin.data.calibrate import calibrate, write_calibration
+    from twin.calibration.calibrate import calibrate, write_calibration
 
     folder = tmp_path_factory.mktemp("calibrated") / "store"
     shutil.copytree(wave_store.path, folder)

@@ -9,7 +9,7 @@ import pytest
 
 from twin.cli import main
 from twin.data.store import TrajectoryStore
-from twin.evaluation import EvalConfig, EvaluationError, evaluate
+from twin.runners.evaluation import EvalConfig, EvaluationError, evaluate
 
 
 @pytest.fixture
@@ -116,7 +116,7 @@ def test_the_controller_benchmark_pairs_each_controller_with_human(calibrated, b
 
 
 def test_paired_changes_and_their_interval():
-    from twin import benchmark
+    from twin.control import benchmark
 
     changes = benchmark.paired_changes([11.0, 22.0, float("nan"), 5.0], [10.0, 20.0, 5.0, 0.0])
     assert list(changes) == pytest.approx([10.0, 10.0])  # NaN and a zero reference dropped

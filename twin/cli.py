@@ -482,7 +482,7 @@ def _run_config(args):
 
 
 def _run(args) -> int:
-    from twin.cosim.run import open_data, run_episode, summary
+    from twin.runners.run import open_data, run_episode, summary
 
     config = _run_config(args)
     store = open_data(args.data, progress=not args.quiet)
@@ -495,7 +495,7 @@ def _run(args) -> int:
 def _render(args) -> int:
     from sensors.preview import frame_picture, frame_vehicles
     from twin.cosim.config import PRESETS, load_config, override, parse_assignments
-    from twin.cosim.run import open_data, render_at
+    from twin.runners.run import open_data, render_at
 
     base = PRESETS[args.scenario]
     config = load_config(args.config, base=base) if args.config is not None else base
@@ -513,10 +513,10 @@ def _render(args) -> int:
 
 
 def _dataset(args) -> int:
-    from sensors.dataset import DatasetConfig, load_dataset_config
-    from sensors.runner import generate, summary
     from twin.cosim.config import ConfigError, override, parse_assignments
-    from twin.cosim.run import open_data
+    from twin.runners.dataset import DatasetConfig, load_dataset_config
+    from twin.runners.dataset_runner import generate, summary
+    from twin.runners.run import open_data
 
     config = DatasetConfig()
     if args.config is not None:
@@ -552,7 +552,7 @@ def _dataset(args) -> int:
 
 def _store(path: Path | None):
     """A STORE argument: the embedded default (None), ``embedded:NAME`` or a store folder."""
-    from twin.data.default import default_store, embedded_name, embedded_store
+    from twin.data.embedded import default_store, embedded_name, embedded_store
     from twin.data.store import TrajectoryStore
 
     if path is None:
@@ -579,8 +579,8 @@ def _ingest(args) -> int:
 
 
 def _info(args) -> int:
-    from twin.data.calibrate import describe_calibration, read_calibration
-    from twin.data.default import EMBEDDED, EMBEDDED_PREFIX, embedded_folder
+    from twin.calibration.calibrate import describe_calibration, read_calibration
+    from twin.data.embedded import EMBEDDED, EMBEDDED_PREFIX, embedded_folder
     from twin.data.store import is_store
 
     store = _store(args.store)
@@ -598,11 +598,11 @@ def _info(args) -> int:
 
 
 def _eval(args) -> int:
+    from twin.calibration.calibrate import read_calibration
     from twin.core.timeutil import parse_time
     from twin.cosim.config import SCENARIO_B, override, parse_assignments
-    from twin.cosim.run import open_data
-    from twin.data.calibrate import read_calibration
-    from twin.evaluation import EvalConfig, evaluate, summary_lines
+    from twin.runners.evaluation import EvalConfig, evaluate, summary_lines
+    from twin.runners.run import open_data
 
     cosim = override(SCENARIO_B, parse_assignments(args.assignments), source="--set")
 
@@ -650,8 +650,8 @@ def _listed(text: str | None) -> tuple[str, ...]:
 
 
 def _calibrate(args) -> int:
+    from twin.calibration.calibrate import calibrate, describe_calibration, write_calibration
     from twin.core.timeutil import parse_time
-    from twin.data.calibrate import calibrate, describe_calibration, write_calibration
 
     store = _store(args.store)
     t_from = parse_time(args.t_from) if args.t_from is not None else None
@@ -753,7 +753,7 @@ def _map_build(args) -> int:
 
 def _export(args) -> int:
     from mapgen.build import default_map
-    from twin.export_sumo import export_run
+    from twin.export.sumo import export_run
 
     done = export_run(args.run, args.out, default_map(progress=False))
     print(
@@ -773,45 +773,45 @@ def _map_export(args) -> int:
 
 
 def _map_preview(args) -> int:
-    from mapgen.preview import render_preview
+    from sensors.map_preview import render_preview
 
     print(f"wrote {render_preview(_map(args.map, args.seed), args.out)}")
     return 0
 
 
 def _emit(name: str, figures: dict) -> int:
-    from twin.bench import context
+    from twin.perf.bench import context
 
     print(json.dumps({"bench": name, **figures, **context()}))
     return 0
 
 
 def _bench_query(args) -> int:
-    from twin.bench import query
+    from twin.perf.bench import query
 
     return _emit("query", query(_store(args.data), repeats=args.repeats))
 
 
 def _bench_synth(args) -> int:
-    from twin.bench import synth_bench
+    from twin.perf.bench import synth_bench
 
     return _emit("synth", synth_bench(minutes=args.minutes, repeats=args.repeats))
 
 
 def _bench_map(args) -> int:
-    from twin.bench import map_bench
+    from twin.perf.bench import map_bench
 
     return _emit("map", map_bench(repeats=args.repeats))
 
 
 def _bench_physics(args) -> int:
-    from twin.bench import physics_bench
+    from twin.perf.bench import physics_bench
 
     return _emit("physics", physics_bench(steps=args.steps, repeats=args.repeats))
 
 
 def _bench_traffic(args) -> int:
-    from twin.bench import traffic_bench
+    from twin.perf.bench import traffic_bench
 
     return _emit(
         "traffic",
@@ -820,14 +820,14 @@ def _bench_traffic(args) -> int:
 
 
 def _bench_run(args) -> int:
-    from twin.bench import run_bench
+    from twin.perf.bench import run_bench
 
     store = _store(args.data)
     return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats))
 
 
 def _bench_camera(args) -> int:
-    from twin.bench import camera_bench
+    from twin.perf.bench import camera_bench
 
     return _emit(
         "camera",
@@ -851,7 +851,7 @@ def _worker_counts(text: str | None):
 
 
 def _bench_env(args) -> int:
-    from twin.bench import env_bench
+    from twin.perf.bench import env_bench
 
     if args.steps < 1 or args.repeats < 1 or (args.workers is not None and args.workers < 1):
         raise ValueError("--steps, --repeats and --workers must be >= 1")
@@ -862,7 +862,7 @@ def _bench_env(args) -> int:
 
 
 def _bench_eval(args) -> int:
-    from twin.bench import eval_bench
+    from twin.perf.bench import eval_bench
 
     return _emit(
         "eval",
@@ -878,7 +878,7 @@ def _bench_eval(args) -> int:
 
 
 def _bench_calibrate(args) -> int:
-    from twin.bench import calibrate_bench
+    from twin.perf.bench import calibrate_bench
 
     return _emit(
         "calibrate",
@@ -891,7 +891,7 @@ def _bench_calibrate(args) -> int:
 
 
 def _bench_dataset(args) -> int:
-    from twin.bench import dataset_bench
+    from twin.perf.bench import dataset_bench
 
     workers = _worker_counts(args.workers)
     return _emit(
@@ -907,6 +907,6 @@ def _bench_dataset(args) -> int:
 
 
 def _bench_ingest(args) -> int:
-    from twin.bench import ingest_bench
+    from twin.perf.bench import ingest_bench
 
     return _emit("ingest", ingest_bench(size_mb=args.size_mb, repeats=args.repeats))

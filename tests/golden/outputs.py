@@ -99,7 +99,7 @@ def run_digests(work: Path) -> dict[str, str]:
 def calibrated_run_digest(work: Path) -> dict[str, str]:
     """A calibrated copy of the embedded store (its westbound first 10 minutes), and
     scenario B with ``--behaviour calibrated`` on it."""
-    from twin.data.default import default_store
+    from twin.data.embedded import default_store
 
     store = work / "calibrated_store"
     shutil.copytree(default_store().path, store)

@@ -18,7 +18,13 @@ from pycocotools import mask as coco_mask
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from sensors.dataset import (
+from sensors.kitti import decode_depth
+from tests.sensors import kitti_devkit
+from twin.core.i24 import Road
+from twin.cosim.config import override
+from twin.cosim.cosimulator import road_limits
+from twin.data.empirical import EmpiricalTraffic
+from twin.runners.dataset import (
     EPISODES,
     DatasetConfig,
     DatasetError,
@@ -27,14 +33,8 @@ from sensors.dataset import (
     is_episode,
     render_episode,
 )
-from sensors.episodes import EpisodeSampling, measure_cells
-from sensors.kitti import decode_depth
-from sensors.runner import generate
-from tests.sensors import kitti_devkit
-from twin.core.i24 import Road
-from twin.cosim.config import override
-from twin.cosim.cosimulator import road_limits
-from twin.data.traffic import EmpiricalTraffic
+from twin.runners.dataset_runner import generate
+from twin.runners.episodes import EpisodeSampling, measure_cells
 
 EPISODE_COUNT, FRAMES = 3, 3
 SETTINGS = {"frames_per_episode": FRAMES, "sampling": {"roads": ["westbound"]}}
@@ -188,7 +188,7 @@ def test_episodes_are_drawn_from_congested_and_free_cells(wave_store, built_map)
 
 
 def draw_episode_of(cells, sampling, seed, index):
-    from sensors.episodes import draw_episode
+    from twin.runners.episodes import draw_episode
 
     return draw_episode(cells, sampling, seed, index)
 
@@ -298,7 +298,7 @@ def test_impossible_settings_are_named(settings, message):
 
 
 def test_a_road_without_data_is_named(wave_store, built_map, tmp_path):
-    from sensors.episodes import SamplingError
+    from twin.runners.episodes import SamplingError
 
     with pytest.raises(SamplingError, match=r"no eastbound traffic \(roads: \['westbound'\]\)"):
         generate(DatasetConfig(), wave_store, tmp_path / "ds", 1, bundle=built_map)

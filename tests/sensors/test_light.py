@@ -11,8 +11,8 @@ import pytest
 from sensors.camera import CameraError, CameraSettings
 from sensors.shadows import GROUND_CLASSES, Casters, darken, shadow_mask, shadow_polygons
 from sensors.sun import SunPosition, episode_light, segment_location, sun_position
+from twin.core.i24 import SCENARIO_TIME
 from twin.cosim.config import SCENARIO_B, override
-from twin.data.synth import SCENARIO_TIME
 from twin.physics.render import NOON
 
 
@@ -114,7 +114,7 @@ def test_only_the_ground_is_darkened():
 def test_lighting_changes_the_rgb_picture_only(wave_store, built_map):
     """Scenario B's front camera at 12 s under three suns: depth, semantic and instance
     images are the same, the RGB picture is not."""
-    from twin.cosim.run import render_at
+    from twin.runners.run import render_at
 
     frames = {}
     for sun, seed in (("noon", 0), ("recorded", 0), ("random", 0)):

@@ -9,14 +9,14 @@ import pytest
 from sensors.writer import frame_meta
 from twin.core.i24 import Road
 from twin.cosim.config import SCENARIO_B, override
-from twin.data.traffic import EmpiricalTraffic
+from twin.data.empirical import EmpiricalTraffic
 from twin.physics.render import REPLAY_BASE
 
 
 @pytest.fixture(scope="module")
 def store():
     """The embedded data: both carriageways."""
-    from twin.cosim.run import open_data
+    from twin.runners.run import open_data
 
     return open_data(None, progress=False)
 
@@ -26,7 +26,7 @@ def frame(store, built_map):
     """Scenario B's front camera 12 s in, under the noon sun. (Straight ahead the
     westbound recording beyond the window hides behind the leader 15 m ahead, as it
     would; the eastbound carriageway's is in view.)"""
-    from twin.cosim.run import render_at
+    from twin.runners.run import render_at
 
     config = override(SCENARIO_B, {"camera": {"sun": "noon"}})
     return render_at(config, store, 12.0, bundle=built_map)

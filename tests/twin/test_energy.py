@@ -5,8 +5,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from twin import energy
 from twin.core.i24 import LANE_WIDTH, MILE
+from twin.physics import energy
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
 from twin.physics.world import PhysicsWorld, SpawnStates
 

@@ -7,7 +7,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import twin.env  # registers the environment
-from twin.env import OBSERVATION, WaveDampeningEnv
+from twin.control.env import OBSERVATION, WaveDampeningEnv
 
 
 @pytest.fixture(scope="module")

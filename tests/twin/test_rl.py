@@ -1,4 +1,4 @@
-"""``twin.rl``: a trained policy drives the twin's ego seeing what the env's agent saw;
+"""``twin.control.rl``: a trained policy drives the twin's ego seeing what the env's agent saw;
 the README's PPO example (where the ``rl`` extra is installed)."""
 
 import json
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from twin.cli import main
+from twin.control.env import OBS_HIGH, OBS_LOW, WaveDampeningEnv
+from twin.control.rl import PolicyController
 from twin.cosim.cosimulator import ControllerError, Cosimulator
-from twin.env import OBS_HIGH, OBS_LOW, WaveDampeningEnv
-from twin.rl import PolicyController
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +87,7 @@ def test_the_readme_ppo_example_trains_and_evaluates(data, tmp_path):
     """The README's example, shortened: PPO for 128 steps, then twin eval against human
     on held-out episodes."""
     pytest.importorskip("stable_baselines3", reason="the rl extra is not installed")
-    from twin.rl import train_ppo
+    from twin.control.rl import train_ppo
 
     model = train_ppo(tmp_path / "ppo_wave", steps=128, n_steps=64, data=data, duration=6.0)
     assert model.name == "ppo_wave.zip" and model.is_file()

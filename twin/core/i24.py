@@ -28,6 +28,8 @@ LANE_WIDTH = LANE_WIDTH_FT * FT  # [m]
 N_LANES = 4
 HOV_LANE = -1
 LANES = (-1, -2, -3, -4)
+#: [s] unix, 2022-11-30 06:45:50 CST: the time of the paper's scenarios A and B.
+SCENARIO_TIME = 1669812350.0
 
 #: I-24 MOTION coarse vehicle classes, by class id.
 VEHICLE_CLASSES = ("sedan", "midsize", "pickup", "van", "semi", "truck", "motorcycle")

@@ -26,12 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from twin.calibration import following
+from twin.calibration.calibrate import read_calibration, read_fits
+from twin.calibration.fitting import PARAMS, ParameterDistribution, class_group
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
-from twin.data import following
-from twin.data.calibrate import read_calibration, read_fits
 from twin.data.store import TrajectoryStore
-from twin.traffic.calibration import PARAMS, ParameterDistribution, class_group
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")
 AUTO = "auto"

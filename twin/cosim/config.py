@@ -12,14 +12,13 @@ from pathlib import Path
 from typing import Any
 
 from sensors.camera import CameraError, CameraSettings, check_rig
-from twin.controllers import ControllerSettings
 from twin.core import i24
 from twin.core.errors import TwinError
-from twin.core.i24 import Road
+from twin.core.i24 import SCENARIO_TIME, Road
 from twin.core.timeutil import steps_per_sample
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
-from twin.data.synth import SCENARIO_TIME
 from twin.physics.world import MAX_SPEED, PhysicsConfig
+from twin.traffic.baselines import ControllerSettings
 from twin.traffic.manager import TrafficConfig
 
 MPH = 0.44704  # [m/s per mph]
@@ -56,7 +55,7 @@ class CosimConfig:
             deceleration when the one behind is faster.
         ego_controller: ``"module:function"`` driving the ego (see
             :mod:`twin.traffic.manager`, ``EgoController``), or a controller factory
-            such as ``twin.controllers:follower_stopper`` (:mod:`twin.controllers`);
+            such as ``twin.controllers:follower_stopper`` (:mod:`twin.traffic.baselines`);
             empty: the traffic manager.
         av_share: [-] share of the visible vehicles driven by ``ego_controller`` as
             well as the ego (each recorded vehicle drawn once by the seed and its

@@ -33,14 +33,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.controllers import is_factory
 from twin.core.errors import ControllerError, TwinError
 from twin.core.i24 import LANES, lane_of
 from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
-from twin.data.traffic import EmpiricalTraffic, RecordedVehicle, Snapshot
+from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
 from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
+from twin.traffic.baselines import is_factory
 from twin.traffic.manager import EgoController, Obstacles, TrafficManager
 
 MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
@@ -685,7 +685,7 @@ def load_controller(spec: str, config=None) -> EgoController | None:
     """Import ``"module:function"`` (``""``: ``None``, the traffic manager drives).
     The current directory is searched first, as ``python -m`` would (like uvicorn's
     app loading), so ``my_acc.py`` beside the user is found. A controller factory
-    (:func:`twin.controllers.controller_factory`) is called with ``config``, the run's
+    (:func:`twin.traffic.baselines.controller_factory`) is called with ``config``, the run's
     configuration, for a fresh controller.
 
     Raises:

@@ -23,7 +23,7 @@ grade      float64 [-] the road's grade under the vehicle's centre along travel 
 drive_power float64 [W] what the twin's powertrain delivered at the wheels in the
                    step (drive torque times wheel spin; NaN for ghosts)
 fuel_rate  float64 [g/s] fuel of the CIRCLES RAV4 model at the realised speed,
-                   acceleration and grade (:mod:`twin.energy`; NaN where ``accel`` is)
+                   acceleration and grade (:mod:`twin.physics.energy`; NaN where ``accel`` is)
 fuel_feasible bool the acceleration is within what that powertrain can deliver (null
                    for ghosts)
 heading    float64 [rad] world yaw (ghosts: the road's)
@@ -37,7 +37,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin import energy
+from twin.physics import energy
 
 ROLES = ("ego", "visible", "ghost")
 _VEHICLE = (

@@ -2,7 +2,7 @@
 
 The real I-24 MOTION files cannot be downloaded on the twin's machines, so the twin
 ships a stand-in in exactly their JSON layout. Heterogeneous IDM drivers
-(:mod:`twin.traffic.idm`, parameters per vehicle class from ``assets/``) with
+(:mod:`twin.traffic.models.idm`, parameters per vehicle class from ``assets/``) with
 acceleration noise drive four lanes of a road longer than the recorded range;
 MOBIL-style lane changes take several seconds; the HOV lane (-1) is entered by
 nobody and left by nobody (the double line of this corridor). Waves are started
@@ -25,14 +25,13 @@ import orjson
 from tqdm import tqdm
 
 from twin.core import i24
-from twin.core.i24 import Road
+from twin.core.i24 import SCENARIO_TIME, Road
 from twin.core.vehicle_classes import vehicle_classes
 from twin.traffic.drivers import DriverDistribution
-from twin.traffic.gipps import GippsParams, gipps_acceleration
-from twin.traffic.idm import IDMParams, idm_acceleration
 from twin.traffic.lanes import Occupancy
+from twin.traffic.models.gipps import GippsParams, gipps_acceleration
+from twin.traffic.models.idm import IDMParams, idm_acceleration
 
-SCENARIO_TIME = 1669812350.0  # [s] unix, 2022-11-30 06:45:50 CST: the paper's scenarios
 HOUR = 3600.0  # [s]
 MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
@@ -118,10 +117,11 @@ class SynthConfig:
             classes kept out of the HOV lane) in lanes -2, -3 and -4.
         drivers: how each vehicle's IDM parameters are drawn (data made by other
             drivers than the twin's defaults, e.g. to test a calibration).
-        car_following: ``"idm"`` (the twin's model) or ``"gipps"`` (:mod:`twin.traffic.gipps`,
-            a model the twin does not drive with: reaction time 2/3 of the drawn time
-            headway, most severe braking twice the drawn comfortable deceleration, the
-            same desired speed, acceleration and minimum gap).
+        car_following: ``"idm"`` (the twin's model) or ``"gipps"``
+            (:mod:`twin.traffic.models.gipps`, a model the twin does not drive with:
+            reaction time 2/3 of the drawn time headway, most severe braking twice the
+            drawn comfortable deceleration, the same desired speed, acceleration and
+            minimum gap).
         lane_change_duration: [s] range of lane-change manoeuvre durations.
         politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
             ([-], [m/s^2], [m/s^2], [m/s^2]).

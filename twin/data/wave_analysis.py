@@ -44,8 +44,8 @@ from twin.core import i24
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
+from twin.data.speed_field import speed_field
 from twin.data.store import TrajectoryStore
-from twin.data.waves import speed_field
 
 MPH = i24.MILE / 3600.0  # [m/s] per mph
 REFERENCE_MPH = 15.0  # the critical speed of the tables (``_15``)

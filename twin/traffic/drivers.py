@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.vehicle_classes import VehicleClassTable
-from twin.traffic.idm import IDMParams
+from twin.traffic.models.idm import IDMParams
 
 CLIP_SD = 2.0  # draws are clipped to this many standard deviations
 

@@ -31,14 +31,14 @@ from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import GRAVITY, VehicleParams
 from twin.traffic.control import path_shape, required_decel, stanley_steer
 from twin.traffic.drivers import DriverDistribution
-from twin.traffic.idm import (
+from twin.traffic.lanes import Occupancy
+from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
+from twin.traffic.models.idm import (
     IDMParams,
     bounded_free_road_term,
     interaction_term,
     twin_idm_acceleration,
 )
-from twin.traffic.lanes import Occupancy
-from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
 
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours

@@ -5,7 +5,7 @@ import pytest
 from tests.twin.cosim.scenes import EGO_X, T0, hold_speed, make_store
 from twin.cosim.config import CosimConfig
 from twin.cosim.cosimulator import Cosimulator
-from twin.data.traffic import EmpiricalTraffic
+from twin.data.empirical import EmpiricalTraffic
 
 
 @pytest.fixture

@@ -3,9 +3,9 @@ vehicles placed in lanes at road-frame x, ingested into a store like real data."
 
 from tests.conftest import make_doc, write_day
 from twin.core import i24
+from twin.core.i24 import SCENARIO_TIME
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.data.synth import SCENARIO_TIME
 
 T0 = SCENARIO_TIME
 EGO_X = 700.0  # [m] westbound

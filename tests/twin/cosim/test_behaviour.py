@@ -7,14 +7,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from twin.cosim import metrics
+from twin.calibration.calibrate import read_fits
+from twin.calibration.fitting import PARAMS
 from twin.cosim.behaviour import Behaviour, BehaviourError
 from twin.cosim.config import SCENARIO_B, ConfigError
 from twin.cosim.cosimulator import Cosimulator
-from twin.data.calibrate import read_fits
+from twin.data.empirical import EmpiricalTraffic
 from twin.data.store import TrajectoryStore
-from twin.data.traffic import EmpiricalTraffic
-from twin.traffic.calibration import PARAMS
+from twin.metrics import fidelity as metrics
 
 
 @pytest.fixture

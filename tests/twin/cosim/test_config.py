@@ -1,6 +1,6 @@
 import pytest
 
-from twin.core.i24 import Road
+from twin.core.i24 import SCENARIO_TIME, Road
 from twin.cosim.config import (
     PRESETS,
     SCENARIO_A,
@@ -13,7 +13,6 @@ from twin.cosim.config import (
     parse_assignments,
     to_toml,
 )
-from twin.data.synth import SCENARIO_TIME
 
 
 def test_presets_are_the_papers_scenarios():

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
-from twin.cosim import metrics
 from twin.cosim.config import CosimConfig
 from twin.cosim.cosimulator import Cosimulator
-from twin.data.traffic import EmpiricalTraffic
+from twin.data.empirical import EmpiricalTraffic
+from twin.metrics import fidelity as metrics
 
 
 @pytest.mark.slow

@@ -9,12 +9,12 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
-from twin import energy
 from twin.cli import main
 from twin.core.i24 import MILE
-from twin.cosim import metrics
 from twin.cosim.config import load_config
-from twin.data.traffic import EmpiricalTraffic
+from twin.data.empirical import EmpiricalTraffic
+from twin.metrics import fidelity as metrics
+from twin.physics import energy
 
 COLUMNS = [
     "time", "id", "record_id", "role", "road", "lane", "x", "y", "z", "speed", "accel",

@@ -8,15 +8,15 @@ here in seconds); scenario B on ``wave_store``, a smaller realization of preset 
 import pytest
 
 from twin.cosim.config import SCENARIO_A, SCENARIO_B
-from twin.cosim.run import run_episode
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import PRESET_A, synthesize, write_i24_json
+from twin.runners.run import run_episode
 
 
 @pytest.fixture(scope="module")
 def embedded_a(tmp_path_factory):
-    """The eastbound half of the embedded data (``twin.data.default``)."""
+    """The eastbound half of the embedded data (``twin.data.embedded``)."""
     folder = tmp_path_factory.mktemp("embedded_a")
     day = write_i24_json(synthesize(PRESET_A), folder / "a.json")
     ingest([day], folder / "store", progress=False)

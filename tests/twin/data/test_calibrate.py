@@ -7,10 +7,10 @@ import shutil
 
 import pytest
 
+from twin.calibration.calibrate import CALIBRATION, FITS, read_calibration, read_fits
 from twin.cli import main
 from twin.core.errors import StoreError
 from twin.data import synth
-from twin.data.calibrate import CALIBRATION, FITS, read_calibration, read_fits
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 
@@ -90,7 +90,7 @@ def test_a_damaged_calibration_is_named_not_used(store):
 
 
 def test_calibration_is_deterministic(store):
-    from twin.data.calibrate import calibrate
+    from twin.calibration.calibrate import calibrate
 
     first, _ = calibrate(store, ["westbound"])
     again, _ = calibrate(store, ["westbound"])

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from tests.conftest import make_doc, write_day
-from twin.data import following
-from twin.data.following import CalibrationDataError
+from twin.calibration import following
+from twin.calibration.following import CalibrationDataError
+from twin.core.i24 import SCENARIO_TIME
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.data.synth import SCENARIO_TIME
 
 FT = 0.3048
 

@@ -10,9 +10,9 @@ from tests.conftest import SHARED, make_doc, write_day
 from twin.cli import main
 from twin.core import i24
 from twin.core.errors import DataFormatError, StoreError
+from twin.data.empirical import EmpiricalTraffic
 from twin.data.ingest import IngestOptions, ingest, smoothed_speed
 from twin.data.store import TrajectoryStore
-from twin.data.traffic import EmpiricalTraffic
 
 
 def _store_bytes(folder: Path) -> dict[str, bytes]:

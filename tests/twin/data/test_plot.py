@@ -1,8 +1,8 @@
 import matplotlib.image as mpimg
 import pytest
 
+from twin.core.i24 import SCENARIO_TIME
 from twin.data.plot import time_space_plot
-from twin.data.synth import SCENARIO_TIME
 
 
 def test_time_space_plot_writes_a_png(wave_store, tmp_path):

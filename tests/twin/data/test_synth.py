@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from twin.core import i24
+from twin.data.empirical import EmpiricalTraffic
+from twin.data.speed_field import speed_field, wave_front_speed
 from twin.data.synth import PRESET_B, PRESET_C, SCENARIO_TIME, _Simulation, synthesize
-from twin.data.traffic import EmpiricalTraffic
-from twin.data.waves import speed_field, wave_front_speed
 
 MPH15 = 15 * 0.44704  # [m/s]
 

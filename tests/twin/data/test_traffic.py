@@ -3,10 +3,10 @@ import pytest
 
 from tests.conftest import make_doc, write_day
 from twin.core.errors import NoVehicleNearError
+from twin.core.i24 import SCENARIO_TIME
+from twin.data.empirical import EmpiricalTraffic
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.data.synth import SCENARIO_TIME
-from twin.data.traffic import EmpiricalTraffic
 
 
 def _reference(store, road, t, x_min, x_max):

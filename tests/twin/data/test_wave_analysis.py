@@ -14,7 +14,7 @@ from twin.core import i24
 from twin.core.i24 import Road
 from twin.core.paths import asset
 from twin.data import wave_analysis as wa
-from twin.data.default import embedded_store
+from twin.data.embedded import embedded_store
 
 REAL = SHARED / "data" / "i24_waves" / "2022-11-22"
 

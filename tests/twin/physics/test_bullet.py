@@ -45,7 +45,7 @@ def test_output_is_restored_when_the_block_raises(capfd):
 def test_importing_the_physics_prints_nothing():
     """A fresh interpreter: pybullet's ``pybullet build time`` banner is not shown."""
     result = subprocess.run(
-        [sys.executable, "-c", "import twin.physics.render, mapgen.preview"],
+        [sys.executable, "-c", "import twin.physics.render, sensors.map_preview"],
         capture_output=True,
         text=True,
         check=True,

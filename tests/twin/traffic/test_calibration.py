@@ -6,11 +6,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from twin.data import following, synth
+from twin.calibration import fitting as calibration
+from twin.calibration import following
+from twin.calibration.fitting import PARAMS, FitSettings, ParameterDistribution
+from twin.data import synth
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.traffic import calibration
-from twin.traffic.calibration import PARAMS, FitSettings, ParameterDistribution
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from twin.traffic.idm import IDMParams, equilibrium_gap, idm_acceleration
+from twin.traffic.models.idm import IDMParams, equilibrium_gap, idm_acceleration
 
 PARAMS = IDMParams(
     desired_speed=33.0, time_headway=1.2, min_gap=2.0, max_accel=1.0, comfortable_decel=1.5

@@ -2,7 +2,7 @@
 
 The words are the field's (``../shared/docs/CONTROL.md``, "What benchmarks report"):
 fuel economy of the AV (the ego), of its K followers and of the window
-(:mod:`twin.energy`); the speed standard deviation and the wave amplitude behind the
+(:mod:`twin.physics.energy`); the speed standard deviation and the wave amplitude behind the
 AV; throughput past the ego's starting point; safety (minimum time to collision, the
 share of time under 4 s, time gaps); comfort (acceleration and jerk RMS).
 
@@ -67,7 +67,7 @@ def control_figures(
     Args:
         vehicles: the log's simulated-vehicle rows (``time``, ``id``, ``tid``, ``lane``,
             ``x``, ``speed``). ghosts: the log's ghost rows.
-        ego_id: the AV. followers: its followers' ids (:func:`twin.energy.followers`).
+        ego_id: the AV. followers: its followers' ids (:func:`twin.physics.energy.followers`).
         length: [m] vehicle length per store tid. dt: [s] the log's step.
     """
     rows = sample(vehicles, dt)

@@ -1,7 +1,7 @@
 """Where dataset episodes start: drawn from the recorded traffic, congested and free.
 
 The data of each road are cut into cells of ``cell_s`` seconds by ``cell_m`` metres
-per lane, and each cell's Edie mean speed is measured (:mod:`twin.data.waves`). A cell
+per lane, and each cell's Edie mean speed is measured (:mod:`twin.data.speed_field`). A cell
 is *congested* when that speed is under ``congested_below_mps``, else *free*. An
 episode is drawn from the congested cells with probability ``congested_share`` (from
 the free ones otherwise; from whichever kind exists when the data hold only one),
@@ -23,8 +23,8 @@ import numpy as np
 from twin.core import i24
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
+from twin.data.speed_field import speed_field
 from twin.data.store import TrajectoryStore
-from twin.data.waves import speed_field
 from twin.physics.world import MAX_SPEED
 
 READ_CHUNK = 120.0  # [s] of samples read from the store at a time

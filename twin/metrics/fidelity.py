@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from twin.core.i24 import LANE_WIDTH, LANES
-from twin.data.traffic import EmpiricalTraffic
-from twin.data.waves import speed_field
+from twin.data.empirical import EmpiricalTraffic
+from twin.data.speed_field import speed_field
 
 CELL_X = 20.0  # [m]
 CELL_T = 2.0  # [s]

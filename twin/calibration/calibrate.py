@@ -1,4 +1,4 @@
-"""Calibrating a store: what :mod:`twin.traffic.calibration` fits, run over a store's
+"""Calibrating a store: what :mod:`twin.calibration.fitting` fits, run over a store's
 recording and kept beside it.
 
 ``twin calibrate STORE`` writes two files into the store folder and changes nothing
@@ -26,17 +26,17 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from twin import __version__
+from twin.calibration import fitting as calibration
+from twin.calibration import following
+from twin.calibration.fitting import PARAMS, START, FitSettings
+from twin.calibration.following import CalibrationDataError
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
 from twin.core.timeutil import format_local
-from twin.data import following
-from twin.data.following import CalibrationDataError
 from twin.data.store import TrajectoryStore
-from twin.traffic import calibration
-from twin.traffic.calibration import PARAMS, START, FitSettings
-from twin.traffic.idm import IDMParams
 from twin.traffic.mobil import MOBILParams
+from twin.traffic.models.idm import IDMParams
 
 CALIBRATION = "calibration.json"
 FITS = "calibration_fits.parquet"

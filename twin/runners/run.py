@@ -26,17 +26,20 @@ import numpy as np
 from sensors.camera import CameraRig, Frame
 from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
-from twin import __version__, energy
+from twin import __version__
+from twin.calibration import following
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
 from twin.core.paths import cache_dir
-from twin.cosim import control_metrics, metrics, plots
+from twin.cosim import plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
-from twin.data import following
+from twin.data.empirical import EmpiricalTraffic
 from twin.data.store import TrajectoryStore, is_store
-from twin.data.traffic import EmpiricalTraffic
+from twin.metrics import control as control_metrics
+from twin.metrics import fidelity as metrics
+from twin.physics import energy
 from twin.traffic.manager import EgoController
 
 RUN_FORMAT = "i24-twin-run"
@@ -115,7 +118,7 @@ class RunResult:
 
 def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> TrajectoryStore:
     """The trajectory data of a run: the embedded default store (``None``), another
-    embedded store (``embedded:morning``, see :mod:`twin.data.default`), a store folder,
+    embedded store (``embedded:morning``, see :mod:`twin.data.embedded`), a store folder,
     or an I-24 MOTION JSON day file (ingested once into the cache).
 
     Raises:
@@ -123,7 +126,7 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
         FileNotFoundError: the path does not exist.
         KeyError: an unknown embedded store.
     """
-    from twin.data.default import default_store, embedded_name, embedded_store
+    from twin.data.embedded import default_store, embedded_name, embedded_store
     from twin.data.ingest import ingest
 
     if data is None:

@@ -19,7 +19,8 @@ from twin.data import ingest as ingest_module
 from twin.data import synth
 from twin.data.ingest import IngestOptions, ingest
 from twin.data.store import TrajectoryStore, is_store
-from twin.traffic import drivers, idm, lanes
+from twin.traffic import drivers, lanes
+from twin.traffic.models import idm
 
 DEFAULT_SEED = 0
 

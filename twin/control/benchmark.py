@@ -1,7 +1,7 @@
 """The wave-dampening benchmark: controllers against ``human`` on the same episodes.
 
 ``twin eval --controller human,follower_stopper,...`` runs every controller on the
-same episodes (same seeds, :mod:`twin.evaluation`); this module compares them, pairing
+same episodes (same seeds, :mod:`twin.runners.evaluation`); this module compares them, pairing
 each episode's run with the ``human`` run of the same episode:
 
 - per metric of :data:`PAIRED`, the change against ``human`` in percent, per episode

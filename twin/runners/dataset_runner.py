@@ -2,7 +2,7 @@
 
 :func:`generate` draws the episodes, claims the folder, renders the episodes not yet
 complete with an engine, and assembles KITTI, COCO and the manifest
-(:mod:`sensors.dataset` for what is written). Engines (:mod:`twin.engines`, shared
+(:mod:`twin.runners.dataset` for what is written). Engines (:mod:`twin.runners.engines`, shared
 with ``twin eval``):
 
 * ``local``: this process (one worker) or a pool of processes started fresh
@@ -21,7 +21,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from sensors.dataset import (
+from twin.core.atomic import AtomicFolder, remove_stale
+from twin.data.store import TrajectoryStore
+from twin.runners.dataset import (
     EPISODE,
     EPISODES,
     DatasetConfig,
@@ -34,9 +36,7 @@ from sensors.dataset import (
     render_episode,
     resolved_renderer,
 )
-from twin.core.atomic import AtomicFolder, remove_stale
-from twin.data.store import TrajectoryStore
-from twin.engines import ENGINES, run_jobs, tick, where, worker_data
+from twin.runners.engines import ENGINES, run_jobs, tick, where, worker_data
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,7 @@ def generate(
     )
 
 
-# -- engines (twin.engines) ----------------------------------------------------------
+# -- engines (twin.runners.engines) ----------------------------------------------------------
 
 
 def _write_episode(config, spec, store, bundle, out: Path, on_frames=None) -> int:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.data import synth
-from twin.data.traffic import EmpiricalTraffic
+from twin.data.empirical import EmpiricalTraffic
 
 
 def query(store, *, repeats: int = 5, calls: int = 2000) -> dict:
@@ -202,7 +202,7 @@ def run_bench(store=None, *, scenario: str = "B", repeats: int = 3) -> dict:
     from mapgen.build import default_map
     from twin.cosim.config import PRESETS
     from twin.cosim.cosimulator import Cosimulator
-    from twin.data.default import default_store
+    from twin.data.embedded import default_store
 
     traffic = EmpiricalTraffic(store if store is not None else default_store(progress=False))
     bundle = default_map()
@@ -271,7 +271,7 @@ def camera_bench(
     from sensors.writer import FrameWriter
     from twin.core.i24 import LANE_WIDTH
     from twin.core.vehicle_classes import vehicle_classes
-    from twin.data.default import default_store
+    from twin.data.embedded import default_store
     from twin.physics.world import PhysicsWorld, SpawnStates
 
     table = vehicle_classes()
@@ -411,9 +411,9 @@ def dataset_bench(
     """
     from dataclasses import replace as with_values
 
-    from sensors.dataset import DatasetConfig
-    from sensors.runner import generate
-    from twin.cosim.run import open_data
+    from twin.runners.dataset import DatasetConfig
+    from twin.runners.dataset_runner import generate
+    from twin.runners.run import open_data
 
     store = store or open_data(None, progress=False)
     cores = len(os.sched_getaffinity(0))
@@ -470,8 +470,8 @@ def eval_bench(
     ``episodes`` episodes of ``duration`` seconds from congested cells of ``store``'s
     westbound data (default: the embedded data), each with ``behaviours``. Medians over
     the repeats; scaling is the episodes per second of the most workers over one's."""
-    from twin.cosim.run import open_data
-    from twin.evaluation import EvalConfig, evaluate
+    from twin.runners.evaluation import EvalConfig, evaluate
+    from twin.runners.run import open_data
 
     store = store or open_data(None, progress=False)
     cores = len(os.sched_getaffinity(0))
@@ -515,7 +515,7 @@ def env_bench(
     Medians over the repeats; scaling is the vector env's steps per second over one's."""
     import gymnasium as gym
 
-    from twin.env import ENV_ID
+    from twin.control.env import ENV_ID
 
     workers = workers or len(os.sched_getaffinity(0))
 
@@ -552,8 +552,8 @@ def env_bench(
 def calibrate_bench(store=None, *, road: str = "westbound", repeats: int = 3) -> dict:
     """Wall time of ``twin calibrate`` on ``road`` of ``store`` (default: the embedded
     data; nothing is written), median of the repeats, with what it fitted."""
-    from twin.cosim.run import open_data
-    from twin.data.calibrate import calibrate
+    from twin.calibration.calibrate import calibrate
+    from twin.runners.run import open_data
 
     store = store or open_data(None, progress=False)
     walls = []

@@ -70,7 +70,7 @@ def export_run(run: Path, out: Path, bundle) -> dict:
         ExportError: ``run`` is not a run folder, or SUMO is missing or fails.
     """
     from twin.cosim.config import load_config
-    from twin.cosim.run import is_run
+    from twin.runners.run import is_run
 
     run, out = Path(run), Path(out)
     if not is_run(run):

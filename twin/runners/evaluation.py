@@ -1,11 +1,11 @@
 """``twin eval``: the twin's fidelity measured over many episodes, per behaviour.
 
 Episodes are drawn from the recorded traffic as a dataset's are
-(:mod:`sensors.episodes`: congested and free cells, episode ``i`` from ``(seed, i)``
+(:mod:`twin.runners.episodes`: congested and free cells, episode ``i`` from ``(seed, i)``
 alone), restricted to the window given; every behaviour runs the same episodes. Each
 (episode, behaviour) is one cosimulation, measured as ``twin run`` measures a run
-(:func:`twin.cosim.run.measure`), on the engines the dataset runner uses
-(:mod:`twin.engines`: a local process pool by default, Ray as an option; same results).
+(:func:`twin.runners.run.measure`), on the engines the dataset runner uses
+(:mod:`twin.runners.engines`: a local process pool by default, Ray as an option; same results).
 The output folder::
 
     OUT/
@@ -28,16 +28,23 @@ from pathlib import Path
 
 import numpy as np
 
-from sensors.episodes import EpisodeSampling, EpisodeSpec, check_roads, draw_episode, measure_cells
-from twin import __version__, benchmark
+from twin import __version__
+from twin.calibration.calibrate import read_calibration
+from twin.control import benchmark
 from twin.core.atomic import atomic_file, remove_stale
 from twin.core.errors import NoVehicleNearError, TwinError
 from twin.core.i24 import Road
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
-from twin.data.calibrate import read_calibration
 from twin.data.store import TrajectoryStore
-from twin.engines import run_jobs, where, worker_data
+from twin.runners.engines import run_jobs, where, worker_data
+from twin.runners.episodes import (
+    EpisodeSampling,
+    EpisodeSpec,
+    check_roads,
+    draw_episode,
+    measure_cells,
+)
 
 FORMAT = "i24-twin-eval"
 VERSION = 1
@@ -67,7 +74,7 @@ METRICS = {
     "vehicles_off_road": "sum",
     "ended_early": "sum",
     "loop_s": "stats",
-    # energy and wave dampening (twin.energy, twin.cosim.control_metrics)
+    # energy and wave dampening (twin.physics.energy, twin.metrics.control)
     "ego_mpg": "stats",
     "followers_mpg": "stats",
     "ego_and_followers_mpg": "stats",
@@ -276,7 +283,7 @@ def evaluate(
 def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[EpisodeSpec]:
     """The evaluation's episodes (see the module doc)."""
     from twin.cosim.cosimulator import road_limits
-    from twin.data.traffic import EmpiricalTraffic
+    from twin.data.empirical import EmpiricalTraffic
 
     sampling = config.sampling
     check_roads(store, sampling)
@@ -297,8 +304,8 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
     """One (episode, arm): the cosimulation and its metrics as a flat row, with the
     ego's and its followers' speeds each second (for the pictures)."""
     from twin.cosim.cosimulator import Cosimulator, ScenarioError
-    from twin.cosim.run import measure
-    from twin.data.traffic import EmpiricalTraffic
+    from twin.data.empirical import EmpiricalTraffic
+    from twin.runners.run import measure
 
     label, behaviour, controller = arm
     store, bundle = worker_data(location)

@@ -1,5 +1,5 @@
 """Driver behaviour calibrated from a recording: car following, desired speeds and
-lane-change rates (the fitting, on arrays; :mod:`twin.data.following` finds what
+lane-change rates (the fitting, on arrays; :mod:`twin.calibration.following` finds what
 the recording shows).
 
 **Car following.** Each recorded follower's IDM parameters (desired speed, time
@@ -28,17 +28,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from twin.core.i24 import HOV_LANE, LANES
-from twin.data.following import (
+from twin.calibration.following import (
     SPEED_BIN_NAMES,
     FollowingRuns,
     FreeFlow,
     GridTraffic,
     LaneChanges,
 )
-from twin.traffic.idm import IDMParams, twin_idm_acceleration
+from twin.core.i24 import HOV_LANE, LANES
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
+from twin.traffic.models.idm import IDMParams, twin_idm_acceleration
 
 MIN_LANE_CHANGE_GAP = 1.0  # [m] as the traffic manager: to each new neighbour
 

@@ -1,10 +1,10 @@
 """``twin dataset``: labelled camera datasets from many cosimulation episodes.
 
-Episodes are drawn from the recorded traffic (:mod:`sensors.episodes`); each is a
+Episodes are drawn from the recorded traffic (:mod:`twin.runners.episodes`); each is a
 cosimulation whose ego cameras take ``frames_per_episode`` frames at the camera
 rate after ``warmup_s``. Every frame of every camera is one sample, labelled by
 :mod:`sensors.labels` and written in KITTI's object layout and as COCO instances;
-:mod:`sensors.runner` runs the episodes (a process pool or Ray) and assembles them.
+:mod:`twin.runners.dataset_runner` runs the episodes (a process pool or Ray) and assembles them.
 
 The dataset folder::
 
@@ -48,14 +48,6 @@ import numpy as np
 
 from sensors.camera import CameraRig, CameraSettings, Frame
 from sensors.coco import coco_bbox, rle_counts, rle_string
-from sensors.episodes import (
-    EpisodeSampling,
-    EpisodeSpec,
-    SamplingError,
-    check_roads,
-    draw_episode,
-)
-from sensors.episodes import measure_cells as _measure_cells
 from sensors.kitti import calibration_text, categories, encode_depth, label_lines
 from sensors.labels import VehicleLabels, frame_labels, model_triangles
 from sensors.replay import FrameTraffic
@@ -65,6 +57,14 @@ from twin.core.atomic import AtomicFolder, atomic_file, marked_as
 from twin.core.errors import NoVehicleNearError, TwinError
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.data.store import TrajectoryStore
+from twin.runners.episodes import (
+    EpisodeSampling,
+    EpisodeSpec,
+    SamplingError,
+    check_roads,
+    draw_episode,
+)
+from twin.runners.episodes import measure_cells as _measure_cells
 
 FORMAT = "i24-twin-dataset"
 FORMAT_VERSION = 1
@@ -223,7 +223,7 @@ def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int)
     """
     from twin.core.i24 import Road
     from twin.cosim.cosimulator import road_limits
-    from twin.data.traffic import EmpiricalTraffic
+    from twin.data.empirical import EmpiricalTraffic
 
     check_roads(store, config.sampling)
     traffic = EmpiricalTraffic(store)
@@ -335,7 +335,7 @@ def render_episode(
         the content of ``episode.json``.
     """
     from twin.cosim.cosimulator import Cosimulator, ScenarioError
-    from twin.data.traffic import EmpiricalTraffic
+    from twin.data.empirical import EmpiricalTraffic
 
     cosim = config.episode_config(spec)
     cameras = cosim.camera.rig()
