@@ -216,7 +216,10 @@ def test_a_killed_run_resumes_to_the_same_dataset(dataset, wave_store, tmp_path)
 
     def finished() -> list[Path]:
         folder = out / EPISODES
-        return sorted(p for p in folder.iterdir() if is_episode(p)) if folder.is_dir() else []
+        if not folder.is_dir():
+            return []
+        # an episode being written lies in a hidden .partial folder until it is renamed
+        return sorted(p for p in folder.iterdir() if not p.name.startswith(".") and is_episode(p))
 
     deadline = time.monotonic() + 300
     # killed as soon as any episode is complete (the workers' episodes end in any order;
