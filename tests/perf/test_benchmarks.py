@@ -1,5 +1,7 @@
 import json
 
+import pytest
+
 from twin.cli import main
 
 
@@ -10,6 +12,7 @@ def test_bench_query_prints_one_json_line(wave_store, capsys):
     assert line["vehicles_in_window"] > 20
 
 
+@pytest.mark.slow
 def test_bench_run_prints_the_loop_figures(wave_store, capsys):
     assert main(["bench", "run", "--data", str(wave_store.path), "--repeats", "1"]) == 0
     line = json.loads(capsys.readouterr().out.strip())
@@ -17,6 +20,7 @@ def test_bench_run_prints_the_loop_figures(wave_store, capsys):
     assert 0 < line["ghost_reload_ms"] < line["step_ms"] and line["vehicles_mean"] > 10
 
 
+@pytest.mark.slow
 def test_bench_dataset_prints_frames_per_second_by_workers(wave_store, capsys):
     argv = ["bench", "dataset", "--data", str(wave_store.path), "--episodes", "2"]
     assert main([*argv, "--frames", "2", "--workers", "1,2", "--repeats", "1"]) == 0
@@ -51,6 +55,7 @@ def test_synth_command_writes_a_day(tmp_path, capsys):
     assert "ISO 8601" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
     assert main(["bench", "calibrate", "--data", str(wave_store.path), "--repeats", "1"]) == 0
     line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
