@@ -29,15 +29,16 @@ from twin.core.i24 import SCENARIO_TIME, Road
 from twin.core.vehicle_classes import vehicle_classes
 from twin.traffic.drivers import DriverDistribution
 from twin.traffic.lanes import Occupancy
-from twin.traffic.models.gipps import GippsParams, gipps_acceleration
-from twin.traffic.models.idm import IDMParams, idm_acceleration
+from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
+from twin.traffic.models import MODELS, car_following_model
+from twin.traffic.models.base import take
+from twin.traffic.models.idm import IDMParams
 
 HOUR = 3600.0  # [s]
 MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
 MIN_GAP = 2.0  # [m] IDM s0 mean
 DRIVERS = DriverDistribution(min_gap=MIN_GAP, comfortable_decel=COMFORT_DECEL)
-CAR_FOLLOWING = ("idm", "gipps")
 IDM_NAMES = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
 
 
@@ -115,13 +116,14 @@ class SynthConfig:
         accel_noise: [m/s^2] sd of the drivers' acceleration noise per step.
         heavy_factor: [-] factors on the class table's share of heavy vehicles (the
             classes kept out of the HOV lane) in lanes -2, -3 and -4.
-        drivers: how each vehicle's IDM parameters are drawn (data made by other
-            drivers than the twin's defaults, e.g. to test a calibration).
-        car_following: ``"idm"`` (the twin's model) or ``"gipps"``
-            (:mod:`twin.traffic.models.gipps`, a model the twin does not drive with:
+        drivers: how each vehicle's traits (IDM's parameters) are drawn (data made by
+            other drivers than the twin's defaults, e.g. to test a calibration).
+        car_following: the drivers' model, by its name in :mod:`twin.traffic.models`:
+            ``"idm-textbook"`` (IDM as published, the default), ``"idm"`` (the twin's
+            own drivers) or ``"gipps"`` (a model the twin's defaults do not drive with:
             reaction time 2/3 of the drawn time headway, most severe braking twice the
             drawn comfortable deceleration, the same desired speed, acceleration and
-            minimum gap).
+            minimum gap). Their lane changes judge accelerations by the same model.
         lane_change_duration: [s] range of lane-change manoeuvre durations.
         politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
             ([-], [m/s^2], [m/s^2], [m/s^2]).
@@ -146,7 +148,7 @@ class SynthConfig:
     accel_noise: float = 0.15
     heavy_factor: tuple[float, float, float] = (0.3, 1.0, 1.6)
     drivers: DriverDistribution = DRIVERS
-    car_following: str = "idm"
+    car_following: str = "idm-textbook"
     lane_change_duration: tuple[float, float] = (3.0, 6.0)
     politeness: float = 0.2
     change_threshold: float = 0.3
@@ -168,7 +170,7 @@ class SynthConfig:
             "flow": len(self.flow) == 4 and all(0 <= q <= 3000 for q in self.flow),
             "heavy_factor": len(self.heavy_factor) == 3
             and all(0 <= f <= 5 for f in self.heavy_factor),
-            "car_following": self.car_following in CAR_FOLLOWING,
+            "car_following": self.car_following in MODELS,
             "lane_change_duration": 0
             < self.lane_change_duration[0]
             <= self.lane_change_duration[1],
@@ -351,20 +353,9 @@ class _Vehicles:
             setattr(self, name, np.concatenate([value, getattr(other, name)]))
 
     @property
-    def params(self) -> IDMParams:
+    def traits(self) -> IDMParams:
+        """The drivers' traits (the class table's terms: IDM's parameters)."""
         return IDMParams(self.v0, self.T, self.s0, self.a, self.b, self.delta)
-
-    @property
-    def gipps(self) -> GippsParams:
-        """The same drivers as Gipps drivers (see ``SynthConfig.car_following``)."""
-        return GippsParams(
-            desired_speed=self.v0,
-            max_accel=self.a,
-            decel=2.0 * self.b,
-            leader_decel=2.0 * self.b,
-            reaction_time=self.T * (2.0 / 3.0),
-            min_gap=self.s0,
-        )
 
 
 @dataclass
@@ -376,7 +367,7 @@ class SynthResult:
     tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
     vehicle_class: np.ndarray
     dimensions: np.ndarray  # (m, 3) [m]
-    drivers: IDMParams  # (m,) each: the IDM parameters each vehicle drove with
+    drivers: IDMParams  # (m,) each: the traits each vehicle drove with (its model's from_traits)
     lane_changes: int
     collisions: int
 
@@ -385,6 +376,13 @@ class _Simulation:
     def __init__(self, config: SynthConfig, rng: np.random.Generator):
         self.cfg = config
         self.rng = rng
+        self.model = car_following_model(config.car_following)
+        self.mobil = MOBILParams(
+            politeness=config.politeness,
+            threshold=config.change_threshold,
+            safe_decel=config.safe_decel,
+            keep_right=config.keep_right,
+        )
         self.classes = vehicle_classes()
         self.x_in = config.x_record[0] - config.upstream
         self.x_out = config.x_record[1] + config.downstream
@@ -478,11 +476,11 @@ class _Simulation:
         mean = 1.0 / self.cfg.bottleneck.slow_share
         return max(1, round(mean * self.rng.uniform(0.5, 1.5)))
 
-    def _params(self) -> IDMParams:
-        """The drivers' IDM, with the bottleneck's speeds for those in it."""
+    def _traits(self) -> IDMParams:
+        """The drivers' traits, with the bottleneck's speeds for those in it."""
         veh, b = self.vehicles, self.cfg.bottleneck
         if b is None:
-            return veh.params
+            return veh.traits
         inside = (veh.x + veh.length >= b.x) & (veh.x <= b.x + b.length)
         v0 = np.where(inside, np.minimum(veh.v0, veh.bottleneck_speed), veh.v0)
         return IDMParams(v0, veh.T, veh.s0, veh.a, veh.b, veh.delta)
@@ -557,12 +555,8 @@ class _Simulation:
         occupancy = self._occupancy()
         owner = occupancy.owner
         gap, leader = occupancy.leaders(veh.x, veh.length)
-        if cfg.car_following == "gipps":
-            drivers = replace(veh.gipps, desired_speed=self._params().desired_speed)
-            acc_entry = gipps_acceleration(veh.v[owner], veh.v[leader], gap, drivers.take(owner))
-        else:
-            drivers = self._params().take(owner)
-            acc_entry = idm_acceleration(veh.v[owner], veh.v[leader], gap, drivers)
+        drivers = take(self.model.from_traits(self._traits()), owner)
+        acc_entry = self.model.accel(veh.v[owner], veh.v[leader], gap, drivers)
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))
@@ -593,7 +587,10 @@ class _Simulation:
         self._insert()
 
     def _change_lanes(self, occupancy: Occupancy, acc: np.ndarray) -> None:
-        """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres."""
+        """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres.
+
+        The drivers judge the change by their own model's accelerations and weigh the
+        new follower's loss only (their old follower's gain counts for nothing)."""
         cfg, veh = self.cfg, self.vehicles
         due = np.flatnonzero(
             (veh.next_decision <= self.t)
@@ -604,9 +601,10 @@ class _Simulation:
         if len(due) == 0:
             return
         veh.next_decision[due] = self.t + self.rng.exponential(cfg.decision_interval, len(due))
-        best_gain = np.full(len(due), cfg.change_threshold)
+        drivers = self.model.from_traits(veh.traits)
+        best_incentive = np.zeros(len(due))
         best_lane = veh.lane[due].copy()
-        for step_dir, bias in ((+1, -cfg.keep_right), (-1, cfg.keep_right)):
+        for step_dir in (+1, -1):
             target = veh.lane[due] + step_dir
             allowed = (target <= -2) & (target >= -4)
             cand = due[allowed]
@@ -617,15 +615,19 @@ class _Simulation:
             has_lead, has_fol = lead >= 0, fol >= 0
             gap_lead = np.where(has_lead, veh.x[lead] - veh.x[cand] - veh.length[cand], np.inf)
             gap_fol = np.where(has_fol, veh.x[cand] - veh.x[fol] - veh.length[fol], np.inf)
-            a_new = idm_acceleration(veh.v[cand], veh.v[lead], gap_lead, veh.params.take(cand))
-            a_fol_new = idm_acceleration(veh.v[fol], veh.v[cand], gap_fol, veh.params.take(fol))
+            a_new = self.model.accel(veh.v[cand], veh.v[lead], gap_lead, take(drivers, cand))
+            a_fol_new = self.model.accel(veh.v[fol], veh.v[cand], gap_fol, take(drivers, fol))
             a_fol_old = np.where(has_fol, acc[fol], 0.0)
             a_fol_new = np.where(has_fol, a_fol_new, 0.0)
-            safe = (a_fol_new >= -cfg.safe_decel) & (gap_lead > 1.0) & (gap_fol > 1.0)
-            gain = a_new - acc[cand] + cfg.politeness * (a_fol_new - a_fol_old) + bias
-            better = safe & (gain > best_gain[allowed])
+            safe = mobil_safe(a_fol_new, self.mobil) & (gap_lead > 1.0) & (gap_fol > 1.0)
+            none = np.zeros(len(cand))
+            incentive = mobil_incentive(
+                acc[cand], a_new, a_fol_old, a_fol_new, none, none,
+                np.full(len(cand), step_dir < 0), self.mobil,
+            )  # fmt: skip
+            better = safe & (incentive > best_incentive[allowed])
             idx = np.flatnonzero(allowed)[better]
-            best_gain[idx] = gain[better]
+            best_incentive[idx] = incentive[better]
             best_lane[idx] = tgt[better]
         chosen = best_lane != veh.lane[due]
         movers = due[chosen]

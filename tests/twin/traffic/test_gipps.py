@@ -9,9 +9,7 @@ import pytest
 from twin.data import synth
 from twin.traffic.models.gipps import GippsParams, gipps_acceleration
 
-DRIVER = GippsParams(
-    desired_speed=30.0, max_accel=1.5, decel=3.0, leader_decel=3.0, reaction_time=0.8, min_gap=2.0
-)
+DRIVER = GippsParams(desired_speed=30.0, max_accel=1.5, decel=3.0, reaction_time=0.8, min_gap=2.0)
 
 
 def test_free_road_acceleration_is_gipps_and_vanishes_at_the_desired_speed():

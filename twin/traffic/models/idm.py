@@ -1,8 +1,22 @@
-"""The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000), vectorised."""
+"""The Intelligent Driver Model (Treiber, Hennecke, Helbing 2000), vectorised.
+
+Two models of the registry (:mod:`twin.traffic.models`) come from here:
+
+* ``idm``, :data:`IDM`: the twin's drivers. IDM with its free-road term braking at no
+  more than the comfortable deceleration b above the desired speed
+  (:func:`bounded_free_road_term`), so that a driver whose desired speed is lowered
+  (the paper's lane leads take their ghost's speed) slows comfortably, as in Treiber
+  and Kesting's IIDM. The traffic manager drives it and the calibration fits it.
+* ``idm-textbook``, :data:`TEXTBOOK_IDM`: IDM exactly as published, which the
+  synthetic I-24 days are made with (their bottleneck lowers the desired speed and
+  the drivers brake toward it as IDM says).
+"""
 
 from dataclasses import dataclass, replace
 
 import numpy as np
+
+from twin.traffic.models.base import CarFollowingModel, Parameter, take
 
 
 @dataclass(frozen=True)
@@ -27,19 +41,7 @@ class IDMParams:
 
     def take(self, index: np.ndarray) -> "IDMParams":
         """The parameters of the vehicles at ``index`` (scalars are kept as they are)."""
-        return IDMParams(
-            *(
-                value if np.ndim(value) == 0 else np.asarray(value)[index]
-                for value in (
-                    self.desired_speed,
-                    self.time_headway,
-                    self.min_gap,
-                    self.max_accel,
-                    self.comfortable_decel,
-                    self.delta,
-                )
-            )
-        )
+        return take(self, index)
 
 
 def desired_gap(v: np.ndarray, v_lead: np.ndarray, params: IDMParams) -> np.ndarray:
@@ -121,3 +123,40 @@ def equilibrium_gap(v: np.ndarray, params: IDMParams) -> np.ndarray:
     return (params.min_gap + v * params.time_headway) / np.sqrt(
         1.0 - (v / params.desired_speed) ** params.delta
     )
+
+
+#: IDM's parameters: calibration bounds [m/s, s, m, m/s^2, m/s^2] wide enough for every
+#: driver in the literature's I-24, NGSIM and highD fits, narrow enough to reject
+#: nonsense; fits start from a typical passenger-car driver; delta is held at 4.
+PARAMETERS = (
+    Parameter("desired_speed", "m/s", (5.0, 45.0), 30.0),
+    Parameter("time_headway", "s", (0.3, 4.0), 1.2),
+    Parameter("min_gap", "m", (0.3, 10.0), 2.0),
+    Parameter("max_accel", "m/s^2", (0.2, 5.0), 1.2),
+    Parameter("comfortable_decel", "m/s^2", (0.3, 6.0), 1.7),
+    Parameter("delta", "-", (1.0, 10.0), 4.0, fitted=False),
+)
+
+
+def _same(traits: IDMParams) -> IDMParams:
+    """The class table's traits are IDM's parameters."""
+    return traits
+
+
+IDM = CarFollowingModel(
+    name="idm",
+    reference="Treiber, Hennecke, Helbing 2000, with a bounded free-road term",
+    params=IDMParams,
+    parameters=PARAMETERS,
+    accel=twin_idm_acceleration,
+    from_traits=_same,
+)
+
+TEXTBOOK_IDM = CarFollowingModel(
+    name="idm-textbook",
+    reference="Treiber, Hennecke, Helbing 2000, Phys. Rev. E 62, 1805",
+    params=IDMParams,
+    parameters=PARAMETERS,
+    accel=idm_acceleration,
+    from_traits=_same,
+)
