@@ -12,7 +12,7 @@ from tests.twin.cosim.scenes import EGO_X, make_store, vehicle
 from twin.cli import main
 from twin.cosim.config import ConfigError, CosimConfig, from_toml, load_config, to_toml
 from twin.traffic import baselines as c
-from twin.traffic.manager import LaneView, Observation
+from twin.traffic.controller_api import LaneView, Observation
 
 FS = c.FollowerStopperParams()
 

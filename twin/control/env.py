@@ -46,7 +46,7 @@ import numpy as np
 from twin.core.i24 import LANES
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.physics import energy
-from twin.traffic.manager import EgoCommand, Observation
+from twin.traffic.controller_api import EgoCommand, Observation
 
 ENV_ID = "i24twin/WaveDampening-v0"
 CONTROL_DT = 0.1  # [s] the agent's step

@@ -29,8 +29,7 @@ from twin.control.env import (
     features,
 )
 from twin.core.errors import TwinError
-from twin.traffic.baselines import controller_factory
-from twin.traffic.manager import EgoCommand, Observation
+from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
 
 EXTRA = "the rl extra (pip install -e '.[rl]': stable-baselines3 with PyTorch)"
 _MODELS: dict[str, object] = {}  # loaded models by path, one load per process

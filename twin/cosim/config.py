@@ -19,7 +19,7 @@ from twin.core.timeutil import steps_per_sample
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
 from twin.physics.world import MAX_SPEED, PhysicsConfig
 from twin.traffic.baselines import ControllerSettings
-from twin.traffic.manager import TrafficConfig
+from twin.traffic.config import TrafficConfig
 
 MPH = 0.44704  # [m/s per mph]
 VEL_DEFAULT = 70.0 * MPH  # [m/s] the posted limit of this stretch (I24_DATA.md)

@@ -22,10 +22,7 @@ data layer the recording. Vehicles are named by the world's ids; the recorded ve
 each one was spawned from is kept beside it (its ``tid``), for the metrics.
 """
 
-import importlib
 import math
-import os
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,15 +30,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.errors import ControllerError, TwinError
+from twin.core.errors import TwinError
 from twin.core.i24 import LANES, lane_of
 from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
 from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
-from twin.traffic.baselines import is_factory
-from twin.traffic.manager import EgoController, Obstacles, TrafficManager
+from twin.traffic.controller_api import EgoController, load_controller
+from twin.traffic.manager import TrafficManager
+from twin.traffic.scene import Obstacles
 
 MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
 AV_STREAM = 0x41565F  # seeds the AV draws apart from the run's other random choices
@@ -679,36 +677,3 @@ def _bind(controller, sim: "Cosimulator") -> None:
     bind = getattr(controller, "bind", None)
     if callable(bind):
         bind(sim)
-
-
-def load_controller(spec: str, config=None) -> EgoController | None:
-    """Import ``"module:function"`` (``""``: ``None``, the traffic manager drives).
-    The current directory is searched first, as ``python -m`` would (like uvicorn's
-    app loading), so ``my_acc.py`` beside the user is found. A controller factory
-    (:func:`twin.traffic.baselines.controller_factory`) is called with ``config``, the run's
-    configuration, for a fresh controller.
-
-    Raises:
-        ControllerError: the module cannot be imported, has no such callable, or its
-            factory fails.
-    """
-    if not spec:
-        return None
-    module_name, _, name = spec.partition(":")
-    if os.getcwd() not in sys.path:
-        sys.path.insert(0, os.getcwd())
-    try:
-        module = importlib.import_module(module_name)
-    except Exception as error:
-        raise ControllerError(
-            f"ego controller {spec!r}: cannot import {module_name!r} ({error})"
-        ) from None
-    controller = getattr(module, name, None)
-    if not callable(controller):
-        raise ControllerError(f"ego controller {spec!r}: {module_name} has no callable {name!r}")
-    if is_factory(controller):
-        try:
-            controller = controller(config)
-        except Exception as error:
-            raise ControllerError(f"ego controller {spec!r} could not be built: {error}") from None
-    return controller

@@ -40,7 +40,7 @@ from twin.data.store import TrajectoryStore, is_store
 from twin.metrics import control as control_metrics
 from twin.metrics import fidelity as metrics
 from twin.physics import energy
-from twin.traffic.manager import EgoController
+from twin.traffic.controller_api import EgoController
 
 RUN_FORMAT = "i24-twin-run"
 METRICS = "metrics.json"

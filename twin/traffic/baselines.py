@@ -35,20 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twin.traffic.manager import EgoCommand, Observation
-
-FACTORY_MARK = "__twin_controller_factory__"
-
-
-def controller_factory(factory):
-    """Mark ``factory(config) -> controller`` as building a controller per episode from
-    the run's :class:`~twin.cosim.config.CosimConfig` (``load_controller`` calls it)."""
-    setattr(factory, FACTORY_MARK, True)
-    return factory
-
-
-def is_factory(obj) -> bool:
-    return bool(getattr(obj, FACTORY_MARK, False))
+from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
 
 
 def _positive(params, *names: str) -> None:
@@ -311,7 +298,7 @@ class ControllerSettings:
             the ACC: where staying clear of the leader (if it keeps braking as it does)
             needs harder braking than the controller asks, the ego brakes as hard as
             needed, by the same test as the drivers' emergency braking
-            (:func:`twin.traffic.control.required_decel`). ``False``: the
+            (:func:`twin.traffic.longitudinal.required_decel`). ``False``: the
             controller's command alone (``human`` has the drivers' braking anyway).
         follower_stopper, pi_saturation, acc: each controller's parameters.
         policy: a trained policy's model (``twin.rl:policy``).

@@ -10,7 +10,8 @@ from twin.core.i24 import lane_center
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import VehicleParams
 from twin.physics.world import PhysicsWorld, SpawnStates
-from twin.traffic.manager import TrafficConfig, TrafficManager
+from twin.traffic.config import TrafficConfig
+from twin.traffic.manager import TrafficManager
 
 
 def class_sizes(vehicle_class):

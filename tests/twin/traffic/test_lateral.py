@@ -5,7 +5,7 @@ import pytest
 
 from tests.twin.traffic.conftest import make_manager, run, spawn
 from twin.core.i24 import LANE_WIDTH, lane_center
-from twin.traffic.control import path_shape, stanley_steer
+from twin.traffic.steering import path_shape, stanley_steer
 
 
 def test_stanley_steers_toward_the_path():

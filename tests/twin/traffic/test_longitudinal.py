@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import make_manager, run, spawn
-from twin.traffic.manager import EgoCommand, Obstacles
+from twin.traffic.controller_api import EgoCommand
+from twin.traffic.scene import Obstacles
 
 DRIVER = dict(time_headway=1.2, min_gap=2.0, max_accel=1.0, comfortable_decel=1.5, delta=4.0)
 

@@ -7,11 +7,9 @@ import pytest
 from tests.twin.traffic.conftest import PointMasses, make_manager, point_mass_manager, run, spawn
 from twin.core.errors import ControllerError
 from twin.core.i24 import lane_center
-from twin.traffic.manager import (
-    EgoCommand,
-    Obstacles,
-    TrafficConfig,
-)
+from twin.traffic.config import TrafficConfig
+from twin.traffic.controller_api import EgoCommand
+from twin.traffic.scene import Obstacles
 
 
 def point_states(ids, x, lane, speed):

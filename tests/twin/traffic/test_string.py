@@ -7,7 +7,7 @@ import pytest
 
 from tests.twin.traffic.conftest import PointMasses, point_mass_manager
 from twin.core.i24 import lane_center
-from twin.traffic.manager import Obstacles
+from twin.traffic.scene import Obstacles
 
 DT = 0.01  # [s]
 V_EQ = 12.0  # [m/s] platoon speed

@@ -1,0 +1,109 @@
+"""Settings of the traffic manager (``[traffic]`` of a run's TOML)."""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from twin.traffic.drivers import DriverDistribution
+from twin.traffic.mobil import MOBILParams
+from twin.traffic.models import car_following_model
+
+MOBIL_FIELDS = ("politeness", "threshold", "safe_decel", "keep_right")
+
+
+@dataclass(frozen=True)
+class TrafficConfig:
+    """Settings of the traffic manager.
+
+    Attributes:
+        dt: [s] step of the manager (the physics step).
+        drivers: how the drivers' traits (the class table's terms) are drawn per
+            vehicle.
+        car_following: the drivers' model, by its name in :mod:`twin.traffic.models`
+            (``idm``, ``gipps``, ...).
+        mobil: MOBIL parameters every driver starts with.
+        decision_interval: [s] mean time between a driver's lane-change decisions.
+        decision_period: [s] lane-change decisions (MOBIL and forced changes) are taken
+            on this grid, for the drivers due then; a multiple of ``dt``.
+        lane_change_time: [s] (low, high) range of a manoeuvre's duration.
+        auto_lane_change: whether new vehicles change lanes by MOBIL.
+        hov_share: [-] share of HOV-eligible vehicles among those whose eligibility is
+            not given and whose class may use the HOV lane.
+        hov_openings: [m] (x0, x1) road-frame ranges where HOV-eligible vehicles may
+            cross the HOV line; none by default (the double solid line of this corridor).
+        emergency_decel: [m/s^2] when staying clear of the leader (if it keeps braking
+            as it does) needs more than this, the manager brakes as hard as needed.
+        emergency_margin: [m] gap kept by emergency braking.
+        reaction_time: [s] travel before emergency braking bites.
+        brake_limit: [-] deceleration limit of normal driving as a share of mu g (the
+            tyre limit); emergency braking uses all of mu g.
+        lateral_gain: [1/s] cross-track gain of the lateral (Stanley) controller.
+        path_preview: [s] the path's direction and curvature are taken this far ahead
+            (at the current speed), against the body's yaw lag.
+        max_lateral_accel: [m/s^2] limit of the lateral controller.
+        seed: random seed of the drivers' draws.
+    """
+
+    dt: float = 0.01
+    drivers: DriverDistribution = field(default_factory=DriverDistribution)
+    car_following: str = "idm"
+    mobil: MOBILParams = field(default_factory=MOBILParams)
+    decision_interval: float = 1.0
+    decision_period: float = 0.1
+    lane_change_time: tuple[float, float] = (3.0, 6.0)
+    auto_lane_change: bool = True
+    hov_share: float = 0.15
+    hov_openings: tuple[tuple[float, float], ...] = ()
+    emergency_decel: float = 4.0
+    emergency_margin: float = 1.0
+    reaction_time: float = 0.1
+    brake_limit: float = 0.9
+    lateral_gain: float = 1.0
+    path_preview: float = 0.1
+    max_lateral_accel: float = 4.0
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "lane_change_time", tuple(self.lane_change_time))
+        object.__setattr__(
+            self, "hov_openings", tuple(tuple(map(float, o)) for o in self.hov_openings)
+        )
+        positive = {
+            "dt": self.dt,
+            "decision_interval": self.decision_interval,
+            "decision_period": self.decision_period,
+            "emergency_decel": self.emergency_decel,
+            "lateral_gain": self.lateral_gain,
+            "max_lateral_accel": self.max_lateral_accel,
+        }
+        for name, value in positive.items():
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"TrafficConfig.{name} must be positive, got {value!r}")
+        ratio = self.decision_period / self.dt
+        if abs(ratio - round(ratio)) > 1e-9 or self.decision_period > self.decision_interval:
+            raise ValueError(
+                f"decision_period {self.decision_period} s must be a multiple of dt {self.dt} s"
+                f" and at most decision_interval {self.decision_interval} s"
+            )
+        low, high = self.lane_change_time
+        if not 0 < low <= high:
+            raise ValueError(f"lane_change_time must be 0 < low <= high, got {(low, high)}")
+        if not 0 <= self.hov_share <= 1:
+            raise ValueError(f"hov_share must be in 0..1, got {self.hov_share}")
+        if not 0 < self.brake_limit <= 1:
+            raise ValueError(f"brake_limit must be in (0, 1], got {self.brake_limit}")
+        if self.emergency_margin < 0 or self.reaction_time < 0 or self.path_preview < 0:
+            raise ValueError("emergency_margin, reaction_time and path_preview must be >= 0")
+        if any(len(o) != 2 or not o[0] < o[1] for o in self.hov_openings):
+            raise ValueError(f"hov_openings must be (x0, x1) with x0 < x1: {self.hov_openings}")
+        check_mobil(self.mobil)
+        car_following_model(self.car_following)
+
+
+def check_mobil(params: MOBILParams) -> None:
+    """Raise ValueError naming a MOBIL parameter that is not finite and >= 0."""
+    for name in MOBIL_FIELDS:
+        value = np.asarray(getattr(params, name), dtype=np.float64)
+        if not np.all(np.isfinite(value)) or np.any(value < 0):
+            raise ValueError(f"MOBIL {name} must be finite and >= 0, got {value!r}")
