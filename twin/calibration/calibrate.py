@@ -1,12 +1,13 @@
-"""Calibrating a store: what :mod:`twin.calibration.fitting` fits, run over a store's
-recording and kept beside it.
+"""Calibrating a store: the fits of :mod:`twin.calibration.car_following`,
+:mod:`~twin.calibration.distributions` and :mod:`~twin.calibration.lane_changes`, run
+over a store's recording and kept beside it.
 
 ``twin calibrate STORE`` writes two files into the store folder and changes nothing
 else in it (the recorded data are never touched)::
 
     STORE/
-      calibration.json            per road: the window used, the car-following
-                                  distributions per class group with fit counts and
+      calibration.json            the car-following model fitted; per road: the window
+                                  used, its distributions per class group with fit counts and
                                   errors, desired speeds per lane, lane-change rates
                                   and the fitted MOBIL threshold
       calibration_fits.parquet    one row per fitted follower: its parameters, errors,
@@ -26,17 +27,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from twin import __version__
-from twin.calibration import fitting as calibration
 from twin.calibration import following
-from twin.calibration.fitting import PARAMS, START, FitSettings
+from twin.calibration.car_following import FitSettings, fit_followers
+from twin.calibration.distributions import desired_speeds, group_distributions
 from twin.calibration.following import CalibrationDataError
+from twin.calibration.lane_changes import fit_threshold, lane_change_rates, recorded_incentives
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
 from twin.core.timeutil import format_local
 from twin.data.store import TrajectoryStore
 from twin.traffic.mobil import MOBILParams
-from twin.traffic.models.idm import IDMParams
+from twin.traffic.models import car_following_model
+from twin.traffic.models.base import CarFollowingModel
+from twin.traffic.models.idm import IDM
 
 CALIBRATION = "calibration.json"
 FITS = "calibration_fits.parquet"
@@ -73,10 +77,12 @@ def calibrate(
     t_until: float | None = None,
     settings: CalibrationSettings = CalibrationSettings(),
     *,
+    model: CarFollowingModel = IDM,
     progress: bool = False,
 ) -> tuple[dict, dict]:
     """Calibrate ``roads`` (default: all the store's) on the recording between
-    ``t_from`` and ``t_until`` (unix seconds; default: all of it).
+    ``t_from`` and ``t_until`` (unix seconds; default: all of it), the drivers'
+    car following as ``model``.
 
     Returns:
         (the calibration document, {road: FollowerFits}).
@@ -93,12 +99,13 @@ def calibrate(
         "version": VERSION,
         "created_by": f"i24-twin {__version__}",
         "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "car_following_model": model.name,
         "settings": _settings_dict(settings),
         "roads": {},
     }
     all_fits, problems = {}, []
     for road in roads:
-        section, fits = _calibrate_road(store, road, t_from, t_until, settings, progress)
+        section, fits = _calibrate_road(store, road, (t_from, t_until), settings, model, progress)
         doc["roads"][road.value] = section
         all_fits[road.value] = fits
         reason = section["car_following"].get("not_calibrated")
@@ -116,8 +123,8 @@ def calibrate(
     return doc, all_fits
 
 
-def _calibrate_road(store, road, t_from, t_until, settings, progress):
-    grid = following.load_grid(store, road, t_from, t_until)
+def _calibrate_road(store, road, window, settings, model, progress):
+    grid = following.load_grid(store, road, *window)
     runs = following.following_runs(
         grid, min_duration=settings.min_run, max_duration=settings.max_run
     )
@@ -133,10 +140,10 @@ def _calibrate_road(store, road, t_from, t_until, settings, progress):
             bar.n = done
             bar.refresh()
 
-    fits = calibration.fit_followers(runs, settings.fit, progress=advance)
+    fits = fit_followers(runs, settings.fit, model=model, progress=advance)
     if bar is not None:
         bar.close()
-    distributions = calibration.group_distributions(fits)
+    distributions = group_distributions(fits)
     accepted = int(fits.accepted.sum())
     car = {
         "followers": int(np.unique(runs.tid).size),
@@ -145,7 +152,7 @@ def _calibrate_road(store, road, t_from, t_until, settings, progress):
         "fitted": len(fits),
         "accepted": accepted,
         "rejected_poor": int(fits.poor.sum()),
-        "rejected_at_bound": int((~fits.accepted & fits.at_bound[:, 1:].any(axis=1)).sum()),
+        "rejected_at_bound": int((~fits.accepted & fits.other_at_bound).sum()),
         "desired_speed_identified": int((fits.accepted & fits.desired_speed_identified()).sum()),
         "nrmse": _quantiles(fits.nrmse[fits.accepted]),
         "rmse_m": _quantiles(fits.rmse[fits.accepted]),
@@ -157,12 +164,12 @@ def _calibrate_road(store, road, t_from, t_until, settings, progress):
             f"followers, {fits.uninformative} of them never crossed a wave (stopped and "
             f"moved), {car['rejected_poor']} poor fits, {car['rejected_at_bound']} at a bound"
         )
-    idm = _median_driver(distributions.get("all"))
+    driver = _median_driver(model, distributions.get("all"))
     changes = following.lane_changes(grid)
-    incentives = calibration.recorded_incentives(
-        grid, idm, settings.mobil, every=settings.decision_every
+    incentives = recorded_incentives(
+        grid, model, driver, settings.mobil, every=settings.decision_every
     )
-    mobil = calibration.fit_threshold(incentives, len(changes))
+    mobil = fit_threshold(incentives, len(changes))
     mobil.update(
         politeness=settings.mobil.politeness,
         safe_decel=settings.mobil.safe_decel,
@@ -178,17 +185,19 @@ def _calibrate_road(store, road, t_from, t_until, settings, progress):
         },
         "trajectories": int(np.unique(grid.tid).size),
         "car_following": car,
-        "desired_speed": calibration.desired_speeds(following.free_flow_speeds(grid)),
-        "lane_changes": calibration.lane_change_rates(changes),
+        "desired_speed": desired_speeds(following.free_flow_speeds(grid)),
+        "lane_changes": lane_change_rates(changes),
         "mobil": mobil,
     }
     return section, fits
 
 
-def _median_driver(distribution) -> IDMParams:
-    """The median calibrated driver (the fit's start, a typical car, without one)."""
-    values = distribution.median if distribution is not None else [START[name] for name in PARAMS]
-    return IDMParams(*(float(v) for v in values))
+def _median_driver(model: CarFollowingModel, distribution):
+    """The model's median calibrated driver (the fit's start, a typical car, without
+    one), as scalar parameters."""
+    fitted = model.fitted
+    values = distribution.median if distribution is not None else [p.start for p in fitted]
+    return model.make(**{p.name: float(v) for p, v in zip(fitted, values, strict=True)})
 
 
 def _quantiles(values: np.ndarray) -> dict:
@@ -218,17 +227,18 @@ def write_calibration(store: TrajectoryStore, doc: dict, fits: dict) -> Path:
 
 
 def _fits_table(fits: dict) -> pa.Table:
+    names = next(iter(fits.values())).names if fits else ()
     columns = {name: [] for name in ("road", "tid", "vehicle_class", "runs", "seconds")}
-    columns.update({name: [] for name in PARAMS})
+    columns.update({name: [] for name in names})
     columns.update({"rmse": [], "nrmse": [], "accepted": []})
-    columns.update({f"{name}_at_bound": [] for name in PARAMS})
+    columns.update({f"{name}_at_bound": [] for name in names})
     for road, f in fits.items():
         columns["road"].append(np.full(len(f), road, dtype=object))
         columns["tid"].append(f.tid.astype(np.int32))
         columns["vehicle_class"].append(f.vehicle_class.astype(np.int8))
         columns["runs"].append(f.runs.astype(np.int32))
         columns["seconds"].append(f.seconds)
-        for j, name in enumerate(PARAMS):
+        for j, name in enumerate(names):
             columns[name].append(f.params[:, j])
             columns[f"{name}_at_bound"].append(f.at_bound[:, j])
         columns["rmse"].append(f.rmse)
@@ -262,6 +272,19 @@ def read_calibration(store: TrajectoryStore) -> dict | None:
     return doc
 
 
+def calibration_model(doc: dict) -> CarFollowingModel:
+    """The car-following model a calibration document fitted (IDM for those written
+    before models could be chosen).
+
+    Raises:
+        StoreError: the document names a model this twin does not know.
+    """
+    try:
+        return car_following_model(doc.get("car_following_model", "idm"))
+    except ValueError as error:
+        raise StoreError(f"calibration: {error}") from None
+
+
 def read_fits(store: TrajectoryStore):
     """The per-follower fits as a pandas DataFrame (empty when there are none)."""
     path = store.path / FITS
@@ -276,7 +299,8 @@ def describe_calibration(doc: dict | None) -> str:
     """Lines for ``twin data info``: what each road's calibration found."""
     if doc is None:
         return "calibration  none (run 'twin calibrate STORE')"
-    lines = [f"calibration  {doc['created']} by {doc['created_by']}"]
+    model = calibration_model(doc)
+    lines = [f"calibration  {doc['created']} by {doc['created_by']}, drivers {model.name}"]
     for road, section in doc["roads"].items():
         window = section["window"]
         car = section["car_following"]
@@ -294,12 +318,10 @@ def describe_calibration(doc: dict | None) -> str:
                 f"median {car['nrmse']['median']:.3f}"
             )
             for group, d in car["distributions"].items():
-                median = d["median"]
-                lines.append(
-                    f"      {group:<5} n={d['count']:<4} v0 {median['desired_speed']:.1f} m/s, "
-                    f"T {median['time_headway']:.2f} s, s0 {median['min_gap']:.2f} m, "
-                    f"a {median['max_accel']:.2f}, b {median['comfortable_decel']:.2f} m/s^2"
+                median = ", ".join(
+                    f"{p.symbol} {d['median'][p.name]:.2f} {p.unit}" for p in model.fitted
                 )
+                lines.append(f"      {group:<5} n={d['count']:<4} {median}")
         speeds = section["desired_speed"]
         if speeds:
             per_lane = ", ".join(

@@ -1,5 +1,6 @@
 """Car following, free flow and lane changes as a recording shows them: the data side of
-the calibration (:mod:`twin.calibration.fitting` fits models to what this module finds).
+the calibration (:mod:`twin.calibration.car_following` and the others fit models to what
+this module finds).
 
 Every trajectory of a road is resampled onto one time grid (``dt``, 0.1 s by default,
 the step the drivers are simulated at). At each grid time the vehicles of each lane are

@@ -4,8 +4,9 @@ recording (``twin calibrate``).
 - ``paper``: the paper's rules: drivers drawn from the traffic manager's default
   distribution, every visible vehicle wanting ``vel_default`` (the lane leads ahead of
   the ego take their ghost's speed), MOBIL with the default threshold.
-- ``calibrated``: drivers drawn from the store's calibrated distributions: IDM
-  parameters from the class group's fitted (correlated, log-normal) distribution,
+- ``calibrated``: drivers drawn from the store's calibrated distributions: the
+  car-following model's parameters from the class group's fitted (correlated,
+  log-normal) distribution,
   desired speeds from the calibrated desired speeds of the vehicle's lane, MOBIL with
   the calibrated threshold.
 - ``recorded``: each vehicle gets the parameters fitted to its own recording (a
@@ -15,6 +16,8 @@ recording (``twin calibrate``).
 
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
+The calibrated behaviours drive the model the calibration fitted (``twin calibrate
+--model``), which must be the run's ``traffic.car_following``.
 
 ``auto`` (the default of ``twin run``) is :data:`AUTO_CHOICE` where the store has a
 calibration of the road, else ``paper``: the behaviour ``twin eval`` found most
@@ -27,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.calibration import following
-from twin.calibration.calibrate import read_calibration, read_fits
-from twin.calibration.fitting import PARAMS, ParameterDistribution, class_group
+from twin.calibration.calibrate import calibration_model, read_calibration, read_fits
+from twin.calibration.distributions import ParameterDistribution, class_group
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
@@ -81,13 +84,16 @@ class Behaviour:
         store: the recording (its calibration is read for the non-paper modes).
         road: the episode's road.
         seed: the run's seed.
+        car_following: the drivers' model (``traffic.car_following``).
 
     Raises:
-        BehaviourError: unknown name, or a non-paper mode on a store with no calibration
-            of ``road``.
+        BehaviourError: unknown name, a non-paper mode on a store with no calibration
+            of ``road``, or with a calibration of another car-following model.
     """
 
-    def __init__(self, name: str, store: TrajectoryStore, road: Road, seed: int):
+    def __init__(
+        self, name: str, store: TrajectoryStore, road: Road, seed: int, car_following: str = "idm"
+    ):
         self.name = check_behaviour(name)
         self.road = Road.parse(road)
         self.rng = np.random.default_rng([seed, SEED_STREAM])
@@ -106,6 +112,13 @@ class Behaviour:
                 f"behaviour {self.name!r} needs drivers calibrated on {self.road.value}: run "
                 f"'twin calibrate {store.path} --road {self.road.value}' first (or use "
                 "--behaviour paper)"
+            )
+        fitted = calibration_model(doc).name
+        if fitted != car_following:
+            raise BehaviourError(
+                f"behaviour {self.name!r}: {store.path}'s calibration fitted {fitted} drivers, "
+                f"the run drives {car_following}: add --set traffic.car_following={fitted} "
+                f"(or calibrate again with --model {car_following})"
             )
         section = doc["roads"][self.road.value]
         car = section["car_following"]
@@ -182,8 +195,9 @@ class Behaviour:
             return {}
         out = {}
         if self.distributions:
+            names = next(iter(self.distributions.values())).names
             groups = class_group(vehicle_class)
-            params = np.empty((n, 5))
+            params = np.empty((n, len(names)))
             for group in np.unique(groups):
                 rows = groups == group
                 dist = self.distributions.get(group) or self.distributions["all"]
@@ -191,12 +205,13 @@ class Behaviour:
             if self._fits is not None:
                 own = np.isin(tid, self._fits.index.to_numpy())
                 if own.any():
-                    rows = self._fits.loc[tid[own], list(PARAMS)].to_numpy()
+                    rows = self._fits.loc[tid[own], list(names)].to_numpy()
                     params[own] = rows
-            for j, name in enumerate(PARAMS[1:], start=1):
-                out[name] = params[:, j]
+            for j, name in enumerate(names):
+                if name != "desired_speed":
+                    out[name] = params[:, j]
             if self.speed_source == "car_following":
-                out["desired_speed"] = params[:, 0]
+                out["desired_speed"] = params[:, names.index("desired_speed")]
         if self.speed_source == "free_flow":
             out["desired_speed"] = self._desired_speeds(lane)
         if self.threshold is not None:

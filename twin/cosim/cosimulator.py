@@ -151,16 +151,17 @@ class Cosimulator:
         self.traffic = traffic
         self.road = config.road
         self.direction = config.road.direction
-        self.controller = controller or load_controller(config.ego_controller, config)
-        self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
-        headings = {r: bundle.road.heading(r) for r in (1, -1)}
-        self.manager = TrafficManager(config.traffic, headings)
         self.behaviour = Behaviour(
             resolve(config.behaviour, traffic.store, config.road),
             traffic.store,
             config.road,
             config.seed,
+            config.traffic.car_following,
         )
+        self.controller = controller or load_controller(config.ego_controller, config)
+        self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
+        headings = {r: bundle.road.heading(r) for r in (1, -1)}
+        self.manager = TrafficManager(config.traffic, headings)
         self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()

@@ -240,7 +240,10 @@ def evaluate(
         raise EvaluationError(f"--workers must be an integer >= 1, got {workers!r}")
     out = Path(out)
     for behaviour in config.behaviours:  # fails early, naming 'twin calibrate'
-        Behaviour(behaviour, store, Road.parse(config.road), config.seed)
+        Behaviour(
+            behaviour, store, Road.parse(config.road), config.seed,
+            config.cosim.traffic.car_following,
+        )  # fmt: skip
     bundle = bundle or default_map(progress=progress)
     specs = draw_specs(config, store, bundle)
     _claim(out, config, store, bundle)

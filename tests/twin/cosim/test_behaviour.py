@@ -8,18 +8,21 @@ import pandas as pd
 import pytest
 
 from twin.calibration.calibrate import read_fits
-from twin.calibration.fitting import PARAMS
 from twin.cosim.behaviour import Behaviour, BehaviourError
 from twin.cosim.config import SCENARIO_B, ConfigError
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.store import TrajectoryStore
 from twin.metrics import fidelity as metrics
+from twin.traffic.models import IDM
 
 
 @pytest.fixture
 def calibrated_store(calibrated_wave_store) -> TrajectoryStore:
     return calibrated_wave_store
+
+
+PARAMS = tuple(p.name for p in IDM.fitted)
 
 
 def _episode(store, built_map, behaviour, seconds=3.0):
@@ -124,3 +127,50 @@ def test_auto_is_calibrated_where_the_store_is_calibrated_else_paper(wave_store,
     assert resolve("recorded", wave_store, "westbound") == "recorded"
     with pytest.raises(BehaviourError, match="unknown behaviour"):
         resolve("wild", wave_store, "westbound")
+
+
+@pytest.fixture(scope="module")
+def gipps_calibrated_store(wave_store, tmp_path_factory) -> TrajectoryStore:
+    """A copy of ``wave_store`` calibrated with Gipps drivers (``--model gipps``)."""
+    import shutil
+
+    from twin.calibration.calibrate import calibrate, write_calibration
+    from twin.traffic.models import GIPPS
+
+    folder = tmp_path_factory.mktemp("gipps") / "store"
+    shutil.copytree(wave_store.path, folder)
+    store = TrajectoryStore(folder)
+    doc, fits = calibrate(store, ["westbound"], model=GIPPS)
+    write_calibration(store, doc, fits)
+    return store
+
+
+def test_a_gipps_calibration_drives_gipps_drivers_and_names_the_model_it_needs(
+    gipps_calibrated_store, built_map
+):
+    store = gipps_calibrated_store
+    assert read_fits(store).columns.tolist()[5:10] == [
+        "desired_speed", "max_accel", "decel", "reaction_time", "min_gap",
+    ]  # fmt: skip
+    with pytest.raises(BehaviourError, match=r"traffic\.car_following=gipps"):
+        Behaviour("calibrated", store, "westbound", 0)  # the run drives IDM
+    config = replace(
+        SCENARIO_B, behaviour="calibrated", t_max=3.0,
+        traffic=replace(SCENARIO_B.traffic, car_following="gipps"),
+    )  # fmt: skip
+    sim = Cosimulator(config, EmpiricalTraffic(store), built_map)
+    try:
+        sim.reset()
+        while not sim.done:
+            sim.step()
+        assert sim.manager.model.name == "gipps"
+        params = sim.manager.params(sim.manager.ids)
+        dist = sim.behaviour.distributions["all"]
+        assert dist.names == ("desired_speed", "max_accel", "decel", "reaction_time", "min_gap")
+        # every driver's reaction time drawn from the Gipps fit, within 2 sd of it
+        j = dist.names.index("reaction_time")
+        tau = np.log(params["reaction_time"])
+        assert np.all(np.abs(tau - dist.mean_log[j]) <= 2 * dist.sd_log[j] + 1e-9)
+        assert len(sim.counters.collisions) == 0
+    finally:
+        sim.close()

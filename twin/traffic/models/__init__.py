@@ -9,6 +9,8 @@ from twin.traffic.models.base import CarFollowingModel
 from twin.traffic.models.gipps import GIPPS
 from twin.traffic.models.idm import IDM, TEXTBOOK_IDM
 
+__all__ = ["GIPPS", "IDM", "MODELS", "TEXTBOOK_IDM", "CarFollowingModel", "car_following_model"]
+
 #: Every model, by the name configurations and the command line use.
 MODELS: dict[str, CarFollowingModel] = {m.name: m for m in (IDM, TEXTBOOK_IDM, GIPPS)}
 

@@ -34,6 +34,7 @@ class Parameter:
     Attributes:
         name: its field in the model's parameter dataclass.
         unit: e.g. ``m/s``.
+        symbol: its letter in the model's equations (``T``, ``s0``), for people.
         bounds: (low, high), both > 0: the calibration's box (wide enough for every
             driver of the literature's I-24, NGSIM and highD fits, narrow enough to
             reject nonsense).
@@ -44,6 +45,7 @@ class Parameter:
 
     name: str
     unit: str
+    symbol: str
     bounds: tuple[float, float]
     start: float
     fitted: bool = True

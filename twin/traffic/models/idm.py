@@ -129,12 +129,12 @@ def equilibrium_gap(v: np.ndarray, params: IDMParams) -> np.ndarray:
 #: driver in the literature's I-24, NGSIM and highD fits, narrow enough to reject
 #: nonsense; fits start from a typical passenger-car driver; delta is held at 4.
 PARAMETERS = (
-    Parameter("desired_speed", "m/s", (5.0, 45.0), 30.0),
-    Parameter("time_headway", "s", (0.3, 4.0), 1.2),
-    Parameter("min_gap", "m", (0.3, 10.0), 2.0),
-    Parameter("max_accel", "m/s^2", (0.2, 5.0), 1.2),
-    Parameter("comfortable_decel", "m/s^2", (0.3, 6.0), 1.7),
-    Parameter("delta", "-", (1.0, 10.0), 4.0, fitted=False),
+    Parameter("desired_speed", "m/s", "v0", (5.0, 45.0), 30.0),
+    Parameter("time_headway", "s", "T", (0.3, 4.0), 1.2),
+    Parameter("min_gap", "m", "s0", (0.3, 10.0), 2.0),
+    Parameter("max_accel", "m/s^2", "a", (0.2, 5.0), 1.2),
+    Parameter("comfortable_decel", "m/s^2", "b", (0.3, 6.0), 1.7),
+    Parameter("delta", "-", "delta", (1.0, 10.0), 4.0, fitted=False),
 )
 
 

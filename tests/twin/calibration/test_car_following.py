@@ -1,54 +1,101 @@
 """The car-following calibration against oracles: synthetic days made with known drivers
-unlike the twin's defaults, whose parameters it must recover."""
+unlike the twin's defaults, whose parameters it must recover, for every model."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from twin.calibration import fitting as calibration
+from twin.calibration import car_following as calibration
 from twin.calibration import following
-from twin.calibration.fitting import PARAMS, FitSettings, ParameterDistribution
+from twin.calibration.car_following import Box, FitSettings
 from twin.data import synth
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
+from twin.traffic.models import GIPPS, IDM
+
+PARAMS = tuple(p.name for p in IDM.fitted)
 
 
-@pytest.fixture(scope="module")
-def known(tmp_path_factory):
-    """Six minutes of the westbound wave driven by synth.OTHER_DRIVERS, ingested; the runs,
-    the fits and each fitted follower's true parameters."""
-    folder = tmp_path_factory.mktemp("oracle")
-    config = replace(synth.PRESET_B, minutes=6.0, seed=3, drivers=synth.OTHER_DRIVERS)
+def _oracle(folder, car_following: str, model):
+    """Six minutes of the westbound wave driven by synth.OTHER_DRIVERS with
+    ``car_following``, ingested; the runs, ``model``'s fits and each fitted follower's
+    true parameters."""
+    config = replace(
+        synth.PRESET_B, minutes=6.0, seed=3, drivers=synth.OTHER_DRIVERS,
+        car_following=car_following,
+    )  # fmt: skip
     result = synth.synthesize(config)
     day = synth.write_i24_json(result, folder / "day.json")
     ingest([day], folder / "store", progress=False)
     store = TrajectoryStore(folder / "store")
     runs = following.following_runs(following.load_grid(store, "westbound"))
-    fits = calibration.fit_followers(runs)
+    fits = calibration.fit_followers(runs, model=model)
     vid = np.array([int(oid[10:], 16) for oid in store.trajectory_arrays["id"][fits.tid]])
     at = np.searchsorted(result.vid, vid)
-    truth = np.stack([getattr(result.drivers, name)[at] for name in PARAMS], axis=1)
+    drivers = model.from_traits(result.drivers)
+    truth = np.stack([getattr(drivers, p.name)[at] for p in model.fitted], axis=1)
     return runs, fits, truth
+
+
+@pytest.fixture(scope="module")
+def known(tmp_path_factory):
+    """IDM drivers (as published) fitted as the twin's IDM."""
+    return _oracle(tmp_path_factory.mktemp("oracle"), "idm-textbook", IDM)
+
+
+@pytest.fixture(scope="module")
+def known_gipps(tmp_path_factory):
+    """Gipps drivers fitted as Gipps."""
+    return _oracle(tmp_path_factory.mktemp("oracle-gipps"), "gipps", GIPPS)
+
+
+def _errors(fits, truth) -> dict:
+    error = calibration.median_relative_error(fits.params[fits.accepted], truth[fits.accepted])
+    return dict(zip(fits.names, error, strict=True))
 
 
 def test_calibration_recovers_known_drivers(known):
     _, fits, truth = known
     assert len(fits) >= 50
     assert fits.accepted.mean() >= 0.8
-    error = dict(
-        zip(
-            PARAMS,
-            calibration.median_relative_error(fits.params[fits.accepted], truth[fits.accepted]),
-            strict=True,
-        )
-    )
+    error = _errors(fits, truth)
     assert error["time_headway"] <= 0.10
     assert error["min_gap"] <= 0.10
     assert error["max_accel"] <= 0.10
     assert error["comfortable_decel"] <= 0.25
     # and they are not the defaults the fit starts from
     assert np.median(truth[:, PARAMS.index("min_gap")]) > 2.5
+
+
+def test_calibration_recovers_known_gipps_drivers(known_gipps):
+    """The same oracle for a second model: Gipps' reaction time plays IDM's time
+    headway, its most severe braking the comfortable deceleration.
+
+    Gipps' maximum acceleration and desired speed act only through its free speed,
+    which a follower reaches only when its leader pulls away: on following runs
+    (this oracle's 54 followers) the fitted pairs replay the spacing as well as the
+    true ones but are not the true ones (max_accel 1.0 against 1.7 m/s^2 by median),
+    so they are not asserted; the calibrated behaviour takes the desired speed from
+    free flow."""
+    runs, fits, truth = known_gipps
+    assert fits.names == tuple(p.name for p in GIPPS.fitted)
+    assert len(fits) >= 50
+    assert fits.accepted.mean() >= 0.8
+    error = _errors(fits, truth)
+    assert error["reaction_time"] <= 0.10
+    assert error["min_gap"] <= 0.10
+    assert error["decel"] <= 0.25
+    assert np.median(truth[:, fits.names.index("min_gap")]) > 2.5
+    # the fitted Gipps drivers replay their recordings, as the true ones do
+    rows = np.flatnonzero(np.isin(runs.tid, fits.tid[fits.accepted]))
+    sub = runs.take(rows)
+    at = np.searchsorted(fits.tid, sub.tid)
+    valid = sub.valid
+    mean_gap = np.nanmean(np.where(valid, sub.gap, np.nan), axis=1)
+    error = np.where(valid, calibration.replay(sub, fits.params[at], GIPPS) - sub.gap, 0.0)
+    nrmse = np.sqrt((error**2).sum(axis=1) / valid.sum(axis=1)) / mean_gap
+    assert np.median(nrmse) < 0.02
 
 
 def test_a_recording_replayed_through_its_own_fitted_drivers_reproduces_itself(known):
@@ -69,7 +116,7 @@ def test_a_recording_replayed_through_its_own_fitted_drivers_reproduces_itself(k
     # the model fitted is the model that made the data: its true parameters fit too
     assert np.median(true) < 0.05
     # and the defaults do not
-    default = np.array([calibration.START[name] for name in PARAMS])
+    default = Box.of(IDM).start
     assert np.median(nrmse(np.tile(default, (len(sub), 1)))) > 3 * np.median(fitted)
 
 
@@ -102,47 +149,3 @@ def test_followers_that_never_crossed_a_wave_are_not_fitted(known):
     fits = calibration.fit_followers(steady)
     assert len(fits) == 0
     assert fits.uninformative == np.unique(steady.tid).size
-
-
-def test_parameter_distribution_draws_what_it_describes_and_round_trips():
-    rng = np.random.default_rng(0)
-    mean = np.log([30.0, 1.4, 2.5, 1.5, 2.0])
-    sd = np.array([0.05, 0.2, 0.15, 0.2, 0.1])
-    corr = np.eye(5)
-    corr[1, 3] = corr[3, 1] = -0.6
-    cov = corr * np.outer(sd, sd)
-    params = np.exp(rng.multivariate_normal(mean, cov, size=4000))
-    dist = ParameterDistribution.of(params)
-    assert np.allclose(dist.mean_log, mean, atol=0.01)
-    assert np.allclose(dist.sd_log, sd, rtol=0.05)
-    drawn = dist.draw(20000, np.random.default_rng(1))
-    logs = np.log(drawn)
-    assert np.allclose(logs.mean(axis=0), mean, atol=0.01)
-    assert np.corrcoef(logs.T)[1, 3] == pytest.approx(-0.6, abs=0.05)
-    # clipped at 2 sd: nothing absurd
-    assert np.all(np.abs(logs - dist.mean_log) <= 2 * dist.sd_log + 1e-9)
-    again = ParameterDistribution.from_dict(dist.to_dict())
-    assert np.allclose(again.mean_log, dist.mean_log, atol=1e-4)
-    assert np.allclose(again.correlation, dist.correlation, atol=1e-4)
-    # the same seed draws the same drivers
-    assert np.array_equal(
-        dist.draw(10, np.random.default_rng(5)), dist.draw(10, np.random.default_rng(5))
-    )
-
-
-def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted_gains():
-    # two drivers, five decisions each, one way: driver 1's incentive rises to 2.0 m/s^2
-    gains = np.array([0.1, 0.5, 2.0, 0.5, 0.1, 0.2, 0.9, 0.2, 1.5, 0.2])
-    incentives = calibration.Incentives(
-        tid=np.repeat([1, 2], 5),
-        decision=np.tile(np.arange(5), 2),
-        direction=np.ones(10, dtype=np.int8),
-        gain=gains,
-        possible=np.ones(10, dtype=bool),
-    )
-    assert incentives.changes(0.3) == 3  # onsets: 1 at 0.5, 2 at 0.9 and again at 1.5
-    fit = calibration.fit_threshold(incentives, 1)
-    assert fit["predicted"] == 1 and 1.5 <= fit["threshold"] < 2.0 + 1e-6
-    # none recorded: just above the largest incentive resisted, not the top of the range
-    none = calibration.fit_threshold(incentives, 0)
-    assert none["predicted"] == 0 and none["threshold"] == pytest.approx(2.0, abs=1e-3)

@@ -1,0 +1,24 @@
+"""The MOBIL threshold fitted to a recording's lane-change count."""
+
+import numpy as np
+import pytest
+
+from twin.calibration.lane_changes import Incentives, fit_threshold
+
+
+def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted_gains():
+    # two drivers, five decisions each, one way: driver 1's incentive rises to 2.0 m/s^2
+    gains = np.array([0.1, 0.5, 2.0, 0.5, 0.1, 0.2, 0.9, 0.2, 1.5, 0.2])
+    incentives = Incentives(
+        tid=np.repeat([1, 2], 5),
+        decision=np.tile(np.arange(5), 2),
+        direction=np.ones(10, dtype=np.int8),
+        gain=gains,
+        possible=np.ones(10, dtype=bool),
+    )
+    assert incentives.changes(0.3) == 3  # onsets: 1 at 0.5, 2 at 0.9 and again at 1.5
+    fit = fit_threshold(incentives, 1)
+    assert fit["predicted"] == 1 and 1.5 <= fit["threshold"] < 2.0 + 1e-6
+    # none recorded: just above the largest incentive resisted, not the top of the range
+    none = fit_threshold(incentives, 0)
+    assert none["predicted"] == 0 and none["threshold"] == pytest.approx(2.0, abs=1e-3)

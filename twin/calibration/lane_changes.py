@@ -1,0 +1,184 @@
+"""Lane changes in a recording: their rates, and the MOBIL threshold at which MOBIL,
+judging the recorded scenes with the calibrated drivers' model, starts as many."""
+
+import itertools
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from twin.calibration.following import SPEED_BIN_NAMES, GridTraffic, LaneChanges
+from twin.core.i24 import HOV_LANE, LANES
+from twin.traffic.lanes import Occupancy
+from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
+from twin.traffic.models.base import CarFollowingModel
+
+MIN_LANE_CHANGE_GAP = 1.0  # [m] as the traffic manager: to each new neighbour
+
+
+def lane_change_rates(changes: LaneChanges) -> dict:
+    """The recording's lane-change rates [per vehicle-km]: overall, by lane pair (per km
+    driven in the lane left) and by the speed of the lane left."""
+    exposure = changes.exposure_km
+    total_km = float(exposure.sum())
+
+    def rate(count, km):
+        return round(count / km, 5) if km > 0 else None
+
+    pairs = {}
+    for lane_from in LANES:
+        for lane_to in (lane_from - 1, lane_from + 1):
+            if lane_to not in LANES:
+                continue
+            count = int(
+                np.count_nonzero((changes.lane_from == lane_from) & (changes.lane_to == lane_to))
+            )
+            km = float(exposure[-lane_from - 1].sum())
+            pairs[f"{lane_from}>{lane_to}"] = {"count": count, "per_km": rate(count, km)}
+    bins = changes.speed_bin
+    by_speed = {}
+    for j, name in enumerate(SPEED_BIN_NAMES):
+        count = int(np.count_nonzero(bins == j))
+        km = float(exposure[:, j].sum())
+        by_speed[name] = {"count": count, "km": round(km, 3), "per_km": rate(count, km)}
+    return {
+        "count": len(changes),
+        "vehicle_km": round(total_km, 3),
+        "per_km": rate(len(changes), total_km),
+        "pairs": pairs,
+        "by_lane_speed": by_speed,
+        "exposure_km": np.round(exposure, 3).tolist(),
+    }
+
+
+@dataclass(frozen=True)
+class Incentives:
+    """MOBIL's view of the recorded scenes, at each decision time, for each vehicle and
+    each way it could move (left, right).
+
+    Attributes:
+        tid, decision: (e,) who and at which decision (index of the decision time).
+        direction: (e,) +1 left (toward lane -1), -1 right.
+        gain: (e,) [m/s^2] MOBIL incentive before the threshold.
+        possible: (e,) bool: the target lane exists, the HOV rule allows it and the
+            change is safe.
+    """
+
+    tid: np.ndarray
+    decision: np.ndarray
+    direction: np.ndarray
+    gain: np.ndarray
+    possible: np.ndarray
+
+    def changes(self, threshold: float) -> int:
+        """Lane changes MOBIL would start with ``threshold``: one each time a vehicle's
+        incentive to move one way beats it where it did not at the previous decision."""
+        want = self.possible & (self.gain > threshold)
+        previous = np.zeros_like(want)
+        same = (
+            (self.tid[1:] == self.tid[:-1])
+            & (self.direction[1:] == self.direction[:-1])
+            & (self.decision[1:] == self.decision[:-1] + 1)
+        )
+        previous[1:] = want[:-1] & same
+        return int(np.count_nonzero(want & ~previous))
+
+
+def recorded_incentives(
+    grid: GridTraffic,
+    model: CarFollowingModel,
+    driver,
+    mobil: MOBILParams,
+    every: float = 1.0,
+) -> Incentives:
+    """MOBIL's incentives on the recorded scenes every ``every`` seconds, with the same
+    driver (``model``'s parameters ``driver``, scalars) for everyone, and no
+    threshold (:meth:`Incentives.changes` applies it)."""
+    stride = max(1, round(every / grid.dt))
+    rows_all = np.flatnonzero((grid.lane != 0) & (grid.k % stride == 0))
+    rows_all = rows_all[np.argsort(grid.k[rows_all], kind="stable")]
+    bounds = np.flatnonzero(np.r_[True, np.diff(grid.k[rows_all]) != 0, True])
+    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible")}
+    road = np.int8(grid.road.direction)
+    for a, b in itertools.pairwise(bounds):
+        rows = rows_all[a:b]
+        x, v, lane, length = grid.x[rows], grid.speed[rows], grid.lane[rows], grid.length[rows]
+        roads = np.full(rows.size, road)
+        occupancy = Occupancy.build(roads, x, [lane])
+        ahead_now, behind_now = occupancy.around(roads, lane.astype(np.int64), x)
+
+        def accel(i, j, gap, v=v):  # the model's, of vehicles i behind j (j = -1: free road)
+            return _accel_behind(v, i, j, gap, model, driver)
+
+        me = np.arange(rows.size)
+        gap_now = np.where(ahead_now >= 0, x[np.maximum(ahead_now, 0)] - x - length, np.inf)
+        own_now = accel(me, ahead_now, gap_now)
+        behind = np.maximum(behind_now, 0)
+        old_now = np.where(behind_now >= 0, own_now[behind], 0.0)
+        old_gap = x[np.maximum(ahead_now, 0)] - x[behind] - length[behind]
+        old_after = np.where(behind_now >= 0, accel(behind, ahead_now, old_gap), 0.0)
+        k = int(grid.k[rows[0]] // stride)
+        for direction in (1, -1):
+            target = lane.astype(np.int64) + direction
+            exists = (target <= -1) & (target >= -4) & (target != HOV_LANE) & (lane != HOV_LANE)
+            ahead, behind_new = occupancy.around(roads, np.clip(target, -4, -1), x)
+            gap_ahead = np.where(ahead >= 0, x[np.maximum(ahead, 0)] - x - length, np.inf)
+            new_f = np.maximum(behind_new, 0)
+            gap_behind = np.where(behind_new >= 0, x - x[new_f] - length[new_f], np.inf)
+            own_after = accel(me, ahead, gap_ahead)
+            new_after = np.where(behind_new >= 0, accel(new_f, me, gap_behind), 0.0)
+            new_now = np.where(behind_new >= 0, own_now[new_f], 0.0)
+            gain = mobil_incentive(
+                own_now, own_after, new_now, new_after, old_now, old_after,
+                np.full(rows.size, direction < 0), replace(mobil, threshold=0.0),
+            )  # fmt: skip
+            safe = (
+                mobil_safe(new_after, mobil)
+                & (own_after >= -mobil.safe_decel)
+                & (gap_ahead >= MIN_LANE_CHANGE_GAP)
+                & (gap_behind >= MIN_LANE_CHANGE_GAP)
+            )
+            out["tid"].append(grid.tid[rows])
+            out["decision"].append(np.full(rows.size, k))
+            out["direction"].append(np.full(rows.size, direction, dtype=np.int8))
+            out["gain"].append(gain)
+            out["possible"].append(exists & safe)
+    if not out["tid"]:
+        return Incentives(*(np.zeros(0) for _ in range(5)))
+    columns = {name: np.concatenate(parts) for name, parts in out.items()}
+    order = np.lexsort((columns["decision"], columns["direction"], columns["tid"]))
+    return Incentives(**{name: values[order] for name, values in columns.items()})
+
+
+def _accel_behind(v, i, j, gap, model: CarFollowingModel, driver) -> np.ndarray:
+    """The model's acceleration of vehicles ``i`` behind vehicles ``j`` (-1: a free road)."""
+    lead_speed = np.where(j >= 0, v[np.maximum(j, 0)], 0.0)
+    return model.accel(v[i], lead_speed, np.where(j >= 0, gap, np.inf), driver)
+
+
+def fit_threshold(incentives: Incentives, recorded: int, *, high: float = 8.0) -> dict:
+    """The MOBIL threshold [m/s^2] at which the recorded scenes would start as many lane
+    changes as the recording has: the lowest at which they start no more (bisection: the
+    count falls as the threshold rises). With no recorded change that is just above the
+    largest incentive the recorded drivers resisted, not the top of the range: they
+    would have changed for more. Where even ``high`` starts more, it is ``high``; where
+    0 starts fewer, 0."""
+    low_count, high_count = incentives.changes(0.0), incentives.changes(high)
+    if low_count <= recorded:
+        threshold = 0.0
+    elif high_count > recorded:
+        threshold = high
+    else:
+        lo, hi = 0.0, high
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if incentives.changes(mid) > recorded:
+                lo = mid
+            else:
+                hi = mid
+        threshold = hi
+    return {
+        "threshold": round(threshold, 4),
+        "recorded": int(recorded),
+        "predicted": incentives.changes(threshold),
+        "at_zero_threshold": low_count,
+    }
