@@ -75,7 +75,7 @@ def imports(name: str, path: Path) -> set[str]:
             # ``from twin import energy``: the submodule is what is imported
             found.update(f"{module}.{alias.name}" for alias in node.names)
     known = modules()
-    return {m for m in found if m in known or m.split(".")[0] in SOURCES and m in known}
+    return {m for m in found if m in known or (m.split(".")[0] in SOURCES and m in known)}
 
 
 def test_every_module_belongs_to_a_layer():

@@ -1,10 +1,12 @@
 """The wave-dampening benchmark: controllers against ``human`` on the same episodes.
 
-``twin eval --controller human,follower_stopper,...`` runs every controller on the
-same episodes (same seeds, :mod:`twin.runners.evaluation`); this module compares them, pairing
-each episode's run with the ``human`` run of the same episode:
+``twin eval --controller human,follower_stopper,...`` (:func:`benchmark`) runs every
+controller on the same episodes (same seeds, the evaluation runner
+:mod:`twin.runners.evaluation`) and compares them, pairing each episode's run with the
+``human`` run of the same episode:
 
-- per metric of :data:`PAIRED`, the change against ``human`` in percent, per episode
+- per metric the table of metrics marks as paired (:data:`twin.metrics.table.PAIRED`),
+  the change against ``human`` in percent, per episode
   (``100 (controller - human) / human``), its mean with a 95 % confidence interval
   (percentile bootstrap over episodes, 10,000 resamples, seeded: deterministic) and
   its median, over the episodes where both ran and both values exist;
@@ -14,24 +16,54 @@ each episode's run with the ``human`` run of the same episode:
 """
 
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
-#: Metrics compared with ``human``, and whether more is better.
-PAIRED = {
-    "ego_mpg": True,
-    "ego_and_followers_mpg": True,
-    "window_mpg": True,
-    "speed_std_behind_mps": False,
-    "wave_amplitude_behind_mps": False,
-    "throughput_veh_per_h": True,
-    "accel_rms_mps2": False,
-    "jerk_rms_mps3": False,
-    "min_ttc_s": True,
-}
+from twin.core.atomic import atomic_file
+from twin.data.store import TrajectoryStore
+from twin.metrics.table import PAIRED
+from twin.runners.evaluation import (
+    EvalConfig,
+    EvalResult,
+    EvaluationError,
+    evaluate,
+    folder_line,
+)
+
 REFERENCE = "human"
 BOOTSTRAP = 10_000
 CONFIDENCE = 0.95
+
+
+def benchmark(
+    store: TrajectoryStore, out: str | os.PathLike, config: EvalConfig, **options
+) -> EvalResult:
+    """Run (or resume) the controllers of ``config`` on its episodes into ``out`` with
+    the paired comparison: :func:`~twin.runners.evaluation.evaluate` with
+    :func:`extend` (``options`` are its).
+
+    Raises:
+        EvaluationError: ``config`` names no controller (and what ``evaluate`` raises).
+    """
+    if not config.controllers:
+        raise EvaluationError("the benchmark compares controllers: give --controller")
+    return evaluate(store, out, config, extension=extend, **options)
+
+
+def extend(out: Path, frame, config: EvalConfig, summary: dict) -> str:
+    """The benchmark's part of an evaluation's outputs: ``paired_vs_human`` in the
+    summary, ``waves.png``, and the paired table for ``summary.md``."""
+    summary["paired_vs_human"] = paired_vs_human(frame, config)
+    with atomic_file(Path(out) / "waves.png") as tmp:
+        plot_traces(frame, config, tmp)
+    return markdown(summary)
+
+
+def summary_lines(result: EvalResult) -> str:
+    """A few lines for the terminal: each controller's medians and paired change."""
+    return "\n".join([folder_line(result), *lines(result.summary)])
 
 
 def paired_changes(ours: np.ndarray, reference: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ minus ``ttc_weight`` when its time to collision is under ``ttc_min`` s.
 
 ``terminated``: the AV collided; ``truncated``: the episode's end (or it left the map
 and data). At the end ``info["metrics"]`` holds the benchmark's metrics
-(:func:`twin.runners.evaluation.flatten`).
+(:func:`twin.metrics.table.flatten`).
 """
 
 import math
@@ -45,6 +45,7 @@ import numpy as np
 
 from twin.core.i24 import LANES
 from twin.cosim.config import SCENARIO_B, CosimConfig
+from twin.metrics.energy import followers
 from twin.physics import energy
 from twin.traffic.controller_api import EgoCommand, Observation
 
@@ -180,9 +181,8 @@ class WaveDampeningEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """A new episode: ``options={"episode": i}`` picks one, else drawn."""
-        from twin.core.errors import NoVehicleNearError
-        from twin.cosim.cosimulator import Cosimulator, ScenarioError
-        from twin.runners.episodes import draw_episode
+        from twin.cosim.cosimulator import Cosimulator
+        from twin.runners.episodes import PLACEMENT_ERRORS, draw_episode, episode_config
 
         super().reset(seed=seed)
         self.close()
@@ -190,15 +190,11 @@ class WaveDampeningEnv(gym.Env):
         for _ in range(20):  # an episode whose ego cannot be placed is drawn again
             k = int(self.np_random.integers(0, 2**31 - 1)) if index is None else int(index)
             spec = draw_episode(self.cells, self.sampling, self.base_seed, k)
-            config = replace(
+            config = episode_config(
                 self.cosim,
+                spec,
                 scenario="env",
-                road=spec.road,
-                lane=spec.lane,
-                x=spec.x,
-                time=spec.time,
                 t_max=self.duration,
-                seed=spec.seed,
                 ego_controller="",
                 camera=replace(self.cosim.camera, enabled=False),
             )
@@ -206,7 +202,7 @@ class WaveDampeningEnv(gym.Env):
             try:
                 self.sim.reset()
                 break
-            except (NoVehicleNearError, ScenarioError):
+            except PLACEMENT_ERRORS:
                 self.sim.close()
                 self.sim = None
                 if index is not None:
@@ -218,7 +214,7 @@ class WaveDampeningEnv(gym.Env):
         self._collisions, self._ego_accel, self._states = 0, 0.0, None
         self._advance()  # one physics step: the controller sees the ego once
         rows = self.sim.log.vehicles()
-        self._followers = energy.followers(rows, self.sim.ego_id)
+        self._followers = followers(rows, self.sim.ego_id)
         return self._observation(), {"episode": k, "ego_record_id": self.sim.ego.id}
 
     def step(self, action):
@@ -309,8 +305,8 @@ class WaveDampeningEnv(gym.Env):
         return float(reward)
 
     def _metrics(self) -> dict:
+        from twin.metrics.measure import measure
         from twin.runners.evaluation import flatten
-        from twin.runners.run import measure
 
         figures, _ = measure(self.sim, self.store, 0.0, 0.0)
         return flatten(figures)

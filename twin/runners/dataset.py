@@ -54,7 +54,7 @@ from sensors.replay import FrameTraffic
 from sensors.writer import BackgroundWriter, encode_instance, vehicle_source, write_pngs
 from twin import __version__
 from twin.core.atomic import AtomicFolder, atomic_file, marked_as
-from twin.core.errors import NoVehicleNearError, TwinError
+from twin.core.errors import TwinError
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.data.store import TrajectoryStore
 from twin.runners.episodes import (
@@ -63,8 +63,11 @@ from twin.runners.episodes import (
     SamplingError,
     check_roads,
     draw_episode,
+    episode_config,
+    reset_or_skip,
 )
 from twin.runners.episodes import measure_cells as _measure_cells
+from twin.runners.folders import claim
 
 FORMAT = "i24-twin-dataset"
 FORMAT_VERSION = 1
@@ -184,14 +187,10 @@ class DatasetConfig:
 
     def episode_config(self, spec: EpisodeSpec) -> CosimConfig:
         """The cosimulation of episode ``spec``."""
-        return replace(
+        return episode_config(
             self.cosim,
+            spec,
             scenario=f"dataset-{spec.index:06d}",
-            road=spec.road,
-            lane=spec.lane,
-            x=spec.x,
-            time=spec.time,
-            seed=spec.seed,
             t_max=max(self.duration, self.cosim.dt),
             bev_time=None,
         )
@@ -264,54 +263,14 @@ def _identity(config: DatasetConfig, store: TrajectoryStore, bundle) -> dict:
 
 
 def claim_folder(out: Path, config: DatasetConfig, store: TrajectoryStore, bundle) -> None:
-    """Make ``out`` this dataset's folder, or check that it already is."""
+    """Make ``out`` this dataset's folder, or check that it already is
+    (:func:`twin.runners.folders.claim`; its ``config.toml`` loads back with --config)."""
     identity = _identity(config, store, bundle)
-    if out.exists() and not out.is_dir():
-        raise DatasetError(f"--out {out} is a file, not a dataset folder")
-    if out.is_dir() and any(out.iterdir()):
-        if not is_dataset(out):
-            raise DatasetError(
-                f"{out} exists and is not an i24-twin dataset; refusing to write into it "
-                "(choose another --out or remove it yourself)"
-            )
-        held = json.loads((out / IDENTITY).read_text())
-        differ = [k for k in identity if k != "config" and held.get(k) != identity[k]]
-        differ += _settings_differ(held.get("config", ""), identity["config"])
-        if differ:
-            raise DatasetError(
-                f"{out} holds a dataset made with other settings ({'; '.join(differ[:5])}); "
-                "its episodes would not match. Use another --out, or the same settings to "
-                f"resume it ({out / 'config.toml'} loads back with --config)"
-            )
-        return
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_file(out / "config.toml") as tmp:
-        tmp.write_text(identity["config"])
-    with atomic_file(out / IDENTITY) as tmp:
-        tmp.write_text(json.dumps(identity, indent=1) + "\n")
-
-
-def _settings_differ(held: str, wanted: str) -> list[str]:
-    """``"key: dataset has A, asked B"`` for each setting in which two TOMLs differ."""
-    import tomllib
-
-    def flat(text: str) -> dict:
-        out, stack = {}, [("", tomllib.loads(text))]
-        while stack:
-            prefix, table = stack.pop()
-            for key, value in table.items():
-                if isinstance(value, dict):
-                    stack.append((f"{prefix}{key}.", value))
-                else:
-                    out[f"{prefix}{key}"] = value
-        return out
-
-    a, b = flat(held), flat(wanted)
-    return [
-        f"{key}: dataset has {a.get(key)!r}, asked {b.get(key)!r}"
-        for key in sorted(a.keys() | b.keys())
-        if a.get(key) != b.get(key)
-    ]
+    claim(
+        out, IDENTITY, identity, kind="i24-twin dataset", noun="dataset", error=DatasetError,
+        files={"config.toml": identity["config"]}, toml=("config",),
+        hint=f" ({Path(out) / 'config.toml'} loads back with --config)",
+    )  # fmt: skip
 
 
 # -- one episode ---------------------------------------------------------------------
@@ -334,7 +293,7 @@ def render_episode(
     Returns:
         the content of ``episode.json``.
     """
-    from twin.cosim.cosimulator import Cosimulator, ScenarioError
+    from twin.cosim.cosimulator import Cosimulator
     from twin.data.empirical import EmpiricalTraffic
 
     cosim = config.episode_config(spec)
@@ -355,11 +314,8 @@ def render_episode(
     writer = BackgroundWriter(lambda item: _write_sample(folder, *item), what="dataset samples")
     try:
         with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
-            try:
-                sim.reset()
-            except (NoVehicleNearError, ScenarioError) as error:
-                description["skipped"] = str(error)
-            else:
+            description["skipped"] = reset_or_skip(sim)
+            if description["skipped"] is None:
                 ego = sim.ego
                 description["ego"] = {
                     "record_id": ego.id,

@@ -16,13 +16,15 @@ episodes, the workers or the order they run in.
 """
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from twin.core import i24
-from twin.core.errors import TwinError
+from twin.core.errors import NoVehicleNearError, TwinError
 from twin.core.i24 import Road
+from twin.cosim.config import CosimConfig
+from twin.cosim.cosimulator import ScenarioError
 from twin.data.speed_field import speed_field
 from twin.data.store import TrajectoryStore
 from twin.physics.world import MAX_SPEED
@@ -218,3 +220,36 @@ def draw_episode(cells: Cells, sampling: EpisodeSampling, seed: int, index: int)
         congested=bool(congested[cell]),
         cell_speed=round(float(cells.speed[cell]), 3),
     )
+
+
+#: Why an episode's ego cannot be placed: no recorded vehicle near the request, or no
+#: room for the episode in the map and data. Such an episode is skipped (and said so).
+PLACEMENT_ERRORS = (NoVehicleNearError, ScenarioError)
+
+
+def episode_config(
+    base: CosimConfig, spec: EpisodeSpec, *, scenario: str, t_max: float, **changes
+) -> CosimConfig:
+    """The cosimulation of episode ``spec``: ``base`` with the spec's road, lane, x, time
+    and seed, labelled ``scenario``, ``t_max`` [s] long, and the runner's ``changes``."""
+    return replace(
+        base,
+        scenario=scenario,
+        road=spec.road,
+        lane=spec.lane,
+        x=spec.x,
+        time=spec.time,
+        seed=spec.seed,
+        t_max=t_max,
+        **changes,
+    )
+
+
+def reset_or_skip(sim) -> str | None:
+    """Reset the cosimulation ``sim`` of an episode: None, or why its ego cannot be
+    placed (:data:`PLACEMENT_ERRORS`; the episode is then skipped)."""
+    try:
+        sim.reset()
+    except PLACEMENT_ERRORS as error:
+        return str(error)
+    return None

@@ -4,7 +4,7 @@ Episodes are drawn from the recorded traffic as a dataset's are
 (:mod:`twin.runners.episodes`: congested and free cells, episode ``i`` from ``(seed, i)``
 alone), restricted to the window given; every behaviour runs the same episodes. Each
 (episode, behaviour) is one cosimulation, measured as ``twin run`` measures a run
-(:func:`twin.runners.run.measure`), on the engines the dataset runner uses
+(:func:`twin.metrics.measure.measure`), on the engines the dataset runner uses
 (:mod:`twin.runners.engines`: a local process pool by default, Ray as an option; same results).
 The output folder::
 
@@ -23,6 +23,7 @@ import json
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -30,21 +31,24 @@ import numpy as np
 
 from twin import __version__
 from twin.calibration.calibrate import read_calibration
-from twin.control import benchmark
 from twin.core.atomic import atomic_file, remove_stale
-from twin.core.errors import NoVehicleNearError, TwinError
+from twin.core.errors import TwinError
 from twin.core.i24 import Road
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.store import TrajectoryStore
+from twin.metrics.table import SUMMARISED, flatten
 from twin.runners.engines import run_jobs, where, worker_data
 from twin.runners.episodes import (
     EpisodeSampling,
     EpisodeSpec,
     check_roads,
     draw_episode,
+    episode_config,
     measure_cells,
+    reset_or_skip,
 )
+from twin.runners.folders import claim
 
 FORMAT = "i24-twin-eval"
 VERSION = 1
@@ -52,47 +56,6 @@ IDENTITY = "eval.json"
 RESULTS = "results"
 CONGESTED_TRAVEL = 13.4  # [m/s] room is kept ahead of an episode's ego for this speed
 
-#: The metrics of a row, with how they are summarised ("sum" adds them over episodes).
-METRICS = {
-    "ego_speed_rmse_mps": "stats",
-    "ego_position_rmse_m": "stats",
-    "ego_position_error_30s_m": "stats",
-    "ego_position_error_60s_m": "stats",
-    "ego_position_error_120s_m": "stats",
-    "ego_position_error_end_m": "stats",
-    "slow_spell_begin_difference_s": "stats",
-    "slow_spell_end_difference_s": "stats",
-    "speed_field_rmse_mps": "stats",
-    "speed_field_rmse_lane_-1_mps": "stats",
-    "speed_field_rmse_lane_-2_mps": "stats",
-    "speed_field_rmse_lane_-3_mps": "stats",
-    "speed_field_rmse_lane_-4_mps": "stats",
-    "lane_changes_simulated": "sum",
-    "lane_changes_recorded": "sum",
-    "collisions": "sum",
-    "stalled_across_lines": "sum",
-    "vehicles_off_road": "sum",
-    "ended_early": "sum",
-    "loop_s": "stats",
-    # energy and wave dampening (twin.physics.energy, twin.metrics.control)
-    "ego_mpg": "stats",
-    "followers_mpg": "stats",
-    "ego_and_followers_mpg": "stats",
-    "window_mpg": "stats",
-    "avs_mpg": "stats",
-    "ego_and_followers_l_per_100km": "stats",
-    "speed_std_behind_mps": "stats",
-    "wave_amplitude_behind_mps": "stats",
-    "throughput_veh_per_h": "stats",
-    "min_ttc_s": "stats",
-    "ttc_under_4s_share": "stats",
-    "time_gap_median_s": "stats",
-    "time_gap_p10_s": "stats",
-    "accel_rms_mps2": "stats",
-    "jerk_rms_mps3": "stats",
-    "infeasible_s": "sum",
-    "safety_override_s": "sum",
-}
 #: Baseline controllers named without their module (``--controller human,acc``).
 BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
 
@@ -202,6 +165,13 @@ class EvalConfig:
         return EpisodeSampling(roads=(self.road,), congested_share=self.congested_share)
 
 
+#: ``extension(out, frame, config, summary) -> markdown``: more of an evaluation's
+#: outputs, called once its rows (``frame``) are assembled. It may add to ``summary``
+#: (written after it) and write files into ``out``; its Markdown is appended to
+#: ``summary.md``.
+Extension = Callable[[Path, object, "EvalConfig", dict], str]
+
+
 @dataclass(frozen=True)
 class EvalResult:
     """What :func:`evaluate` ran and wrote."""
@@ -222,8 +192,11 @@ def evaluate(
     ray_address: str | None = None,
     bundle=None,
     progress: bool = True,
+    extension: "Extension | None" = None,
 ) -> EvalResult:
-    """Run (or resume) the evaluation ``config`` into the folder ``out``.
+    """Run (or resume) the evaluation ``config`` into the folder ``out``; ``extension``
+    adds to its outputs once the rows are in (the paired benchmark's,
+    :mod:`twin.control.benchmark`).
 
     Raises:
         EvaluationError: bad arguments, ``out`` holds something else or another
@@ -279,7 +252,7 @@ def evaluate(
             describe=lambda job: f"episode {job[1].index} ({job[2][0]})",
             error_type=EvaluationError,
         )
-    summary = assemble(out, config, specs)
+    summary = assemble(out, config, specs, extension)
     return EvalResult(out, summary, len(jobs), time.perf_counter() - start)
 
 
@@ -306,21 +279,17 @@ def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[Episo
 def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
     """One (episode, arm): the cosimulation and its metrics as a flat row, with the
     ego's and its followers' speeds each second (for the pictures)."""
-    from twin.cosim.cosimulator import Cosimulator, ScenarioError
+    from twin.cosim.cosimulator import Cosimulator
     from twin.data.empirical import EmpiricalTraffic
-    from twin.runners.run import measure
+    from twin.metrics.measure import measure
 
     label, behaviour, controller = arm
     store, bundle = worker_data(location)
-    cosim = replace(
+    cosim = episode_config(
         config.cosim,
+        spec,
         scenario="eval",
-        road=spec.road,
-        lane=spec.lane,
-        x=spec.x,
-        time=spec.time,
         t_max=config.duration,
-        seed=spec.seed,
         behaviour=behaviour,
         camera=replace(config.cosim.camera, enabled=False),
         ego_controller=controller,
@@ -336,10 +305,9 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
     }
     with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
         setup = time.perf_counter()
-        try:
-            sim.reset()
-        except (NoVehicleNearError, ScenarioError) as error:
-            return {**row, "skipped": str(error)}
+        skipped = reset_or_skip(sim)
+        if skipped is not None:
+            return {**row, "skipped": skipped}
         begin = time.perf_counter()
         sim.run(progress=False)
         loop_s = time.perf_counter() - begin
@@ -361,58 +329,6 @@ def speed_traces(vehicles, ego_id: int, followers: list[int], dt: float) -> dict
         return [round(float(at[t]), 3) if t in at else None for t in seconds]
 
     return {"ego_speeds": trace(ego_id), "follower_speeds": [trace(f) for f in followers]}
-
-
-def flatten(figures: dict) -> dict:
-    """The metrics of one run (``metrics.json``) as the columns of :data:`METRICS`."""
-    ego, counts, field = figures["ego"], figures["counts"], figures["traffic"]["speed_field"]
-    energy, control = figures["energy"], figures["control"]
-    errors = ego.get("position_error_m", {})
-    spells = ego.get("slow_spells", {}).get("spells", [])
-    first = spells[0] if spells else {}
-    row = {
-        "ego_record_id": ego["record_id"],
-        "simulated_s": figures["simulated_s"],
-        "ego_speed_rmse_mps": ego.get("speed_rmse_mps"),
-        "ego_position_rmse_m": ego.get("position_rmse_m"),
-        "ego_position_error_30s_m": errors.get("30s"),
-        "ego_position_error_60s_m": errors.get("60s"),
-        "ego_position_error_120s_m": errors.get("120s"),
-        "ego_position_error_end_m": errors.get("end"),
-        "slow_spells_recorded": ego.get("slow_spells", {}).get("recorded_spells", 0),
-        "slow_spell_begin_difference_s": first.get("begin_difference_s"),
-        "slow_spell_end_difference_s": first.get("end_difference_s"),
-        "speed_field_rmse_mps": field["all_lanes"].get("rmse_mps"),
-        "lane_changes_simulated": counts["lane_changes"],
-        "lane_changes_recorded": counts["lane_changes_recorded_in_window"],
-        "collisions": figures["physics"]["collisions"],
-        "stalled_across_lines": counts["stalled_across_lines"],
-        "vehicles_off_road": figures["physics"]["vehicles_off_road"],
-        "ended_early": int(bool(figures["ended_early"])),
-        "loop_s": figures["timing"]["loop_s"],
-        "ego_mpg": energy["ego"]["mpg"],
-        "followers_mpg": energy["followers"]["mpg"],
-        "ego_and_followers_mpg": energy["ego_and_followers"]["mpg"],
-        "window_mpg": energy["window"]["mpg"],
-        "avs_mpg": energy["avs"]["mpg"],
-        "avs": len(energy["avs"]["ids"]),
-        "ego_and_followers_l_per_100km": energy["ego_and_followers"]["l_per_100km"],
-        "followers": len(energy["followers"]["ids"]),
-        "speed_std_behind_mps": control["speed_std_behind_mps"],
-        "wave_amplitude_behind_mps": control["wave_amplitude_behind_mps"],
-        "throughput_veh_per_h": control["throughput_veh_per_h"],
-        "min_ttc_s": control["min_ttc_s"],
-        "ttc_under_4s_share": control["ttc_under_4s_share"],
-        "time_gap_median_s": control["time_gap_s"]["median"],
-        "time_gap_p10_s": control["time_gap_s"]["p10"],
-        "accel_rms_mps2": control["accel_rms_mps2"],
-        "jerk_rms_mps3": control["jerk_rms_mps3"],
-        "infeasible_s": energy["ego"]["infeasible_s"],
-        "safety_override_s": control.get("safety_override_s", 0.0),
-    }
-    for lane in (-1, -2, -3, -4):
-        row[f"speed_field_rmse_lane_{lane}_mps"] = field[f"lane_{lane}"].get("rmse_mps")
-    return row
 
 
 def _result_path(out: Path, index: int, label: str) -> Path:
@@ -445,32 +361,19 @@ def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
 
 
 def _claim(out: Path, config: EvalConfig, store: TrajectoryStore, bundle) -> None:
-    """Make ``out`` this evaluation's folder, or check that it already is."""
-    identity = _identity(config, store, bundle)
-    marker = out / IDENTITY
-    if out.exists() and not marker.is_file() and any(out.iterdir()):
-        raise EvaluationError(f"{out} exists and is not an evaluation folder: choose another --out")
-    if marker.is_file():
-        try:
-            held = json.loads(marker.read_text())
-        except ValueError:
-            raise EvaluationError(
-                f"{marker} is damaged: remove {out} or choose another --out"
-            ) from None
-        if held != identity:
-            raise EvaluationError(
-                f"{out} holds an evaluation with other settings or data: choose another --out "
-                "(or remove it)"
-            )
-        return
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_file(marker) as tmp:
-        tmp.write_text(json.dumps(identity, indent=1) + "\n")
+    """Make ``out`` this evaluation's folder, or check that it already is
+    (:func:`twin.runners.folders.claim`)."""
+    claim(
+        out, IDENTITY, _identity(config, store, bundle), kind="evaluation",
+        noun="evaluation", error=EvaluationError,
+    )  # fmt: skip
 
 
-def assemble(out: Path, config: EvalConfig, specs: list[EpisodeSpec]) -> dict:
+def assemble(
+    out: Path, config: EvalConfig, specs: list[EpisodeSpec], extension: "Extension | None" = None
+) -> dict:
     """Write episodes.parquet, summary.json, summary.md and fidelity.png from the
-    results of ``specs``; returns the summary."""
+    results of ``specs`` (and what ``extension`` adds); returns the summary."""
     import pandas as pd
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -480,24 +383,20 @@ def assemble(out: Path, config: EvalConfig, specs: list[EpisodeSpec]) -> dict:
         for label, _, _ in config.arms:
             rows.append(json.loads(_result_path(out, spec.index, label).read_text()))
     frame = pd.DataFrame(rows)
-    for name in METRICS:
+    for name in SUMMARISED:
         if name not in frame:
             frame[name] = np.nan
         frame[name] = pd.to_numeric(frame[name], errors="coerce")
     with atomic_file(out / "episodes.parquet") as tmp:
         pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
     summary = summarise(frame, config)
-    if config.controllers:
-        summary["paired_vs_human"] = benchmark.paired_vs_human(frame, config)
+    more = extension(out, frame, config, summary) if extension is not None else ""
     with atomic_file(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     with atomic_file(out / "summary.md") as tmp:
-        tmp.write_text(markdown(summary) + benchmark.markdown(summary))
+        tmp.write_text(markdown(summary) + more)
     with atomic_file(out / "fidelity.png") as tmp:
         _plot(frame, config, tmp)
-    if config.controllers:
-        with atomic_file(out / "waves.png") as tmp:
-            benchmark.plot_traces(frame, config, tmp)
     return summary
 
 
@@ -516,7 +415,7 @@ def summarise(frame, config: EvalConfig) -> dict:
         rows = frame[frame["arm"] == label]
         ran = rows[rows["skipped"].isna()] if "skipped" in rows else rows
         entry = {"episodes_run": len(ran), "episodes_skipped": len(rows) - len(ran), "metrics": {}}
-        for name, kind in METRICS.items():
+        for name, kind in SUMMARISED.items():
             values = ran[name].to_numpy(dtype=np.float64)
             values = values[np.isfinite(values)]
             if kind == "sum":
@@ -550,7 +449,7 @@ def markdown(summary: dict) -> str:
         "| metric | " + " | ".join(behaviours) + " |",
         "|---|" + "---|" * len(behaviours),
     ]
-    for name, kind in METRICS.items():
+    for name, kind in SUMMARISED.items():
         cells = []
         for b in behaviours:
             m = summary[key][b]["metrics"][name]
@@ -606,15 +505,18 @@ def _plot(frame, config: EvalConfig, path: Path) -> None:
     plt.close(fig)
 
 
-def summary_lines(result: EvalResult) -> str:
-    """A few lines for the terminal."""
-    s = result.summary
-    lines = [
+def folder_line(result: EvalResult) -> str:
+    """The terminal's first line: where the evaluation is and what ran now."""
+    return (
         f"evaluation folder: {result.folder} (ran {result.runs_done_now} now, "
         f"{result.total_s:.0f} s)"
-    ]
-    if "controllers" in s:
-        return "\n".join(lines + benchmark.lines(s))
+    )
+
+
+def summary_lines(result: EvalResult) -> str:
+    """A few lines for the terminal: each behaviour's fidelity."""
+    s = result.summary
+    lines = [folder_line(result)]
     for behaviour, entry in s["behaviours"].items():
         m = entry["metrics"]
         speed, end = _stat(m, "ego_speed_rmse_mps"), _stat(m, "ego_position_error_end_m")

@@ -15,7 +15,6 @@ The folder (written under a temporary name and renamed when complete)::
 
 import hashlib
 import json
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -27,7 +26,6 @@ from sensors.camera import CameraRig, Frame
 from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
 from twin import __version__
-from twin.calibration import following
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
 from twin.core.paths import cache_dir
@@ -37,14 +35,10 @@ from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.store import TrajectoryStore, is_store
-from twin.metrics import control as control_metrics
-from twin.metrics import fidelity as metrics
-from twin.physics import energy
+from twin.metrics.measure import RUN_FORMAT, measure
 from twin.traffic.controller_api import EgoController
 
-RUN_FORMAT = "i24-twin-run"
 METRICS = "metrics.json"
-COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
 CAMERAS = "cameras"
 
 
@@ -294,110 +288,6 @@ def _write_folder(
     return figures
 
 
-def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: float):
-    """The metrics of a finished episode (``metrics.json``), and the log's frames
-    (vehicles, windows, ghosts, the recorded ego, the ego's rows) for the pictures."""
-    cfg, log = sim.config, sim.log
-    vehicles = log.vehicles()
-    windows = log.windows()
-    ghosts = log.ghosts()
-    recorded_ego = store.trajectory(sim.ego.tid)
-    ego_rows = vehicles[vehicles["role"] == 0]
-    every = max(1, round(metrics.SAMPLE_PERIOD / cfg.dt))
-    step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
-    sampled = vehicles[step_of % every == 0]
-    sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
-    counters = sim.counters
-    recorded_changes = following.lane_changes(
-        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim.sim_time)
-    )
-    errors = np.array(counters.spawn_speed_error)
-    sim_s = sim.sim_time
-    figures = {
-        "format": RUN_FORMAT,
-        "version": __version__,
-        "scenario": cfg.scenario,
-        "behaviour": sim.behaviour.name,
-        "road": cfg.road.value,
-        "t0": sim.t0,
-        "simulated_s": round(sim_s, 6),
-        "ended_early": counters.ended or None,
-        "ego": {
-            "id": sim.ego_id,
-            "record_id": sim.ego.id,
-            "requested": {"lane": cfg.lane, "x_m": cfg.x, "time": cfg.time},
-            "selected": {
-                "lane": sim.ego.lane,
-                "x_m": round(sim.ego.x, 3),
-                "time": sim.ego.t,
-                "speed_mps": round(sim.ego.speed, 3),
-            },
-            **metrics.ego_metrics(ego_rows, recorded_ego, sim.t0),
-            "position_error_m": metrics.ego_position_errors(ego_rows, recorded_ego, sim.t0),
-            "slow_spells": metrics.slow_spell_timing(ego_rows, recorded_ego, sim.t0),
-        },
-        "traffic": {
-            **metrics.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
-            "speed_field": metrics.speed_field_metrics(
-                sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
-            ),
-        },
-        "energy": energy.run_figures(
-            vehicles,
-            sim.ego_id,
-            sim.world.road,
-            cfg.road.direction,
-            store.trajectory_arrays["length"],
-            cfg.dt,
-            avs=sorted(sim.av_ids),
-        ),
-        "control": {
-            **control_metrics.control_figures(
-                vehicles,
-                ghosts,
-                sim.ego_id,
-                energy.followers(vehicles, sim.ego_id),
-                store.trajectory_arrays["length"],
-                cfg.dt,
-            ),
-            # time the baselines' safety layer overrode the ego's controller
-            "safety_override_s": round(sim.manager.safety_overrides * cfg.dt, 3),
-        },
-        "counts": {
-            "visible_at_start": counters.spawned_initially,
-            "spawned": counters.spawned,
-            "despawned": counters.despawned,
-            "spawns_skipped_overlap": counters.skipped_overlap,
-            "spawns_skipped_invalid": counters.skipped_invalid,
-            "visible_max": int(vehicles.groupby("time").size().max()) - 1,
-            "lane_changes": sim.manager.lane_changes,
-            "lane_changes_recorded_in_window": metrics.recorded_lane_changes_in_window(
-                recorded_changes.time, recorded_changes.x, windows, sim.t0
-            ),
-            "stalled_across_lines": metrics.stalled_across_lines(sampled, metrics.SAMPLE_PERIOD),
-        },
-        "physics": {
-            "spawns_checked": int(errors.size),
-            "spawn_speed_error_max": _round(errors.max()) if errors.size else None,
-            "spawn_speed_error_median": _round(np.median(errors)) if errors.size else None,
-            "spawns_above_0.5_percent": int(np.count_nonzero(errors > 0.005)),
-            "collisions": len(counters.collisions),
-            "collision_list": [
-                {"time_s": round(t, 3), "ids": [a, b]}
-                for t, a, b in counters.collisions[:COLLISIONS_LISTED]
-            ],
-            "vehicles_off_road": len(counters.off_road),
-        },
-        "timing": {
-            "reset_s": round(reset_s, 3),
-            "loop_s": round(loop_s, 3),
-            "real_time_factor": round(sim_s / loop_s, 3) if loop_s > 0 else None,
-            **{k: round(v, 4) for k, v in sim.times.per_step().items()},
-        },
-    }
-    return figures, (vehicles, windows, ghosts, recorded_ego, ego_rows)
-
-
 def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):
     def near(frame):
         return frame[np.abs(frame["time"].to_numpy() - at) < 1e-6]
@@ -410,10 +300,6 @@ def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):
         frame["width"] = arrays["width"][tid]
     window = windows.iloc[int(np.argmin(np.abs(windows["time"].to_numpy() - at)))]
     return plots.bev_frame(sim, ghost, window, at, title)
-
-
-def _round(value: float) -> float:
-    return round(float(value), 6) if math.isfinite(value) else None
 
 
 def summary(result: RunResult) -> str:

@@ -13,8 +13,9 @@ from twin.cli import main
 from twin.core.i24 import MILE
 from twin.cosim.config import load_config
 from twin.data.empirical import EmpiricalTraffic
+from twin.metrics import energy
 from twin.metrics import fidelity as metrics
-from twin.physics import energy
+from twin.physics.energy import RAV4_2019
 
 COLUMNS = [
     "time", "id", "record_id", "role", "road", "lane", "x", "y", "z", "speed", "accel",
@@ -92,9 +93,7 @@ def test_energy_in_the_log_and_in_metrics_json(run_folder):
     # the ego eases off from 20 m/s down the map's 1.1 % grade: the RAV4 model's rate
     # there, and its own powertrain still pushing against drag and rolling resistance
     assert ego["grade"].median() == pytest.approx(-0.011, abs=0.002)
-    steady = energy.RAV4_2019.rate(
-        *(float(ego[name].median()) for name in ("speed", "accel", "grade"))
-    )
+    steady = RAV4_2019.rate(*(float(ego[name].median()) for name in ("speed", "accel", "grade")))
     assert ego["fuel_rate"].median() == pytest.approx(float(steady), rel=0.02)
     assert ego["fuel_feasible"].all() and ego["drive_power"].median() > 500.0  # [W]
     assert m["ego"]["fuel_g"] == pytest.approx(ego["fuel_rate"].sum() * 0.01, abs=1e-3)
@@ -105,7 +104,7 @@ def test_energy_in_the_log_and_in_metrics_json(run_folder):
     assert m["window"]["vehicles"] == simulated["id"].nunique()
     ghosts = frame[frame["role"] == "ghost"]
     assert ghosts["fuel_rate"].isna().all() and ghosts["fuel_feasible"].isna().all()
-    assert m["fuel_model"] == energy.RAV4_2019.name
+    assert m["fuel_model"] == RAV4_2019.name
 
 
 def test_pictures_open_in_opencv(run_folder):

@@ -2,10 +2,10 @@
 energy of the twin's powertrain against the physics of a known manoeuvre."""
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from twin.core.i24 import LANE_WIDTH, MILE
+from twin.metrics import energy as figures
 from twin.physics import energy
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
 from twin.physics.world import PhysicsWorld, SpawnStates
@@ -16,10 +16,10 @@ RAV4 = energy.RAV4_2019
 def test_the_rav4_model_gives_the_check_values_of_control_md():
     cruise = RAV4.rate(30.0, 0.0, 0.0)
     assert cruise == pytest.approx(1.2524, abs=5e-4)  # g/s
-    assert cruise * energy.GALLONS_PER_HOUR_PER_GRAM_PER_S == pytest.approx(1.59, abs=5e-3)
-    hour = energy.economy(30.0 * 3600.0, float(cruise) * 3600.0)
+    assert cruise * figures.GALLONS_PER_HOUR_PER_GRAM_PER_S == pytest.approx(1.59, abs=5e-3)
+    hour = figures.economy(30.0 * 3600.0, float(cruise) * 3600.0)
     assert hour["mpg"] == pytest.approx(42.3, abs=0.1)  # 67.1 mph on 1.59 gal/h
-    l_per_100km_times_mpg = 100.0 * energy.LITRES_PER_GALLON / (MILE / 1000.0)  # 235.2
+    l_per_100km_times_mpg = 100.0 * figures.LITRES_PER_GALLON / (MILE / 1000.0)  # 235.2
     assert hour["l_per_100km"] == pytest.approx(l_per_100km_times_mpg / hour["mpg"], rel=1e-9)
     # a 1.1 % grade adds 0.436 g/s: m g sin(theta) v = 5.6 kW at about 28 % efficiency
     climb = RAV4.rate(30.0, 0.0, 0.011) - cruise
@@ -53,25 +53,6 @@ def test_bad_inputs_are_named(speed, accel, grade, name):
         RAV4.rate(speed, accel, grade)
     with pytest.raises(ValueError, match="speeds must be >= 0"):
         RAV4.rate(-1.0, 0.0, 0.0)
-
-
-def test_group_economy_is_total_distance_over_total_fuel():
-    rows = pd.DataFrame(
-        {
-            "id": [1, 1, 2, 2],
-            "speed": [10.0, 10.0, 30.0, 30.0],
-            "fuel_rate": [np.nan, 0.5, 1.0, 1.0],  # id 1's first row: no acceleration yet
-            "feasible": [True, True, True, False],
-            "drive_power": [1000.0, -50.0, 2000.0, 2000.0],
-        }
-    )
-    vehicles = energy.per_vehicle(rows, dt=2.0)
-    assert vehicles.loc[1, "fuel_g"] == 1.0 and vehicles.loc[1, "tractive_j"] == 2000.0
-    both = energy.group_figures(vehicles, [1, 2, 99])  # 99: not simulated, ignored
-    assert both["vehicles"] == 2 and both["distance_m"] == 160.0 and both["fuel_g"] == 5.0
-    gallons = 5.0 / energy.GRAMS_PER_GALLON
-    assert both["mpg"] == pytest.approx(160.0 / MILE / gallons, rel=1e-3)
-    assert both["infeasible_s"] == 2.0 and both["tractive_kj"] == 10.0
 
 
 def test_tractive_energy_is_the_work_of_a_known_manoeuvre(built_map):

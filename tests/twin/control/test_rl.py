@@ -9,7 +9,8 @@ import pytest
 from twin.cli import main
 from twin.control.env import OBS_HIGH, OBS_LOW, WaveDampeningEnv
 from twin.control.rl import PolicyController
-from twin.cosim.cosimulator import ControllerError, Cosimulator
+from twin.core.errors import ControllerError
+from twin.cosim.cosimulator import Cosimulator
 
 
 @pytest.fixture(scope="module")

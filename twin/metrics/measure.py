@@ -1,0 +1,153 @@
+"""The measurements of a finished episode: ``metrics.json`` of a run, the figures
+``twin eval``, the paired benchmark and the env read (through
+:mod:`twin.metrics.table`).
+
+Sections: ``ego`` (the simulated ego against its recording), ``traffic`` (speeds and
+the speed field against the recording), ``energy`` (:mod:`twin.metrics.energy`),
+``control`` (:mod:`twin.metrics.control`), ``counts``, ``physics`` and ``timing``.
+"""
+
+import math
+
+import numpy as np
+
+from twin import __version__
+from twin.calibration import following
+from twin.cosim.cosimulator import Cosimulator
+from twin.data.store import TrajectoryStore
+from twin.metrics import control as control_metrics
+from twin.metrics import energy
+from twin.metrics import fidelity as metrics
+
+RUN_FORMAT = "i24-twin-run"
+COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
+
+
+def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: float):
+    """The metrics of a finished episode (``metrics.json``), and the log's frames
+    (vehicles, windows, ghosts, the recorded ego, the ego's rows) for the pictures.
+
+    Args:
+        sim: the cosimulation, run to its end. store: its recording.
+        loop_s, reset_s: [s] wall time of the loop and of the reset (``timing``).
+    """
+    cfg, log = sim.config, sim.log
+    vehicles, windows, ghosts = log.vehicles(), log.windows(), log.ghosts()
+    recorded_ego = store.trajectory(sim.ego.tid)
+    ego_rows = vehicles[vehicles["role"] == 0]
+    every = max(1, round(metrics.SAMPLE_PERIOD / cfg.dt))
+    step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
+    sampled = vehicles[step_of % every == 0]
+    sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
+    sim_s = sim.sim_time
+    lengths = store.trajectory_arrays["length"]
+    figures = {
+        "format": RUN_FORMAT,
+        "version": __version__,
+        "scenario": cfg.scenario,
+        "behaviour": sim.behaviour.name,
+        "road": cfg.road.value,
+        "t0": sim.t0,
+        "simulated_s": round(sim_s, 6),
+        "ended_early": sim.counters.ended or None,
+        "ego": _ego(sim, ego_rows, recorded_ego),
+        "traffic": {
+            **metrics.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
+            "speed_field": metrics.speed_field_metrics(
+                sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
+            ),
+        },
+        "energy": energy.run_figures(
+            vehicles,
+            sim.ego_id,
+            sim.world.road,
+            cfg.road.direction,
+            lengths,
+            cfg.dt,
+            avs=sorted(sim.av_ids),
+        ),
+        "control": {
+            **control_metrics.control_figures(
+                vehicles,
+                ghosts,
+                sim.ego_id,
+                energy.followers(vehicles, sim.ego_id),
+                lengths,
+                cfg.dt,
+            ),
+            # time the baselines' safety layer overrode the ego's controller
+            "safety_override_s": round(sim.manager.safety_overrides * cfg.dt, 3),
+        },
+        "counts": _counts(sim, store, vehicles, windows, sampled),
+        "physics": _physics(sim),
+        "timing": {
+            "reset_s": round(reset_s, 3),
+            "loop_s": round(loop_s, 3),
+            "real_time_factor": round(sim_s / loop_s, 3) if loop_s > 0 else None,
+            **{k: round(v, 4) for k, v in sim.times.per_step().items()},
+        },
+    }
+    return figures, (vehicles, windows, ghosts, recorded_ego, ego_rows)
+
+
+def _ego(sim: Cosimulator, ego_rows, recorded_ego) -> dict:
+    """Who the ego is, where it was asked for and found, and how it drove against its
+    recording."""
+    cfg = sim.config
+    return {
+        "id": sim.ego_id,
+        "record_id": sim.ego.id,
+        "requested": {"lane": cfg.lane, "x_m": cfg.x, "time": cfg.time},
+        "selected": {
+            "lane": sim.ego.lane,
+            "x_m": round(sim.ego.x, 3),
+            "time": sim.ego.t,
+            "speed_mps": round(sim.ego.speed, 3),
+        },
+        **metrics.ego_metrics(ego_rows, recorded_ego, sim.t0),
+        "position_error_m": metrics.ego_position_errors(ego_rows, recorded_ego, sim.t0),
+        "slow_spells": metrics.slow_spell_timing(ego_rows, recorded_ego, sim.t0),
+    }
+
+
+def _counts(sim: Cosimulator, store, vehicles, windows, sampled) -> dict:
+    """Vehicles spawned and removed, and lane changes simulated against recorded."""
+    cfg, counters = sim.config, sim.counters
+    recorded_changes = following.lane_changes(
+        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim.sim_time)
+    )
+    return {
+        "visible_at_start": counters.spawned_initially,
+        "spawned": counters.spawned,
+        "despawned": counters.despawned,
+        "spawns_skipped_overlap": counters.skipped_overlap,
+        "spawns_skipped_invalid": counters.skipped_invalid,
+        "visible_max": int(vehicles.groupby("time").size().max()) - 1,
+        "lane_changes": sim.manager.lane_changes,
+        "lane_changes_recorded_in_window": metrics.recorded_lane_changes_in_window(
+            recorded_changes.time, recorded_changes.x, windows, sim.t0
+        ),
+        "stalled_across_lines": metrics.stalled_across_lines(sampled, metrics.SAMPLE_PERIOD),
+    }
+
+
+def _physics(sim: Cosimulator) -> dict:
+    """The physical checks: spawn speeds, collisions, vehicles off the road."""
+    counters = sim.counters
+    errors = np.array(counters.spawn_speed_error)
+    return {
+        "spawns_checked": int(errors.size),
+        "spawn_speed_error_max": _round(errors.max()) if errors.size else None,
+        "spawn_speed_error_median": _round(np.median(errors)) if errors.size else None,
+        "spawns_above_0.5_percent": int(np.count_nonzero(errors > 0.005)),
+        "collisions": len(counters.collisions),
+        "collision_list": [
+            {"time_s": round(t, 3), "ids": [a, b]}
+            for t, a, b in counters.collisions[:COLLISIONS_LISTED]
+        ],
+        "vehicles_off_road": len(counters.off_road),
+    }
+
+
+def _round(value: float) -> float:
+    return round(float(value), 6) if math.isfinite(value) else None

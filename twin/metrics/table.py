@@ -1,0 +1,189 @@
+"""Every metric of a run, declared once: its name, unit, definition, where
+``metrics.json`` holds it, which runs produce it, how ``twin eval`` summarises it, and
+whether the paired benchmark compares it with ``human``.
+
+``metrics.json`` (:mod:`twin.metrics.measure`) is the nested document a run writes;
+this table is the flat view of it that ``twin eval``'s ``episodes.parquet`` and
+summaries, the paired benchmark (:mod:`twin.control.benchmark`), the env's
+``info["metrics"]`` and the documentation (``docs/metrics.md``, written by
+:func:`markdown_table`) read. Adding a metric is its computation (in the section of
+``metrics.json`` it belongs to) and one :class:`Metric` here.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+EVERY_RUN = "every run"
+WITH_CONTROLLER = "runs with an ego controller"
+WITH_AV_SHARE = "runs with --av-share"
+WITH_RECORDING = "runs whose ego's recording has a slow spell"
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One metric of a run.
+
+    Attributes:
+        name: its column in ``episodes.parquet`` and key in the summaries.
+        unit: e.g. ``m/s``; ``-`` for a ratio, ``count`` for a count.
+        definition: what it measures, in one sentence.
+        source: the keys (and list indices) leading to it in ``metrics.json``.
+        summary: how ``twin eval`` summarises it over episodes: ``stats`` (median, p90,
+            mean), ``sum``, or ``none`` (kept in the rows only).
+        paired: compared with ``human`` by the paired benchmark: ``higher`` or
+            ``lower`` is better; ``None``: not compared.
+        produced_by: which runs have a value (the others hold null).
+        convert: applied to the value read (e.g. ``len`` of a list).
+    """
+
+    name: str
+    unit: str
+    definition: str
+    source: tuple[str | int, ...]
+    summary: str = "stats"
+    paired: str | None = None
+    produced_by: str = EVERY_RUN
+    convert: Callable | None = None
+
+    def __post_init__(self):
+        if self.summary not in ("stats", "sum", "none"):
+            raise ValueError(f"metric {self.name}: summary must be stats, sum or none")
+        if self.paired not in (None, "higher", "lower"):
+            raise ValueError(f"metric {self.name}: paired must be higher, lower or None")
+
+    def read(self, figures: dict):
+        """The value in a run's ``metrics.json`` document (None where it is missing)."""
+        value = figures
+        for key in self.source:
+            try:
+                value = value[key]
+            except (KeyError, IndexError, TypeError):
+                return None
+        return self.convert(value) if self.convert is not None else value
+
+
+def _ego(*keys):
+    return ("ego", *keys)
+
+
+def _energy(*keys):
+    return ("energy", *keys)
+
+
+def _control(*keys):
+    return ("control", *keys)
+
+
+METRICS: tuple[Metric, ...] = (
+    Metric("ego_record_id", "-", "the recorded vehicle the ego is (its I-24 MOTION _id)",
+           _ego("record_id"), summary="none"),
+    Metric("simulated_s", "s", "time simulated", ("simulated_s",), summary="none"),
+    Metric("ego_speed_rmse_mps", "m/s", "RMS of the simulated ego's speed minus its "
+           "recording's, over the episode", _ego("speed_rmse_mps")),
+    Metric("ego_position_rmse_m", "m", "RMS of the simulated ego's position along the road "
+           "minus its recording's", _ego("position_rmse_m")),
+    *(
+        Metric(f"ego_position_error_{at}_m", "m", f"the ego's position minus its recording's "
+               f"{'at the end' if at == 'end' else f'{at[:-1]} s after the start'}",
+               _ego("position_error_m", at))
+        for at in ("30s", "60s", "120s", "end")
+    ),
+    Metric("slow_spells_recorded", "count", "spells below 15 mph in the ego's recording",
+           _ego("slow_spells", "recorded_spells"), summary="none"),
+    Metric("slow_spell_begin_difference_s", "s", "when the ego's first slow spell begins "
+           "minus when its recording's does", _ego("slow_spells", "spells", 0,
+           "begin_difference_s"), produced_by=WITH_RECORDING),
+    Metric("slow_spell_end_difference_s", "s", "when the ego's first slow spell ends minus "
+           "when its recording's does", _ego("slow_spells", "spells", 0, "end_difference_s"),
+           produced_by=WITH_RECORDING),
+    Metric("speed_field_rmse_mps", "m/s", "RMS over Edie cells of the windows of the "
+           "simulated speed field minus the recorded one, all lanes",
+           ("traffic", "speed_field", "all_lanes", "rmse_mps")),
+    Metric("lane_changes_simulated", "count", "lane changes the simulated vehicles made",
+           ("counts", "lane_changes"), summary="sum"),
+    Metric("lane_changes_recorded", "count", "lane changes the recording makes in the same "
+           "moving window", ("counts", "lane_changes_recorded_in_window"), summary="sum"),
+    Metric("collisions", "count", "pairs of bodies that touched", ("physics", "collisions"),
+           summary="sum"),
+    Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
+           ("counts", "stalled_across_lines"), summary="sum"),
+    Metric("vehicles_off_road", "count", "vehicles that left the road",
+           ("physics", "vehicles_off_road"), summary="sum"),
+    Metric("ended_early", "count", "1 where the episode ended before its length (the ego "
+           "left the map or data)", ("ended_early",), summary="sum",
+           convert=lambda value: int(bool(value))),
+    Metric("loop_s", "s", "wall time of the cosimulation loop", ("timing", "loop_s")),
+    Metric("ego_mpg", "mpg", "fuel economy of the AV (the ego): total distance over total "
+           "fuel, RAV4 model, miles per US gallon", _energy("ego", "mpg"), paired="higher"),
+    Metric("followers_mpg", "mpg", "the same of its K = 5 followers (nearest behind it in "
+           "its lane at the start)", _energy("followers", "mpg")),
+    Metric("ego_and_followers_mpg", "mpg", "the same of the AV and its followers together",
+           _energy("ego_and_followers", "mpg"), paired="higher"),
+    Metric("window_mpg", "mpg", "the same of every simulated vehicle of the window",
+           _energy("window", "mpg"), paired="higher"),
+    Metric("avs_mpg", "mpg", "the same of the ego and the other vehicles with its controller",
+           _energy("avs", "mpg"), produced_by=WITH_AV_SHARE),
+    Metric("avs", "count", "vehicles with the ego's controller, the ego included",
+           _energy("avs", "ids"), summary="none", convert=len),
+    Metric("ego_and_followers_l_per_100km", "L/100 km", "the economy of the AV and its "
+           "followers the other way up", _energy("ego_and_followers", "l_per_100km")),
+    Metric("followers", "count", "followers counted", _energy("followers", "ids"),
+           summary="none", convert=len),
+    Metric("speed_std_behind_mps", "m/s", "standard deviation of each follower's speed over "
+           "the episode (10 Hz), averaged over the followers",
+           _control("speed_std_behind_mps"), paired="lower"),
+    Metric("wave_amplitude_behind_mps", "m/s", "max - min speed of each follower, averaged",
+           _control("wave_amplitude_behind_mps"), paired="lower"),
+    Metric("throughput_veh_per_h", "veh/h", "simulated vehicles passing the ego's starting "
+           "point, per hour of episode", _control("throughput_veh_per_h"), paired="higher"),
+    Metric("min_ttc_s", "s", "least time to collision of the AV (gap over closing speed "
+           "while closing on its leader, 10 Hz)", _control("min_ttc_s"), paired="higher"),
+    Metric("ttc_under_4s_share", "-", "share of the AV's samples with a time to collision "
+           "under 4 s", _control("ttc_under_4s_share")),
+    Metric("time_gap_median_s", "s", "median of the AV's gap over its speed (while faster "
+           "than 1 m/s)", _control("time_gap_s", "median")),
+    Metric("time_gap_p10_s", "s", "10th percentile of the same", _control("time_gap_s", "p10")),
+    Metric("accel_rms_mps2", "m/s^2", "RMS of the AV's acceleration (from its speed at 10 Hz)",
+           _control("accel_rms_mps2"), paired="lower"),
+    Metric("jerk_rms_mps3", "m/s^3", "RMS of the AV's jerk", _control("jerk_rms_mps3"),
+           paired="lower"),
+    Metric("infeasible_s", "s", "time the AV's acceleration was beyond the RAV4 "
+           "powertrain's", _energy("ego", "infeasible_s"), summary="sum"),
+    Metric("safety_override_s", "s", "time the baselines' safety layer (emergency braking) "
+           "overrode the AV's controller", _control("safety_override_s"), summary="sum",
+           produced_by=WITH_CONTROLLER),
+    *(
+        Metric(f"speed_field_rmse_lane_{lane}_mps", "m/s", f"the speed-field RMS error of "
+               f"lane {lane}{' (HOV)' if lane == -1 else ''}",
+               ("traffic", "speed_field", f"lane_{lane}", "rmse_mps"))
+        for lane in (-1, -2, -3, -4)
+    ),
+)  # fmt: skip
+
+BY_NAME = {metric.name: metric for metric in METRICS}
+#: How ``twin eval`` summarises each metric it summarises: ``stats`` or ``sum``.
+SUMMARISED = {m.name: m.summary for m in METRICS if m.summary != "none"}
+#: The metrics the paired benchmark compares with ``human``: whether more is better.
+PAIRED = {m.name: m.paired == "higher" for m in METRICS if m.paired is not None}
+
+
+def flatten(figures: dict) -> dict:
+    """A run's ``metrics.json`` document as one flat row of :data:`METRICS`."""
+    return {metric.name: metric.read(figures) for metric in METRICS}
+
+
+def markdown_table() -> str:
+    """The table of metrics for the documentation (``docs/metrics.md``)."""
+    lines = [
+        "| metric | unit | definition | produced by | in twin eval | paired vs human |",
+        "|---|---|---|---|---|---|",
+    ]
+    for m in METRICS:
+        summary = {"stats": "median, p90, mean", "sum": "sum", "none": "rows only"}[m.summary]
+        paired = f"{m.paired} is better" if m.paired else "-"
+        where = ".".join(str(k) for k in m.source)
+        lines.append(
+            f"| `{m.name}` | {m.unit} | {m.definition} (`{where}`) | {m.produced_by} | "
+            f"{summary} | {paired} |"
+        )
+    return "\n".join(lines) + "\n"
