@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from twin.core import i24
+from twin.core.i24 import SCENARIO_TIME
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
-from twin.data.synth import PRESET_A, PRESET_B, SCENARIO_TIME, synthesize, write_i24_json
+from twin.data.synth import PRESET_A, PRESET_B, synthesize, write_i24_json
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 

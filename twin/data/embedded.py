@@ -19,8 +19,15 @@ from twin.data import ingest as ingest_module
 from twin.data import synth
 from twin.data.ingest import IngestOptions, ingest
 from twin.data.store import TrajectoryStore, is_store
-from twin.traffic import drivers, lanes
-from twin.traffic.models import idm
+from twin.data.synth import config, presets, recording, simulation
+from twin.traffic import drivers, lanes, mobil
+from twin.traffic.models import base, gipps, idm
+
+#: The code the embedded data are made with: a change to any of it rebuilds them.
+GENERATOR = (
+    synth, config, presets, simulation, recording, ingest_module,
+    base, idm, gipps, drivers, lanes, mobil,
+)  # fmt: skip
 
 DEFAULT_SEED = 0
 
@@ -34,7 +41,7 @@ def default_key(seed: int = DEFAULT_SEED) -> str:
     """Hash of the generator's code (with the driver models it uses), presets, class
     table, ingest code and seed."""
     digest = hashlib.sha256()
-    for module in (synth, ingest_module, idm, drivers, lanes):
+    for module in GENERATOR:
         digest.update(inspect.getsource(module).encode())
     digest.update(asset("vehicle_classes.csv").read_bytes())
     digest.update(str(seed).encode())

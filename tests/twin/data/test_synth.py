@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from twin.core import i24
+from twin.core.i24 import SCENARIO_TIME
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.speed_field import speed_field, wave_front_speed
-from twin.data.synth import PRESET_B, PRESET_C, SCENARIO_TIME, _Simulation, synthesize
+from twin.data.synth import PRESET_B, PRESET_C, Simulation, synthesize
 
 MPH15 = 15 * 0.44704  # [m/s]
 
@@ -144,7 +145,7 @@ def test_hesitant_drivers_at_the_bottleneck_queue_the_lane_behind_them():
     speeds = {}
     for share in (0.0, 1.0):
         config = replace(base, bottleneck=replace(base.bottleneck, slow_share=share))
-        sim = _Simulation(config, np.random.default_rng(0))
+        sim = Simulation(config, np.random.default_rng(0))
         sim.populate()
         for _ in range(3000):
             sim.step()
@@ -158,7 +159,7 @@ def test_hesitant_drivers_at_the_bottleneck_queue_the_lane_behind_them():
 def test_hesitant_drivers_are_spread_evenly_over_each_lane():
     """1 in 200 drivers of each lane, never closer than 100 nor further apart than 300
     drivers: a 30-minute day is not left with one wave in a lane, or ten, by chance."""
-    sim = _Simulation(PRESET_C, np.random.default_rng(0))
+    sim = Simulation(PRESET_C, np.random.default_rng(0))
     lanes = np.tile(np.array(i24.LANES), 20_000)
     hesitant = sim._bottleneck_speeds(lanes) == PRESET_C.bottleneck.slow_speed
     for lane in i24.LANES:

@@ -1,0 +1,163 @@
+"""A synthetic day recorded as I-24 MOTION records one: the vehicles in view,
+resampled at the camera rate with tracking noise, written in the real JSON layout."""
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import orjson
+from tqdm import tqdm
+
+from twin.core import i24
+from twin.data.synth.config import IDM_NAMES, SynthConfig
+from twin.data.synth.simulation import Simulation
+from twin.traffic.models.idm import IDMParams
+
+
+@dataclass
+class SynthResult:
+    """Recorded trajectories (struct-of-arrays per vehicle) and counters."""
+
+    config: SynthConfig
+    vid: np.ndarray  # (m,) vehicle ids
+    tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
+    vehicle_class: np.ndarray
+    dimensions: np.ndarray  # (m, 3) [m]
+    drivers: IDMParams  # (m,) each: the traits each vehicle drove with (its model's from_traits)
+    lane_changes: int
+    collisions: int
+
+
+def synthesize(config: SynthConfig, *, progress: bool = False) -> SynthResult:
+    """Run the microsimulation and return the recorded tracks (deterministic by seed)."""
+    rng = np.random.default_rng(config.seed)
+    sim = Simulation(config, rng)
+    t0 = config.start - config.warmup
+    sim.populate()
+    n_steps = math.ceil((config.end - t0) / config.dt) + 1
+    events = sorted(config.slowdowns, key=lambda s: s.t)
+    lo, hi = config.x_record
+    rec_vid, rec_step, rec_x, rec_y = [], [], [], []
+    record_from = math.floor((config.start - t0) / config.dt) - 1
+    for k in tqdm(
+        range(n_steps),
+        desc=f"synth {config.road.value}",
+        disable=None if progress else True,
+        leave=False,
+    ):
+        sim.t = t0 + k * config.dt
+        while events and config.anchor + events[0].t <= sim.t:
+            sim.trigger(events.pop(0))
+        if k >= record_from:
+            veh = sim.vehicles
+            seen = (veh.x >= lo) & (veh.x <= hi)
+            rec_vid.append(veh.vid[seen])
+            rec_step.append(np.full(int(seen.sum()), k, np.int32))
+            rec_x.append(veh.x[seen])
+            rec_y.append(sim.lateral()[seen].astype(np.float32))
+        sim.step()
+    vid = np.concatenate(rec_vid)
+    order = np.argsort(vid, kind="stable")
+    vid, step = vid[order], np.concatenate(rec_step)[order]
+    x, y = np.concatenate(rec_x)[order], np.concatenate(rec_y)[order]
+    return _resample(config, sim, rng, t0, vid, step, x, y)
+
+
+def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
+    """Tracks at the recording rate with a per-vehicle phase and tracking noise."""
+    period = 1.0 / config.sample_rate
+    starts = np.flatnonzero(np.r_[True, vid[1:] != vid[:-1]])
+    ends = np.r_[starts[1:], len(vid)]
+    ids, tracks = [], []
+    for a, b in zip(starts, ends, strict=True):
+        v = int(vid[a])
+        t_steps = t0 + step[a:b] * config.dt
+        phase = rng.uniform(0, period)
+        first = math.ceil((max(t_steps[0], config.start) - config.start - phase) / period)
+        last = math.floor((min(t_steps[-1], config.end) - config.start - phase) / period)
+        if last - first < 1:
+            continue
+        t = config.start + phase + np.arange(first, last + 1) * period
+        xs = np.interp(t, t_steps, x[a:b]) + config.position_noise * rng.standard_normal(len(t))
+        ys = np.interp(t, t_steps, y[a:b]) + config.position_noise * rng.standard_normal(len(t))
+        ids.append(v)
+        tracks.append((t, xs, ys))
+    ids = np.array(ids, dtype=np.int64)
+    drivers = IDMParams(
+        *(
+            np.concatenate([getattr(batch, name) for batch in sim.registry_drivers])[ids]
+            for name in IDM_NAMES
+        )
+    )
+    return SynthResult(
+        config=config,
+        vid=ids,
+        tracks=tracks,
+        vehicle_class=np.concatenate(sim.registry_class)[ids],
+        dimensions=np.concatenate(sim.registry_dims)[ids],
+        drivers=drivers,
+        lane_changes=sim.lane_changes,
+        collisions=sim.collisions,
+    )
+
+
+def write_i24_json(result: SynthResult, path: str | os.PathLike, *, progress: bool = False) -> Path:
+    """Write the tracks as an I-24 MOTION day file (a JSON array of documents).
+
+    Written to a temporary file beside ``path`` and renamed, so an interrupted write
+    never leaves a truncated file under the final name.
+    """
+    cfg = result.config
+    road = cfg.road
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    order = np.argsort([track[0][0] for track in result.tracks], kind="stable")
+    prefix = f"{int(cfg.anchor) & 0xFFFFFFFF:08x}{road.code:02x}"
+    try:
+        with open(tmp, "wb") as out:
+            out.write(b"[\n")
+            for n, i in enumerate(
+                tqdm(order, desc="write", disable=None if progress else True, leave=False)
+            ):
+                t, x, y = result.tracks[i]
+                x_ft = np.round(i24.x_feet(x, road), 2)
+                y_ft = np.round(i24.y_feet(y, road), 2)
+                t = np.round(t, 3)
+                length, width, height = (result.dimensions[i] / i24.FT).round(3).tolist()
+                doc = {
+                    "_id": {"$oid": f"{prefix}{int(result.vid[i]):014x}"},
+                    "timestamp": t.tolist(),
+                    "first_timestamp": float(t[0]),
+                    "last_timestamp": float(t[-1]),
+                    "x_position": x_ft.tolist(),
+                    "y_position": y_ft.tolist(),
+                    "starting_x": float(x_ft[0]),
+                    "ending_x": float(x_ft[-1]),
+                    "length": length,
+                    "width": width,
+                    "height": height,
+                    "coarse_vehicle_class": int(result.vehicle_class[i]),
+                    "fine_vehicle_class": int(result.vehicle_class[i]),
+                    "direction": road.direction,
+                    "merged_ids": [],
+                    "fragment_ids": [],
+                    "compute_node_id": 0,
+                    "local_fragment_id": int(result.vid[i]),
+                    "road_segment_ids": [],
+                    "configuration_id": 0,
+                    "flags": ["synthetic"],
+                    "x_score": 0.0,
+                    "y_score": 0.0,
+                    "feasibility": 1.0,
+                }
+                if n:
+                    out.write(b",\n")
+                out.write(orjson.dumps(doc))
+            out.write(b"\n]\n")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
