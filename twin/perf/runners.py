@@ -56,7 +56,7 @@ def dataset_bench(
 
 def _dataset_figures(config, store, episodes: int, workers: int, repeats: int) -> dict:
     """The dataset bench's figures for one number of ``workers``."""
-    from twin.runners.dataset_runner import generate
+    from twin.runners.dataset import generate
 
     render, total, busy = [], [], []
     for _ in range(repeats):

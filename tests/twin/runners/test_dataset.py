@@ -30,10 +30,10 @@ from twin.runners.dataset import (
     DatasetError,
     LabelFilters,
     draw_episodes,
+    generate,
     is_episode,
     render_episode,
 )
-from twin.runners.dataset_runner import generate
 from twin.runners.episodes import EpisodeSampling, measure_cells
 
 EPISODE_COUNT, FRAMES = 3, 3

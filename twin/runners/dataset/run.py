@@ -23,19 +23,16 @@ from pathlib import Path
 
 from twin.core.atomic import AtomicFolder, remove_stale
 from twin.data.store import TrajectoryStore
-from twin.runners.dataset import (
+from twin.runners.dataset.assemble import assemble
+from twin.runners.dataset.config import (
     EPISODE,
     EPISODES,
     DatasetConfig,
     DatasetError,
-    assemble,
-    claim_folder,
-    draw_episodes,
-    episode_folder,
-    is_episode,
-    render_episode,
     resolved_renderer,
 )
+from twin.runners.dataset.episode import render_episode
+from twin.runners.dataset.folder import claim_folder, draw_episodes, episode_folder, is_episode
 from twin.runners.engines import ENGINES, run_jobs, tick, where, worker_data
 
 
