@@ -126,7 +126,7 @@ class WaveDampeningEnv(gym.Env):
         seed: int = 0,
     ):
         from mapgen.build import default_map
-        from twin.cosim.cosimulator import road_limits
+        from twin.cosim.windows import road_limits
         from twin.data.empirical import EmpiricalTraffic
         from twin.runners.episodes import EpisodeSampling, measure_cells
         from twin.runners.evaluation import CONGESTED_TRAVEL

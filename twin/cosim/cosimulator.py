@@ -30,64 +30,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.errors import TwinError
 from twin.core.i24 import LANES, lane_of
 from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
+from twin.cosim.windows import Ghosts, ScenarioError, Windows, no_ghosts, road_limits
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
 from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
 from twin.traffic.controller_api import EgoController, load_controller
 from twin.traffic.manager import TrafficManager
 from twin.traffic.scene import Obstacles
 
-MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
 AV_STREAM = 0x41565F  # seeds the AV draws apart from the run's other random choices
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
-
-
-class ScenarioError(TwinError):
-    """The scenario cannot run on these data and this map (e.g. the data end too soon)."""
-
-
-@dataclass(frozen=True)
-class Windows:
-    """Road-frame x ranges [m] of the back centres in each window, clipped to where
-    the map and the data exist: ``ghost_back`` < ``visible`` < ``ghost_front``."""
-
-    ghost_back: tuple[float, float]
-    visible: tuple[float, float]
-    ghost_front: tuple[float, float]
-
-    @classmethod
-    def around(
-        cls, x: float, w_visible: float, w_ghost: float, limits: tuple[float, float]
-    ) -> "Windows":
-        lo, hi = limits
-
-        def clip(a, b):
-            return (min(max(a, lo), hi), min(max(b, lo), hi))
-
-        return cls(
-            ghost_back=clip(x - w_visible - w_ghost, x - w_visible),
-            visible=clip(x - w_visible, x + w_visible),
-            ghost_front=clip(x + w_visible, x + w_visible + w_ghost),
-        )
-
-    @property
-    def span(self) -> tuple[float, float]:
-        return self.ghost_back[0], self.ghost_front[1]
-
-    def in_visible(self, x: np.ndarray) -> np.ndarray:
-        return (x >= self.visible[0]) & (x <= self.visible[1])
-
-    def bounds(self, x: np.ndarray) -> tuple[int, int, int, int]:
-        """For ``x`` sorted: (a, b, c, d) such that ``x[a:b]`` is in the rear ghost
-        window, ``x[b:c]`` in the visible window and ``x[c:d]`` in the front one."""
-        a, b = x.searchsorted((self.ghost_back[0], self.visible[0]))
-        c, d = x.searchsorted((self.visible[1], self.ghost_front[1]), side="right")
-        return int(a), int(b), int(c), int(d)
 
 
 @dataclass
@@ -175,7 +131,7 @@ class Cosimulator:
         self._base_speed = np.empty(0)  # [m/s] each body's own desired speed, by world id
         self._planned: dict[int, list] = {}  # world id -> recorded lane changes ahead
         self._requested: dict[int, tuple] = {}  # world id -> the change asked for
-        self._ghosts = _no_ghosts()
+        self._ghosts = no_ghosts()
         self._obstacles_now: Obstacles | None = None
         # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
         n_tids = len(traffic.store.trajectory_arrays["id"])
@@ -615,35 +571,6 @@ def _recorded_states(road, x, y, speed, vehicle_class, length, width, height, ti
     )
 
 
-@dataclass(frozen=True, eq=False)
-class Ghosts:
-    """The ghost set: recorded vehicles in the ghost windows, (k,) arrays sorted by x
-    (``tid`` store index, ``lane``, ``x`` [m] back centre, ``y`` [m], ``speed`` [m/s],
-    ``length`` [m])."""
-
-    tid: np.ndarray
-    lane: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    speed: np.ndarray
-    length: np.ndarray
-
-    @classmethod
-    def take(cls, snap: Snapshot, rows: np.ndarray) -> "Ghosts":
-        return cls(
-            snap.tid[rows], snap.lane[rows], snap.x[rows], snap.y[rows], snap.speed[rows],
-            snap.length[rows],
-        )  # fmt: skip
-
-    def __len__(self) -> int:
-        return self.tid.size
-
-
-def _no_ghosts() -> Ghosts:
-    empty = np.empty(0)
-    return Ghosts(empty.astype(np.int32), empty.astype(np.int8), empty, empty, empty, empty)
-
-
 def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) -> np.ndarray:
     """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
     ``spawn_clearance_at_rest`` for a rear vehicle at rest growing to ``spawn_clearance``
@@ -655,21 +582,6 @@ def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) ->
         cfg.spawn_clearance - cfg.spawn_clearance_at_rest
     )
     return clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
-
-
-def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:
-    """[m] the x range where the map has road and the data have vehicles on ``road``."""
-    m0, m1 = bundle.road.x_range(road)
-    table = traffic.store.trajectories
-    table = table[table["road"] == road.value]
-    if table.empty:
-        raise ScenarioError(f"the data hold no trajectories on {road.value}")
-    d0 = float(np.minimum(table["x_first"], table["x_last"]).min())
-    d1 = float(np.maximum(table["x_first"], table["x_last"]).max())
-    lo, hi = max(m0 + MAP_MARGIN, d0), min(m1 - MAP_MARGIN, d1)
-    if not lo < hi:
-        raise ScenarioError(f"the map ({m0:.0f} to {m1:.0f} m) and data do not overlap")
-    return lo, hi
 
 
 def _bind(controller, sim: "Cosimulator") -> None:

@@ -24,7 +24,7 @@ from twin.core import i24
 from twin.core.errors import NoVehicleNearError, TwinError
 from twin.core.i24 import Road
 from twin.cosim.config import CosimConfig
-from twin.cosim.cosimulator import ScenarioError
+from twin.cosim.windows import ScenarioError
 from twin.data.speed_field import speed_field
 from twin.data.store import TrajectoryStore
 from twin.physics.world import MAX_SPEED

@@ -258,7 +258,7 @@ def evaluate(
 
 def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[EpisodeSpec]:
     """The evaluation's episodes (see the module doc)."""
-    from twin.cosim.cosimulator import road_limits
+    from twin.cosim.windows import road_limits
     from twin.data.empirical import EmpiricalTraffic
 
     sampling = config.sampling

@@ -6,7 +6,8 @@ import pytest
 from tests.twin.cosim.scenes import EGO_X, T0, rows_of, step_until, tid_of, vehicle
 from twin.core.errors import NoVehicleNearError
 from twin.cosim.config import CosimConfig
-from twin.cosim.cosimulator import Cosimulator, ScenarioError
+from twin.cosim.cosimulator import Cosimulator
+from twin.cosim.windows import ScenarioError
 from twin.data.empirical import EmpiricalTraffic
 
 EGO = 1  # the recorded ego of every scene: lane -2, x = 700 m at T0, 20 m/s

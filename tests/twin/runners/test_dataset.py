@@ -22,7 +22,7 @@ from sensors.kitti import decode_depth
 from tests.sensors import kitti_devkit
 from twin.core.i24 import Road
 from twin.cosim.config import override
-from twin.cosim.cosimulator import road_limits
+from twin.cosim.windows import road_limits
 from twin.data.empirical import EmpiricalTraffic
 from twin.runners.dataset import (
     EPISODES,

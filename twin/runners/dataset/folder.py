@@ -32,7 +32,7 @@ def draw_episodes(config: DatasetConfig, store: TrajectoryStore, bundle, n: int)
         SamplingError: no cell of the data can hold an episode.
     """
     from twin.core.i24 import Road
-    from twin.cosim.cosimulator import road_limits
+    from twin.cosim.windows import road_limits
     from twin.data.empirical import EmpiricalTraffic
 
     check_roads(store, config.sampling)
