@@ -15,8 +15,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from twin.core.paths import asset, cache_dir
+from twin.data import day_files, synth
 from twin.data import ingest as ingest_module
-from twin.data import synth
 from twin.data.ingest import IngestOptions, ingest
 from twin.data.store import TrajectoryStore, is_store
 from twin.data.synth import config, presets, recording, simulation
@@ -25,7 +25,7 @@ from twin.traffic.models import base, gipps, idm
 
 #: The code the embedded data are made with: a change to any of it rebuilds them.
 GENERATOR = (
-    synth, config, presets, simulation, recording, ingest_module,
+    synth, config, presets, simulation, recording, ingest_module, day_files,
     base, idm, gipps, drivers, lanes, mobil,
 )  # fmt: skip
 

@@ -10,26 +10,22 @@ output and renamed into place at the end: an interrupted ingest leaves the
 previous store (if any) untouched and no half-store behind.
 """
 
-import contextlib
-import gzip
 import math
 import os
 import shutil
 from collections import Counter
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
 
-import ijson
 import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
 from tqdm import tqdm
 
 from twin.core import i24
-from twin.core.errors import DataFormatError
 from twin.core.i24 import Road
+from twin.data.day_files import documents
 from twin.data.store import (
     SAMPLE_SCHEMA,
     TRAJECTORY_SCHEMA,
@@ -39,7 +35,6 @@ from twin.data.store import (
 
 MIN_MARGIN = 400.0  # [m] ghost windows need this much road beyond each end of the segment
 MAX_DIMENSION_FT = 200.0  # [ft] longer than any road vehicle: a tracking error
-_READ_CHUNK = 1 << 16  # [bytes]
 
 
 @dataclass(frozen=True)
@@ -186,7 +181,7 @@ def ingest(
             leave=False,
         ) as bar:
             for source_index, path in enumerate(paths):
-                for doc in _documents(path, bar.update):
+                for doc in documents(path, bar.update):
                     _ingest_document(doc, source_index, options, report, seen, spill, trajectories)
         spill.flush()
         lane_counts = _write_samples(writer, spill)
@@ -366,99 +361,6 @@ def _array(doc: dict, name: str) -> np.ndarray:
     if array.ndim != 1 or (array.size and array.dtype.kind not in "iuf"):
         raise _Rejected(f"wrong_type:{name}")
     return array.astype(np.float64)
-
-
-class _CountingReader:
-    """A binary file wrapper that counts the bytes handed to the parser."""
-
-    def __init__(self, raw: BinaryIO, on_read: Callable[[int], object]):
-        self.raw = raw
-        self.position = 0
-        self.on_read = on_read
-
-    def read(self, size: int = -1) -> bytes:
-        data = self.raw.read(size)
-        self.position += len(data)
-        self.on_read(len(data))
-        return data
-
-
-def _documents(path: Path, on_read: Callable[[int], object]) -> Iterator:
-    """Yield the documents of one day file as Python objects, one at a time.
-
-    Raises:
-        DataFormatError: naming the file and the byte position, when the file is not
-            a JSON array or breaks off.
-    """
-    with open(path, "rb") as file, _decompressed(file) as raw:
-        head = raw.read(_READ_CHUNK)
-        stripped = head.lstrip()
-        if not stripped:
-            raise DataFormatError(
-                f"{path}: empty file, expected a JSON array of I-24 MOTION documents"
-            )
-        if stripped[:1] != b"[":
-            offset = len(head) - len(stripped)
-            raise DataFormatError(
-                f"{path}: not an I-24 MOTION day file: expected a JSON array of trajectory "
-                f"documents, found {stripped[:20]!r} at byte {offset}"
-            )
-        reader = _CountingReader(_Prepend(head, raw), on_read)
-        index = -1
-        try:
-            for index, doc in enumerate(ijson.items(reader, "item", use_float=True)):  # noqa: B007
-                yield doc
-        except ijson.JSONError as error:
-            raise DataFormatError(
-                f"{path}: malformed or truncated JSON after document {index + 1} "
-                f"(parser stopped within bytes {max(reader.position - _READ_CHUNK, 0)}.."
-                f"{reader.position}): {str(error).splitlines()[0]}"
-            ) from None
-
-
-def _decompressed(file: BinaryIO):
-    """The file itself, or a gzip reader over it when it starts with gzip's magic bytes."""
-    if file.peek(2)[:2] == b"\x1f\x8b":
-        return gzip.GzipFile(fileobj=file)
-    return contextlib.nullcontext(file)
-
-
-class _Prepend:
-    """A reader that returns ``head`` first, then the rest of ``raw``.
-
-    Non-standard ``NaN``, ``Infinity`` and ``-Infinity`` tokens (Python's json module
-    writes them) are handed to the parser as ``null``, which the validation counts as
-    a non-finite sample. A few bytes are held back at each chunk's end so that a
-    token split between chunks is still replaced.
-    """
-
-    _HOLD = len(b"-Infinity")
-
-    def __init__(self, head: bytes, raw: BinaryIO):
-        self.pending = head
-        self.raw = raw
-
-    def read(self, size: int = -1) -> bytes:
-        if size == 0:  # ijson probes with read(0) to tell bytes from text
-            return b""
-        while True:
-            more = self.raw.read(size if size and size > 0 else _READ_CHUNK)
-            data = self.pending + more
-            if not more:
-                self.pending = b""
-                return _nonfinite_to_null(data)
-            cut = max(len(data) - self._HOLD, 0)
-            self.pending = data[cut:]
-            if cut:
-                return _nonfinite_to_null(data[:cut])
-
-
-def _nonfinite_to_null(data: bytes) -> bytes:
-    if b"N" not in data and b"I" not in data:
-        return data
-    return (
-        data.replace(b"-Infinity", b"null").replace(b"Infinity", b"null").replace(b"NaN", b"null")
-    )
 
 
 class _TrajectoryTable:
