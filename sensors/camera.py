@@ -405,26 +405,7 @@ class CameraRig:
         for camera in cameras:
             ego_from_camera = camera.vehicle_from_camera(length)
             world_from_camera = world_from_ego @ ego_from_camera
-            picture = self.view.render(
-                view_matrix(world_from_camera),
-                camera.projection_matrix(),
-                camera.width,
-                camera.height,
-                light,
-            )
-            rgb = picture.rgb
-            if light.shadows:
-                mask = shadow_mask(
-                    casters,
-                    np.asarray(light.direction),
-                    camera.K,
-                    np.linalg.inv(world_from_camera),
-                    camera.width,
-                    camera.height,
-                    camera.near,
-                )
-                shade = shade_factor(light.ambient, light.diffuse, np.asarray(light.direction))
-                rgb = darken(rgb, picture.semantic, mask, shade)
+            picture, rgb = self._render(camera, world_from_camera, light, casters)
             frames.append(
                 Frame(
                     camera=camera,
@@ -445,6 +426,30 @@ class CameraRig:
             )
             self._counts[camera.name] += 1
         return frames
+
+    def _render(self, camera: CameraSpec, world_from_camera, light, casters):
+        """One camera's picture (its buffers) and its RGB in the light, shadows cast by
+        ``casters`` where the light has them."""
+        picture = self.view.render(
+            view_matrix(world_from_camera),
+            camera.projection_matrix(),
+            camera.width,
+            camera.height,
+            light,
+        )
+        if not light.shadows:
+            return picture, picture.rgb
+        mask = shadow_mask(
+            casters,
+            np.asarray(light.direction),
+            camera.K,
+            np.linalg.inv(world_from_camera),
+            camera.width,
+            camera.height,
+            camera.near,
+        )
+        shade = shade_factor(light.ambient, light.diffuse, np.asarray(light.direction))
+        return picture, darken(picture.rgb, picture.semantic, mask, shade)
 
 
 def _no_vehicles() -> DrawnVehicles:

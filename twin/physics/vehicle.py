@@ -208,6 +208,10 @@ def ray_ends(params: VehicleParams, position: np.ndarray, rotation: np.ndarray):
     return start, end
 
 
+# One piece on purpose (134 lines): the wheel, tyre, drivetrain, brake and drag forces of
+# a step are one chain of vectorised array expressions over (n, 4) wheels, each term
+# feeding the next; split into functions, the dozen intermediate arrays would travel
+# through their arguments, and this runs every physics step for every body.
 def vehicle_forces(
     params: VehicleParams,
     controls: Controls,
