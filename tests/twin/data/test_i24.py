@@ -10,6 +10,7 @@ def test_segment_ends_map_to_zero_and_one_mile():
     assert i24.road_x(np.array([61.6 * 5280]), Road.EASTBOUND)[0] == pytest.approx(1609.344)
     assert i24.road_x(np.array([61.6 * 5280]), Road.WESTBOUND)[0] == pytest.approx(0.0, abs=1e-9)
     assert i24.road_x(np.array([60.6 * 5280]), Road.WESTBOUND)[0] == pytest.approx(1609.344)
+    assert pytest.approx(1609.344) == i24.SEGMENT_LENGTH
 
 
 @pytest.mark.parametrize("road", list(Road))

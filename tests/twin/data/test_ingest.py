@@ -7,8 +7,6 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.conftest import SHARED, make_doc, write_day
-from twin.cli import main
-from twin.core import i24
 from twin.core.errors import DataFormatError, StoreError
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.ingest import IngestOptions, ingest, smoothed_speed
@@ -213,27 +211,6 @@ def test_smoothed_speed_removes_tracking_noise():
     assert np.max(np.abs(np.diff(v) / np.diff(t))[20:-20]) < 2.0  # m/s^2
     raw = np.diff(x) / np.diff(t)
     assert np.max(np.abs(np.diff(raw) / 0.04)) > 20.0  # what unsmoothed noise would give
-
-
-def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
-    bad = tmp_path / "bad.json"
-    bad.write_text('{"not": "an array"}')
-    assert main(["data", "ingest", str(bad), "--out", str(tmp_path / "s"), "--quiet"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("twin: error:") and "bad.json" in err and "Traceback" not in err
-    assert main(["data", "info", str(tmp_path / "nowhere")]) == 2
-    assert "no trajectory store" in capsys.readouterr().err
-
-
-def test_cli_ingest_and_info(tmp_path, capsys):
-    day = write_day(tmp_path / "day.json", [make_doc("a" * 24), make_doc("b" * 24, y_ft=30.0)])
-    assert main(["data", "ingest", str(day), "--out", str(tmp_path / "s"), "--quiet"]) == 0
-    assert main(["data", "info", str(tmp_path / "s")]) == 0
-    out = capsys.readouterr().out
-    assert "westbound 2 trajectories, 100 samples" in out
-    assert "lane -1: 1 trajectories, 50 samples  (HOV)" in out
-    assert "lane -2: 1 trajectories, 50 samples" in out
-    assert pytest.approx(1609.344) == i24.SEGMENT_LENGTH
 
 
 def test_leftovers_of_a_killed_ingest_are_cleaned_and_an_interrupt_leaves_nothing(

@@ -1,0 +1,49 @@
+"""``twin calibrate``: fit the drivers to a store's recording."""
+
+from twin.cli.options import (
+    UsageError,
+    add_quiet,
+    add_store,
+    add_window,
+    checked_road,
+    open_store,
+    unix_time,
+)
+
+
+def register(commands) -> None:
+    """Add ``calibrate`` to the subparsers ``commands``."""
+    p = commands.add_parser(
+        "calibrate",
+        help="fit the drivers to a store's recording (writes STORE/calibration.json)",
+        description="Fit the visible traffic's behaviour to the recording: IDM car following "
+        "per follower (replaying its recorded leader, fitted on spacing), its distribution per "
+        "class group, desired speeds per lane from free flow, the lane-change rates and the "
+        "MOBIL threshold that matches them. Writes calibration.json and "
+        "calibration_fits.parquet into the store; the recorded data are not changed.",
+    )
+    add_store(p)
+    p.add_argument(
+        "--road",
+        action="append",
+        default=None,
+        help="eastbound or westbound (repeatable; default: all)",
+    )
+    add_window(p, "start: unix or ISO 8601 with offset", "end: unix or ISO 8601 with offset")
+    add_quiet(p)
+    p.set_defaults(handler=_calibrate)
+
+
+def _calibrate(args) -> int:
+    from twin.calibration.calibrate import calibrate, describe_calibration, write_calibration
+
+    roads = [checked_road(road) for road in args.road] if args.road is not None else None
+    store = open_store(args.store)
+    t_from, t_until = unix_time(args.t_from), unix_time(args.t_until)
+    if t_from is not None and t_until is not None and not t_from < t_until:
+        raise UsageError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
+    doc, fits = calibrate(store, roads, t_from, t_until, progress=not args.quiet)
+    path = write_calibration(store, doc, fits)
+    print(describe_calibration(doc))
+    print(f"written: {path}")
+    return 0

@@ -1,0 +1,277 @@
+"""``twin data``: I-24 MOTION data: ingest, inspect, synthesize, plot, waves."""
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from twin.cli.options import (
+    UsageError,
+    add_quiet,
+    add_start,
+    add_store,
+    check_seed,
+    checked_road,
+    open_store,
+    unix_time,
+)
+
+WINDOW_START_HELP = "unix or ISO 8601 with offset (default: data start)"
+
+
+def register(commands) -> None:
+    """Add ``data`` and its commands to the subparsers ``commands``."""
+    data = commands.add_parser("data", help="I-24 MOTION data: ingest, inspect, synthesize, plot")
+    data_commands = data.add_subparsers(title="data commands")
+    _register_ingest(data_commands)
+    _register_info(data_commands)
+    _register_synth(data_commands)
+    _register_plot(data_commands)
+    _register_waves(data_commands)
+
+
+def _register_ingest(commands) -> None:
+    p = commands.add_parser("ingest", help="ingest I-24 MOTION day files (JSON) into a store")
+    p.add_argument(
+        "files", nargs="+", type=Path, help="day files: JSON arrays of trajectory documents"
+    )
+    p.add_argument(
+        "--out", required=True, type=Path, help="store folder to write (replaced atomically)"
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        default=None,
+        help="metres kept beyond each end of the segment (>= 400; default: all)",
+    )
+    p.add_argument("--bucket", type=float, default=60.0, help="seconds per Parquet row group")
+    add_quiet(p)
+    p.set_defaults(handler=_ingest)
+
+
+def _ingest(args) -> int:
+    from twin.data.ingest import IngestOptions, ingest
+    from twin.data.store import TrajectoryStore
+
+    for path in args.files:
+        if not path.is_file():
+            raise UsageError(f"input file not found: {path}")
+    try:
+        options = IngestOptions(margin=args.margin, bucket=args.bucket)
+    except ValueError as error:  # IngestOptions names the bad --margin or --bucket
+        raise UsageError(str(error)) from None
+    report = ingest(args.files, args.out, options, progress=not args.quiet)
+    print(TrajectoryStore(args.out).describe())
+    if report.documents_kept == 0:
+        print("twin: warning: no document was kept", file=sys.stderr)
+    return 0
+
+
+def _register_info(commands) -> None:
+    p = commands.add_parser("info", help="what a store holds")
+    add_store(p)
+    p.set_defaults(handler=_info)
+
+
+def _info(args) -> int:
+    from twin.calibration.calibrate import describe_calibration, read_calibration
+    from twin.data.embedded import EMBEDDED, EMBEDDED_PREFIX, embedded_folder
+    from twin.data.store import is_store
+
+    store = open_store(args.store)
+    print(store.describe())
+    print(describe_calibration(read_calibration(store)))
+    if args.store is None:
+        print("embedded data (STORE or --data):")
+        for name, (_, presets) in EMBEDDED.items():
+            built = "built" if is_store(embedded_folder(name)) else "built on first use"
+            print(
+                f"  {EMBEDDED_PREFIX}{name}: synthetic preset{'s' * (len(presets) > 1)} "
+                f"{', '.join(presets)} ({built})"
+            )
+    return 0
+
+
+def _register_synth(commands) -> None:
+    p = commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
+    p.add_argument(
+        "--preset",
+        choices=["A", "B", "C", "S"],
+        required=True,
+        help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; C: a "
+        "westbound morning with waves like the real ones (twin data waves); S (test "
+        "data): westbound, 20 minutes of stop-and-go in three lanes started by drivers "
+        "braking, HOV lane closed",
+    )
+    p.add_argument(
+        "--drivers",
+        choices=["default", "other"],
+        default="default",
+        help="other: drivers and lane changing unlike the twin's defaults (test data)",
+    )
+    p.add_argument(
+        "--car-following",
+        choices=["idm", "gipps"],
+        default="idm",
+        help="the drivers' model (gipps: one the twin does not drive with)",
+    )
+    for flag, unit in (
+        ("--politeness", "-"),
+        ("--change-threshold", "m/s^2"),
+        ("--decision-interval", "s"),
+    ):
+        p.add_argument(
+            flag,
+            type=float,
+            default=None,
+            help=f"the drivers' MOBIL {flag[2:].replace('-', ' ')} [{unit}] (default: "
+            "the preset's, or --drivers other's)",
+        )
+    p.add_argument("--out", required=True, type=Path, help="JSON file to write")
+    p.add_argument("--minutes", type=float, default=None, help="recorded minutes (default 16)")
+    add_start(p, "first recorded time (unix or ISO 8601 with offset)")
+    p.add_argument("--seed", type=int, default=0)
+    add_quiet(p, help=None)
+    p.set_defaults(handler=_synth)
+
+
+def _synth(args) -> int:
+    from twin.data import synth
+
+    config = _synth_config(args)
+    result = synth.synthesize(config, progress=not args.quiet)
+    path = synth.write_i24_json(result, args.out, progress=not args.quiet)
+    print(
+        f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(result.vid):,} trajectories, "
+        f"{result.lane_changes:,} lane changes, {config.road.value}"
+    )
+    return 0
+
+
+def _synth_config(args):
+    """The preset with the command line's changes.
+
+    Raises:
+        UsageError: a value the synthesiser cannot take (the message names it).
+    """
+    from twin.data import synth
+
+    check_seed(args.seed)
+    changes = {"seed": args.seed, "car_following": args.car_following}
+    if args.drivers == "other":
+        changes.update(drivers=synth.OTHER_DRIVERS, **synth.OTHER_LANE_CHANGES)
+    for name in ("politeness", "change_threshold", "decision_interval"):
+        if getattr(args, name) is not None:
+            changes[name] = getattr(args, name)
+    if args.minutes is not None:
+        changes["minutes"] = args.minutes
+    if args.start is not None:
+        changes["start"] = unix_time(args.start)
+    try:
+        return replace(synth.ALL_PRESETS[args.preset], **changes)
+    except ValueError as error:  # SynthConfig names the value it cannot take
+        raise UsageError(str(error)) from None
+
+
+def _register_plot(commands) -> None:
+    p = commands.add_parser("plot", help="time-space diagram per lane, coloured by speed")
+    add_store(p)
+    p.add_argument("--road", default="westbound")
+    add_start(p, WINDOW_START_HELP)
+    p.add_argument("--minutes", type=float, default=10.0)
+    p.add_argument("--out", type=Path, default=Path("timespace.png"))
+    p.set_defaults(handler=_plot)
+
+
+def _plot(args) -> int:
+    from twin.data.plot import time_space_plot
+
+    road = checked_road(args.road)
+    store = open_store(args.store)
+    start = unix_time(args.start)
+    if start is None:
+        start = store.time_range(road)[0]
+    _check_plot_window(store, road, start, args.minutes)
+    out = time_space_plot(store, road, start, args.minutes, args.out)
+    print(f"wrote {out}")
+    return 0
+
+
+def _check_plot_window(store, road: str, start: float, minutes: float) -> None:
+    """Raise :class:`UsageError` when the window [start, start + minutes] lies outside the
+    road's data (or ends before it starts), naming what the store covers.
+
+    ``time_space_plot`` raises a ValueError for an empty window, which ``main`` would
+    report as a bug; the window is the user's, so it is checked here, where it is read.
+    """
+    from twin.core.i24 import Road
+    from twin.core.timeutil import format_local
+
+    end = start + 60.0 * minutes
+    t_min, t_max = store.time_range(road)
+    if end < start or end < t_min or start > t_max:
+        name = Road.parse(road).value
+        raise UsageError(
+            f"no {name} samples between {format_local(start)} and {format_local(end)} CST "
+            f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
+            f"{format_local(t_max)} CST on this road"
+        )
+
+
+def _register_waves(commands) -> None:
+    p = commands.add_parser(
+        "waves",
+        help="stop-and-go waves per lane as the I-24 MOTION team measures them, against "
+        "the real 2022-11-22 morning",
+        description="The I-24 MOTION wave-analysis method (Ji et al. 2024): virtual "
+        "trajectories through each lane's speed field, wave fronts and tails at 15 mph, "
+        "chained into waves. Writes lane_N/wave_front_15.csv, wave_tail_15.csv, CC_15.csv "
+        "(the real tables' columns and units), waves.json and waves.png, and prints each "
+        "lane's figures beside the real westbound morning's.",
+    )
+    add_store(p)
+    p.add_argument("--road", default="westbound")
+    add_start(p, WINDOW_START_HELP)
+    p.add_argument("--minutes", type=float, default=None, help="span (default: to the data's end)")
+    p.add_argument("--out", type=Path, default=None, help="folder to write (replaced as a whole)")
+    p.add_argument(
+        "--tables",
+        type=Path,
+        default=None,
+        help="summarise a folder of lane_N tables instead (e.g. the real ones in "
+        "../shared/data/i24_waves/2022-11-22)",
+    )
+    p.add_argument(
+        "--miles", type=float, default=None,
+        help="miles the --tables cover (default: from their waves.json, else 3.85, the real ones')",
+    )  # fmt: skip
+    add_quiet(p, help=None)
+    p.set_defaults(handler=_waves)
+
+
+def _waves(args) -> int:
+    from twin.data import wave_analysis as wa
+
+    real = wa.reference()
+    if args.tables is not None:
+        lanes = wa.read_tables(args.tables, **({"miles": args.miles} if args.miles else {}))
+        print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), "tables"))
+        return 0
+    if args.out is None:
+        raise UsageError("twin data waves needs --out DIR (or --tables DIR to read tables)")
+    road = checked_road(args.road)
+    store = open_store(args.store)
+    start = unix_time(args.start)
+    lanes = wa.analyse_store(store, road, start, args.minutes, progress=not args.quiet)
+    first = start if start is not None else store.time_range(road)[0]
+    meta = {
+        "store": str(store.path),
+        "road": road,
+        "start_unix": first,
+        "minutes": args.minutes,
+        "title": f"{store.path.name}, {road}: waves at 15 mph",
+    }
+    out = wa.write_tables(lanes, args.out, meta)
+    print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), store.path.name))
+    print(f"real: {real['source']}")
+    print(f"wrote {out} (lane_N/*.csv, waves.json, waves.png)")
+    return 0

@@ -1,0 +1,115 @@
+"""``twin eval``: fidelity over many episodes, and the paired controller benchmark."""
+
+from pathlib import Path
+
+from twin.cli.options import (
+    add_data,
+    add_engine,
+    add_quiet,
+    add_set,
+    add_window,
+    add_workers,
+    check_seed,
+    listed,
+    open_data,
+    unix_time,
+    workers_or_cores,
+)
+
+
+def register(commands) -> None:
+    """Add ``eval`` to the subparsers ``commands``."""
+    p = commands.add_parser(
+        "eval",
+        help="fidelity over many episodes, each behaviour on the same episodes",
+        description="Draw episodes from the recorded traffic (congested and free cells), run "
+        "each with every behaviour asked for, measure each run as 'twin run' does, and write "
+        "episodes.parquet, summary.json, summary.md and fidelity.png. Finished episodes are "
+        "kept: rerun the same command to resume.",
+    )
+    add_data(p)
+    p.add_argument("--road", default="westbound", help="eastbound or westbound")
+    p.add_argument("--episodes", type=int, required=True, help="episodes to draw")
+    p.add_argument("--duration", type=float, default=120.0, help="episode length [s]")
+    add_window(p, "episodes start at or after", "episodes end at or before")
+    p.add_argument(
+        "--congested-share", type=float, default=1.0, help="share drawn from congested cells"
+    )
+    p.add_argument(
+        "--behaviour",
+        default=None,
+        help="behaviours, comma-separated (default: paper, and calibrated and recorded when "
+        "the store is calibrated)",
+    )
+    p.add_argument(
+        "--controller",
+        default=None,
+        help="ego controllers run on every episode, comma-separated: human, follower_stopper, "
+        "pi_saturation, acc or module:function (the benchmark: paired against human; "
+        "default behaviour then: calibrated where the store is calibrated, else paper)",
+    )
+    add_set(
+        p,
+        "any run setting for every episode, e.g. --set "
+        "controller.follower_stopper.desired_speed=25 or --set controller.policy.model=ppo.zip "
+        "(repeatable)",
+    )
+    p.add_argument(
+        "--av-share",
+        type=float,
+        default=0.0,
+        help="share of the visible vehicles driven by the controller as well as the ego "
+        "(needs --controller; default 0: the ego alone)",
+    )
+    p.add_argument("--seed", type=int, default=0)
+    add_workers(p, "processes (default: the cores)")
+    add_engine(p)
+    p.add_argument("--out", type=Path, required=True, help="evaluation folder")
+    add_quiet(p)
+    p.set_defaults(handler=_eval)
+
+
+def _eval(args) -> int:
+    from twin.calibration.calibrate import read_calibration
+    from twin.cosim.config import SCENARIO_B, override, parse_assignments
+    from twin.runners.evaluation import EvalConfig, evaluate, summary_lines
+
+    cosim = override(SCENARIO_B, parse_assignments(args.assignments), source="--set")
+    check_seed(args.seed)
+    store = open_data(args.data, progress=not args.quiet)
+    controllers = listed(args.controller)
+    config = EvalConfig(
+        road=args.road,
+        episodes=args.episodes,
+        duration=args.duration,
+        behaviours=_behaviours(args.behaviour, controllers, read_calibration(store) is not None),
+        congested_share=args.congested_share,
+        t_from=unix_time(args.t_from),
+        t_until=unix_time(args.t_until),
+        seed=args.seed,
+        controllers=controllers,
+        av_share=args.av_share,
+        cosim=cosim,
+    )
+    result = evaluate(
+        store,
+        args.out,
+        config,
+        workers=workers_or_cores(args.workers),
+        engine=args.engine,
+        ray_address=args.ray_address,
+        progress=not args.quiet,
+    )
+    print(summary_lines(result))
+    return 0
+
+
+def _behaviours(asked: str | None, controllers: tuple[str, ...], calibrated: bool):
+    """The behaviours to run: those asked for; else with controllers the one they drive
+    among (calibrated where the store is calibrated, else paper); else paper, and
+    calibrated and recorded when the store is calibrated."""
+    if asked is not None:
+        return listed(asked)
+    if controllers:
+        return ("calibrated",) if calibrated else ("paper",)
+    return ("paper", "calibrated", "recorded") if calibrated else ("paper",)
