@@ -75,11 +75,19 @@ def idm_acceleration(
         v_lead: (n,) [m/s] leader speeds (ignored where ``gap`` is inf).
         gap: (n,) [m] bumper-to-bumper gap to the leader; ``inf`` for a free road.
             A gap <= 0 (overlap) gives a very large deceleration; callers clip.
-        params: per-vehicle parameters (see :class:`IDMParams`).
+        params: per-vehicle parameters (see :class:`IDMParams`). A desired speed of 0
+            (which IDM leaves undefined) brakes at b and holds the stop, as the twin's
+            IDM does.
 
     Returns:
         (n,) float64 acceleration, unclipped.
     """
+    stopping = np.asarray(params.desired_speed) <= 0
+    if np.any(stopping):
+        moving = replace(params, desired_speed=np.where(stopping, 1.0, params.desired_speed))
+        accel = idm_acceleration(v, v_lead, gap, moving)
+        stop = -np.asarray(params.comfortable_decel) + interaction_term(v, v_lead, gap, params)
+        return np.where(stopping, stop, accel)
     return params.max_accel * (1.0 - _speed_ratio(v, params) - _gap_ratio(v, v_lead, gap, params))
 
 
