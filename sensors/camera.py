@@ -27,6 +27,7 @@ import pandas as pd
 from mapgen.build import MapBundle
 from sensors.shadows import Casters, darken, map_casters, shade_factor, shadow_mask
 from sensors.sun import SUN_MODES, episode_light
+from twin.core.errors import TwinError
 from twin.core.paths import asset
 from twin.core.timeutil import steps_per_sample
 from twin.physics.render import REPLAY_BASE, DrawnVehicles, SceneView, resolve_renderer
@@ -42,7 +43,7 @@ CV_IN_BODY = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL cameras look down their -z, y up
 
 
-class CameraError(ValueError):
+class CameraError(TwinError, ValueError):
     """A camera or rig setting is impossible."""
 
 

@@ -9,6 +9,7 @@ from twin.cli.options import (
     open_store,
     unix_time,
 )
+from twin.traffic.models import MODELS, car_following_model
 
 
 def register(commands) -> None:
@@ -16,8 +17,9 @@ def register(commands) -> None:
     p = commands.add_parser(
         "calibrate",
         help="fit the drivers to a store's recording (writes STORE/calibration.json)",
-        description="Fit the visible traffic's behaviour to the recording: IDM car following "
-        "per follower (replaying its recorded leader, fitted on spacing), its distribution per "
+        description="Fit the visible traffic's behaviour to the recording: car following "
+        "(IDM, or --model) per follower (replaying its recorded leader, fitted on spacing), "
+        "its distribution per "
         "class group, desired speeds per lane from free flow, the lane-change rates and the "
         "MOBIL threshold that matches them. Writes calibration.json and "
         "calibration_fits.parquet into the store; the recorded data are not changed.",
@@ -30,6 +32,13 @@ def register(commands) -> None:
         help="eastbound or westbound (repeatable; default: all)",
     )
     add_window(p, "start: unix or ISO 8601 with offset", "end: unix or ISO 8601 with offset")
+    p.add_argument(
+        "--model",
+        choices=sorted(MODELS),
+        default="idm",
+        help="the car-following model fitted (default idm); a calibrated run drives it with "
+        "--set traffic.car_following=MODEL",
+    )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
 
@@ -42,7 +51,8 @@ def _calibrate(args) -> int:
     t_from, t_until = unix_time(args.t_from), unix_time(args.t_until)
     if t_from is not None and t_until is not None and not t_from < t_until:
         raise UsageError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
-    doc, fits = calibrate(store, roads, t_from, t_until, progress=not args.quiet)
+    model = car_following_model(args.model)
+    doc, fits = calibrate(store, roads, t_from, t_until, model=model, progress=not args.quiet)
     path = write_calibration(store, doc, fits)
     print(describe_calibration(doc))
     print(f"written: {path}")

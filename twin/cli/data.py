@@ -14,6 +14,7 @@ from twin.cli.options import (
     open_store,
     unix_time,
 )
+from twin.traffic.models import MODELS
 
 WINDOW_START_HELP = "unix or ISO 8601 with offset (default: data start)"
 
@@ -110,9 +111,10 @@ def _register_synth(commands) -> None:
     )
     p.add_argument(
         "--car-following",
-        choices=["idm", "gipps"],
-        default="idm",
-        help="the drivers' model (gipps: one the twin does not drive with)",
+        choices=sorted(MODELS),
+        default="idm-textbook",
+        help="the drivers' model: idm-textbook (IDM as published, the presets'), idm (the "
+        "twin's drivers) or gipps (one the twin's defaults do not drive with)",
     )
     for flag, unit in (
         ("--politeness", "-"),
@@ -190,31 +192,9 @@ def _plot(args) -> int:
     start = unix_time(args.start)
     if start is None:
         start = store.time_range(road)[0]
-    _check_plot_window(store, road, start, args.minutes)
     out = time_space_plot(store, road, start, args.minutes, args.out)
     print(f"wrote {out}")
     return 0
-
-
-def _check_plot_window(store, road: str, start: float, minutes: float) -> None:
-    """Raise :class:`UsageError` when the window [start, start + minutes] lies outside the
-    road's data (or ends before it starts), naming what the store covers.
-
-    ``time_space_plot`` raises a ValueError for an empty window, which ``main`` would
-    report as a bug; the window is the user's, so it is checked here, where it is read.
-    """
-    from twin.core.i24 import Road
-    from twin.core.timeutil import format_local
-
-    end = start + 60.0 * minutes
-    t_min, t_max = store.time_range(road)
-    if end < start or end < t_min or start > t_max:
-        name = Road.parse(road).value
-        raise UsageError(
-            f"no {name} samples between {format_local(start)} and {format_local(end)} CST "
-            f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
-            f"{format_local(t_max)} CST on this road"
-        )
 
 
 def _register_waves(commands) -> None:

@@ -91,6 +91,9 @@ def _eval(args) -> int:
         av_share=args.av_share,
         cosim=cosim,
     )
+    if controllers:  # the wave-dampening benchmark: every controller paired with human
+        from twin.control.benchmark import benchmark as evaluate
+        from twin.control.benchmark import summary_lines
     result = evaluate(
         store,
         args.out,

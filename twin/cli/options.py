@@ -142,12 +142,12 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True):
     """The trajectory store of a ``--data`` value (see ``twin.runners.run.open_data``).
 
     Raises:
-        UsageError: as :func:`checked_data`.
-        StoreError, DataFormatError: the path holds no store or I-24 MOTION data.
+        StoreError, DataFormatError: an unknown ``embedded:NAME``, no such file or
+            folder, or a path that holds no store or I-24 MOTION data.
     """
     from twin.runners.run import open_data as open_run_data
 
-    return open_run_data(checked_data(data), progress=progress)
+    return open_run_data(data, progress=progress)
 
 
 def open_store(path: Path | None):
@@ -155,8 +155,7 @@ def open_store(path: Path | None):
     store folder.
 
     Raises:
-        UsageError: an unknown ``embedded:NAME``.
-        StoreError: the folder is not a store.
+        StoreError: an unknown ``embedded:NAME``, or the folder is not a store.
     """
     from twin.data.embedded import default_store, embedded_name, embedded_store
     from twin.data.store import TrajectoryStore
@@ -164,7 +163,6 @@ def open_store(path: Path | None):
     if path is None:
         return default_store()
     if (name := embedded_name(path)) is not None:
-        _check_embedded(name)
         return embedded_store(name)
     return TrajectoryStore(path)
 

@@ -14,6 +14,7 @@ import inspect
 from dataclasses import replace
 from pathlib import Path
 
+from twin.core.errors import StoreError
 from twin.core.paths import asset, cache_dir
 from twin.data import day_files, synth
 from twin.data import ingest as ingest_module
@@ -74,10 +75,10 @@ def embedded_store(
     """The embedded store ``name`` (see ``EMBEDDED``), built (and cached) on first use.
 
     Raises:
-        KeyError: no embedded store of that name (the message lists them).
+        StoreError: no embedded store of that name (the message lists them).
     """
     if name not in EMBEDDED:
-        raise KeyError(
+        raise StoreError(
             f"no embedded data {name!r}: choose one of "
             + ", ".join(EMBEDDED_PREFIX + n for n in EMBEDDED)
         )

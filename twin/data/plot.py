@@ -12,6 +12,7 @@ import numpy as np
 
 from twin.core import i24
 from twin.core.atomic import atomic_file
+from twin.core.errors import StoreError
 from twin.core.i24 import Road
 from twin.core.timeutil import CST, format_local
 from twin.data.store import TrajectoryStore
@@ -33,14 +34,14 @@ def time_space_plot(
         out: PNG path (written to a temporary file and renamed).
 
     Raises:
-        ValueError: when the window holds no samples (naming what the store covers).
+        StoreError: when the window holds no samples (naming what the store covers).
     """
     road = Road.parse(road)
     end = start + 60.0 * minutes
     samples = store.samples(road, start, end)
     if len(samples["t"]) == 0:
         t_min, t_max = store.time_range(road)
-        raise ValueError(
+        raise StoreError(
             f"no {road.value} samples between {format_local(start)} and {format_local(end)} CST "
             f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
             f"{format_local(t_max)} CST on this road"

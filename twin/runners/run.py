@@ -116,9 +116,8 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
     or an I-24 MOTION JSON day file (ingested once into the cache).
 
     Raises:
-        StoreError: the path is neither a store folder nor a JSON file.
-        FileNotFoundError: the path does not exist.
-        KeyError: an unknown embedded store.
+        StoreError: the path does not exist, is neither a store folder nor a JSON
+            file, or names an unknown embedded store.
     """
     from twin.data.embedded import default_store, embedded_name, embedded_store
     from twin.data.ingest import ingest
@@ -129,7 +128,7 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
         return embedded_store(name, progress=progress)
     path = Path(data)
     if not path.exists():
-        raise FileNotFoundError(f"--data {path}: no such file or folder")
+        raise StoreError(f"--data {path}: no such file or folder")
     if path.is_dir():
         if not is_store(path):
             raise StoreError(f"--data {path} is a folder but not an i24-twin store")

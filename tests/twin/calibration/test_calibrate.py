@@ -97,3 +97,21 @@ def test_calibration_is_deterministic(store):
     for doc in (first, again):
         doc.pop("created")
     assert first == again
+
+
+def test_calibrate_model_gipps_is_driven_when_the_run_names_it(store, tmp_path, capsys):
+    """``twin calibrate --model gipps``: the calibration says so, ``twin data info`` shows
+    it, and a calibrated run refuses to drive IDM with it until told Gipps."""
+    args = ["calibrate", str(store.path), "--road", "westbound", "--model", "gipps", "--quiet"]
+    assert main(args) == 0
+    assert read_calibration(store)["car_following_model"] == "gipps"
+    assert "reaction_time" in read_fits(store).columns
+    assert main(["data", "info", str(store.path)]) == 0
+    info = capsys.readouterr().out
+    assert "drivers gipps" in info and "tau " in info
+    run = ["run", "--data", str(store.path), "--behaviour", "calibrated", "--duration", "2",
+           "--quiet", "--out"]  # fmt: skip
+    assert main([*run, str(tmp_path / "idm")]) == 2
+    assert "traffic.car_following=gipps" in capsys.readouterr().err
+    assert main([*run, str(tmp_path / "gipps"), "--set", "traffic.car_following=gipps"]) == 0
+    assert "behaviour calibrated" in capsys.readouterr().out

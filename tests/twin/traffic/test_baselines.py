@@ -146,7 +146,7 @@ def test_av_share_is_checked():
 def test_bad_controller_output_stops_the_run_naming_controller_and_time(
     follow_store, tmp_path, capsys
 ):
-    spec = "tests.twin.test_controllers:gives_nan"
+    spec = "tests.twin.traffic.test_baselines:gives_nan"
     assert _run(follow_store, tmp_path / "nan", "--ego-controller", spec) == 2
     err = capsys.readouterr().err
     assert "the controller gives_nan of vehicle" in err and "at t = 1.00 s" in err
