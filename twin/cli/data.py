@@ -230,11 +230,14 @@ def _register_waves(commands) -> None:
 
 def _waves(args) -> int:
     from twin.data import wave_analysis as wa
+    from twin.data import wave_tables as tables
 
-    real = wa.reference()
+    real = tables.reference()
     if args.tables is not None:
-        lanes = wa.read_tables(args.tables, **({"miles": args.miles} if args.miles else {}))
-        print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), "tables"))
+        lanes = tables.read_tables(args.tables, **({"miles": args.miles} if args.miles else {}))
+        print(
+            tables.format_comparison(tables.compare(tables.summary(lanes), real["lanes"]), "tables")
+        )
         return 0
     if args.out is None:
         raise UsageError("twin data waves needs --out DIR (or --tables DIR to read tables)")
@@ -250,8 +253,12 @@ def _waves(args) -> int:
         "minutes": args.minutes,
         "title": f"{store.path.name}, {road}: waves at 15 mph",
     }
-    out = wa.write_tables(lanes, args.out, meta)
-    print(wa.format_comparison(wa.compare(wa.summary(lanes), real["lanes"]), store.path.name))
+    out = tables.write_tables(lanes, args.out, meta)
+    print(
+        tables.format_comparison(
+            tables.compare(tables.summary(lanes), real["lanes"]), store.path.name
+        )
+    )
     print(f"real: {real['source']}")
     print(f"wrote {out} (lane_N/*.csv, waves.json, waves.png)")
     return 0

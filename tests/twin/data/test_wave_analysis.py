@@ -14,6 +14,7 @@ from twin.core import i24
 from twin.core.i24 import Road
 from twin.core.paths import asset
 from twin.data import wave_analysis as wa
+from twin.data import wave_tables as tables
 from twin.data.embedded import embedded_store
 
 REAL = SHARED / "data" / "i24_waves" / "2022-11-22"
@@ -32,7 +33,7 @@ README = {
 def real_tables():
     if not REAL.is_dir():
         pytest.skip("../shared/data/i24_waves is not beside the checkout")
-    return wa.read_tables(REAL)
+    return tables.read_tables(REAL)
 
 
 def _one_wave(c=5.0, width=200.0, free=30.0, slow=2.0, minutes=12.0, length=2400.0):
@@ -82,7 +83,7 @@ def test_free_flow_has_no_wave():
 
 
 def test_the_real_tables_give_their_readmes_figures(real_tables):
-    figures = wa.summary(real_tables)
+    figures = tables.summary(real_tables)
     for lane, (waves, median, p25, p75, fronts, tail, tail90) in README.items():
         got = figures[lane]
         assert got["waves"] == waves
@@ -93,7 +94,7 @@ def test_the_real_tables_give_their_readmes_figures(real_tables):
         assert round(got["fronts_per_vehicle_mile"], 2) == fronts
         assert (got["front_to_tail_s"]["median"], got["front_to_tail_s"]["p90"]) == (tail, tail90)
     # the shipped reference is these figures
-    assert json.loads(asset(wa.REFERENCE_ASSET).read_text())["lanes"] == figures
+    assert json.loads(asset(tables.REFERENCE_ASSET).read_text())["lanes"] == figures
 
 
 def test_the_real_wave_table_is_rebuilt_from_the_real_fronts_and_tails(real_tables):
@@ -115,7 +116,7 @@ def test_a_store_is_analysed_into_the_real_tables_columns(wave_store, tmp_path, 
     assert main(["data", "waves", str(wave_store.path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "1 (HOV)" in printed and "real" in printed and "fronts/veh/mile" in printed
-    lanes = wa.read_tables(out)
+    lanes = tables.read_tables(out)
     for lane in lanes.values():
         for name in ("wave_front_15", "wave_tail_15", "CC_15"):
             ours = pd.read_csv(out / f"lane_{lane.lane}" / f"{name}.csv", nrows=0).columns
@@ -123,12 +124,12 @@ def test_a_store_is_analysed_into_the_real_tables_columns(wave_store, tmp_path, 
                 real = pd.read_csv(REAL / "lane_1" / f"{name}.csv", nrows=0).columns
                 assert list(ours) == list(real)
     doc = json.loads((out / "waves.json").read_text())
-    assert doc["format"] == wa.FORMAT and set(doc["lanes"]) == {
+    assert doc["format"] == tables.FORMAT and set(doc["lanes"]) == {
         f"lane_{w.lane}" for w in lanes.values()
     }
     assert (out / "waves.png").stat().st_size > 10_000
     # read back, the tables give the same figures
-    assert wa.summary(wa.read_tables(out)) == doc["lanes"]
+    assert tables.summary(tables.read_tables(out)) == doc["lanes"]
     # preset B's wave is in the HOV lane: fronts there
     assert doc["lanes"]["lane_1"]["fronts"] > 0
     # the span is checked against the data
@@ -140,23 +141,23 @@ def test_a_store_is_analysed_into_the_real_tables_columns(wave_store, tmp_path, 
 
 def test_bad_tables_and_folders_are_named(tmp_path):
     with pytest.raises(wa.WaveAnalysisError, match="not a folder"):
-        wa.read_tables(tmp_path / "none")
+        tables.read_tables(tmp_path / "none")
     with pytest.raises(wa.WaveAnalysisError, match="no lane_1"):
-        wa.read_tables(tmp_path)
+        tables.read_tables(tmp_path)
     (tmp_path / "lane_2").mkdir()
     (tmp_path / "lane_2" / "wave_front_15.csv").write_text("time,space\n1,2\n")
     with pytest.raises(wa.WaveAnalysisError, match=r"front_15\.csv lacks the columns speed, v_id"):
-        wa.read_tables(tmp_path)
+        tables.read_tables(tmp_path)
     columns = ",".join(wa.POINT_COLUMNS)
     (tmp_path / "lane_2" / "wave_front_15.csv").write_text(f"{columns}\n")
     with pytest.raises(wa.WaveAnalysisError, match=r"wave_tail_15\.csv is missing"):
-        wa.read_tables(tmp_path)
+        tables.read_tables(tmp_path)
     # a folder that is not a waves folder is never overwritten
     precious = tmp_path / "precious"
     precious.mkdir()
     (precious / "notes.txt").write_text("mine")
     with pytest.raises(wa.WaveAnalysisError, match="refusing to overwrite"):
-        wa.write_tables({}, precious, {})
+        tables.write_tables({}, precious, {})
     assert (precious / "notes.txt").read_text() == "mine"
 
 
@@ -167,7 +168,7 @@ def test_the_embedded_morning_has_the_real_mornings_waves_in_every_lane():
     median within 30 % of the real 2022-11-22 lane's, and the front speed median inside
     the real lane's IQR. About a minute where the store is not cached yet."""
     lanes = wa.analyse_store(embedded_store("morning", progress=False), "westbound")
-    rows = wa.compare(wa.summary(lanes), wa.reference()["lanes"])
+    rows = tables.compare(tables.summary(lanes), tables.reference()["lanes"])
     assert [row["lane"] for row in rows] == ["lane_1", "lane_2", "lane_3", "lane_4"]
     missed = [(row["lane"], name) for row in rows for name, ok in row["within"].items() if not ok]
-    assert not missed, wa.format_comparison(rows, "preset C")
+    assert not missed, tables.format_comparison(rows, "preset C")
