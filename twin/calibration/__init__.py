@@ -1,0 +1,2 @@
+"""Driver behaviour calibrated from a recording: car following, desired speeds and
+lane changes (``twin calibrate``)."""

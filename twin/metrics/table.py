@@ -5,9 +5,10 @@ whether the paired benchmark compares it with ``human``.
 ``metrics.json`` (:mod:`twin.metrics.measure`) is the nested document a run writes;
 this table is the flat view of it that ``twin eval``'s ``episodes.parquet`` and
 summaries, the paired benchmark (:mod:`twin.control.benchmark`), the env's
-``info["metrics"]`` and the documentation (``docs/metrics.md``, written by
-:func:`markdown_table`) read. Adding a metric is its computation (in the section of
-``metrics.json`` it belongs to) and one :class:`Metric` here.
+``info["metrics"]`` and the documentation read. Adding a metric is its computation
+(in the section of ``metrics.json`` it belongs to) and one :class:`Metric` here;
+``python -m twin.metrics.table`` then writes ``docs/metrics.md`` anew (a test fails
+while it is out of date).
 """
 
 from collections.abc import Callable
@@ -17,6 +18,7 @@ EVERY_RUN = "every run"
 WITH_CONTROLLER = "runs with an ego controller"
 WITH_AV_SHARE = "runs with --av-share"
 WITH_RECORDING = "runs whose ego's recording has a slow spell"
+WITH_LANE_TRAFFIC = "runs with recorded traffic in the lane"
 
 
 @dataclass(frozen=True)
@@ -155,7 +157,8 @@ METRICS: tuple[Metric, ...] = (
     *(
         Metric(f"speed_field_rmse_lane_{lane}_mps", "m/s", f"the speed-field RMS error of "
                f"lane {lane}{' (HOV)' if lane == -1 else ''}",
-               ("traffic", "speed_field", f"lane_{lane}", "rmse_mps"))
+               ("traffic", "speed_field", f"lane_{lane}", "rmse_mps"),
+               produced_by=WITH_LANE_TRAFFIC)
         for lane in (-1, -2, -3, -4)
     ),
 )  # fmt: skip
@@ -172,8 +175,20 @@ def flatten(figures: dict) -> dict:
     return {metric.name: metric.read(figures) for metric in METRICS}
 
 
+def document() -> str:
+    """``docs/metrics.md``: the table of metrics, for people."""
+    return (
+        "# Metrics\n\n"
+        "Every metric of a run, as `twin eval` writes it to `episodes.parquet` and summarises\n"
+        "it, the paired benchmark compares it and the Gymnasium env reports it in\n"
+        '`info["metrics"]`. The path in brackets is where the run\'s `metrics.json` holds it.\n'
+        "Generated from `twin/metrics/table.py` by `python -m twin.metrics.table`; do not edit.\n\n"
+        + markdown_table()
+    )
+
+
 def markdown_table() -> str:
-    """The table of metrics for the documentation (``docs/metrics.md``)."""
+    """The table of metrics as Markdown."""
     lines = [
         "| metric | unit | definition | produced by | in twin eval | paired vs human |",
         "|---|---|---|---|---|---|",
@@ -187,3 +202,9 @@ def markdown_table() -> str:
             f"{summary} | {paired} |"
         )
     return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    from twin.core.paths import REPO_ROOT
+
+    (REPO_ROOT / "docs" / "metrics.md").write_text(document())

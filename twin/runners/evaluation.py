@@ -49,6 +49,7 @@ from twin.runners.episodes import (
     reset_or_skip,
 )
 from twin.runners.folders import claim
+from twin.traffic.baselines import BASELINES
 
 FORMAT = "i24-twin-eval"
 VERSION = 1
@@ -57,7 +58,6 @@ RESULTS = "results"
 CONGESTED_TRAVEL = 13.4  # [m/s] room is kept ahead of an episode's ego for this speed
 
 #: Baseline controllers named without their module (``--controller human,acc``).
-BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
 
 
 class EvaluationError(TwinError):

@@ -37,6 +37,9 @@ import numpy as np
 
 from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
 
+#: The baselines by their command-line names (``twin.controllers:NAME``).
+BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
+
 
 def _positive(params, *names: str) -> None:
     for name in names:
