@@ -28,3 +28,28 @@ def test_a_plot_window_outside_the_data_is_a_named_error(tmp_path, capsys):
     assert "no westbound samples" in capsys.readouterr().err
     assert not out.exists()
     assert main(argv) == 0 and out.is_file()
+
+
+def test_synth_command_writes_a_day(tmp_path, capsys):
+    out = tmp_path / "day.json"
+    assert (
+        main(
+            [
+                "data",
+                "synth",
+                "--preset",
+                "A",
+                "--out",
+                str(out),
+                "--minutes",
+                "0.5",
+                "--start",
+                "2022-11-30T06:45:50-06:00",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert out.read_bytes().startswith(b"[") and "trajectories" in capsys.readouterr().out
+    assert main(["data", "synth", "--preset", "A", "--out", str(out), "--start", "06:45"]) == 2
+    assert "ISO 8601" in capsys.readouterr().err

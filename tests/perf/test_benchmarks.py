@@ -30,31 +30,6 @@ def test_bench_dataset_prints_frames_per_second_by_workers(wave_store, capsys):
     assert line["scaling"] > 0
 
 
-def test_synth_command_writes_a_day(tmp_path, capsys):
-    out = tmp_path / "day.json"
-    assert (
-        main(
-            [
-                "data",
-                "synth",
-                "--preset",
-                "A",
-                "--out",
-                str(out),
-                "--minutes",
-                "0.5",
-                "--start",
-                "2022-11-30T06:45:50-06:00",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
-    assert out.read_bytes().startswith(b"[") and "trajectories" in capsys.readouterr().out
-    assert main(["data", "synth", "--preset", "A", "--out", str(out), "--start", "06:45"]) == 2
-    assert "ISO 8601" in capsys.readouterr().err
-
-
 @pytest.mark.slow
 def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
     assert main(["bench", "calibrate", "--data", str(wave_store.path), "--repeats", "1"]) == 0
