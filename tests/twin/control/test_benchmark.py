@@ -7,24 +7,18 @@ import pandas as pd
 import pytest
 
 from twin.control import benchmark
-from twin.data.store import TrajectoryStore
 from twin.runners.evaluation import EvalConfig, EvaluationError
 
 
-@pytest.fixture
-def calibrated(calibrated_wave_store) -> TrajectoryStore:
-    return calibrated_wave_store
+def _config(**changes) -> EvalConfig:
+    return EvalConfig(episodes=2, duration=8.0, behaviours=("calibrated",), seed=3, **changes)
 
 
-def _config(**changes):
-    settings = {"episodes": 2, "duration": 8.0, "behaviours": ("paper", "calibrated"), "seed": 3}
-    return EvalConfig(**{**settings, **changes})
-
-
-def test_the_controller_benchmark_pairs_each_controller_with_human(calibrated, built_map, tmp_path):
-    config = _config(
-        behaviours=("calibrated",), controllers=("human", "follower_stopper"), av_share=0.3
-    )
+def test_the_controller_benchmark_pairs_each_controller_with_human(
+    calibrated_wave_store, built_map, tmp_path
+):
+    calibrated = calibrated_wave_store
+    config = _config(controllers=("human", "follower_stopper"), av_share=0.3)
     assert config.controllers == ("twin.controllers:human", "twin.controllers:follower_stopper")
     out = tmp_path / "bench"
     benchmark.benchmark(calibrated, out, config, workers=1, bundle=built_map, progress=False)

@@ -13,5 +13,5 @@ def test_time_space_plot_writes_a_png(wave_store, tmp_path):
 
 
 def test_empty_window_is_a_clear_error(wave_store, tmp_path):
-    with pytest.raises(ValueError, match="no westbound samples"):
+    with pytest.raises(StoreError, match="no westbound samples"):
         time_space_plot(wave_store, "westbound", SCENARIO_TIME + 86400, 1, tmp_path / "x.png")

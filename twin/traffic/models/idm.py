@@ -160,11 +160,9 @@ IDM = CarFollowingModel(
     from_traits=_same,
 )
 
-TEXTBOOK_IDM = CarFollowingModel(
+TEXTBOOK_IDM = replace(
+    IDM,
     name="idm-textbook",
     reference="Treiber, Hennecke, Helbing 2000, Phys. Rev. E 62, 1805",
-    params=IDMParams,
-    parameters=PARAMETERS,
     accel=idm_acceleration,
-    from_traits=_same,
 )
