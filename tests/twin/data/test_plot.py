@@ -1,6 +1,7 @@
 import matplotlib.image as mpimg
 import pytest
 
+from twin.core.errors import StoreError
 from twin.core.i24 import SCENARIO_TIME
 from twin.data.plot import time_space_plot
 
