@@ -150,10 +150,10 @@ def build_map(out: Path, *, seed: int = DEFAULT_SEED) -> MapBundle:
     Raises:
         MapError: a source or parameter file is malformed, or ``out`` exists and is
             not a map folder.
-        ValueError: ``seed`` is negative.
+        MapError: ``seed`` is negative.
     """
     if int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        raise MapError(f"seed must be a non-negative integer, got {seed!r}")
     params = load_params()
     sources = sources_module.load_sources()
     road = RoadModel.from_sources(sources, params)

@@ -51,6 +51,7 @@ def _fail_with(monkeypatch, error: BaseException) -> None:
         (["bench", "eval", "--workers", "1,x"], "--workers must be integers like 1,2, got '1,x'"),
         (["bench", "env", "--steps", "0"], "--steps, --repeats and --workers must be >= 1"),
         (["bench", "traffic", "--vehicles", "0"], "--vehicles must be > 0, got 0"),
+        (["map", "build", "--seed", "-1", "--out", "m"], "seed must be a non-negative integer, got -1"),
     ],
 )
 def test_a_value_the_twin_cannot_use_is_one_line_with_status_2(
@@ -116,3 +117,11 @@ def test_the_exit_status_reaches_the_shell():
     assert done.stderr.splitlines() == [
         "twin: error: no embedded data 'nosuch': choose one of embedded:default, embedded:morning"
     ]
+
+
+def test_repeats_below_one_are_refused_by_every_benchmark(capsys):
+    """``--repeats 0`` left a benchmark with nothing timed (a bug's traceback)."""
+    with pytest.raises(SystemExit) as stop:
+        main(["bench", "map", "--repeats", "0"])
+    assert stop.value.code == EXIT_USER_ERROR
+    assert "argument --repeats: must be >= 1, got 0" in capsys.readouterr().err

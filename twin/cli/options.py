@@ -31,8 +31,19 @@ def add_store(parser: argparse.ArgumentParser) -> None:
 
 
 def add_repeats(parser: argparse.ArgumentParser, default: int) -> None:
-    """``--repeats``: how often a benchmark is timed (its figures are the medians)."""
-    parser.add_argument("--repeats", type=int, default=default)
+    """``--repeats``: how often a benchmark is timed (its figures are the medians), >= 1."""
+    parser.add_argument("--repeats", type=at_least_one, default=default)
+
+
+def at_least_one(text: str) -> int:
+    """An integer option that must be >= 1 (argparse names the option when it is not)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
 
 
 def add_set(parser: argparse.ArgumentParser, help: str) -> None:
