@@ -350,7 +350,7 @@ def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
     return {
         "format": FORMAT,
         "version": VERSION,
-        "config": json.loads(json.dumps(asdict(config), default=str)),
+        "config": _config_identity(config),
         "data": {
             "store": str(store.path),
             "roads": store.metadata.get("roads"),
@@ -360,12 +360,18 @@ def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
     }
 
 
+def _config_identity(config: EvalConfig) -> dict:
+    """The settings of an evaluation as they are kept in ``eval.json``."""
+    return json.loads(json.dumps(asdict(config), default=str))
+
+
 def _claim(out: Path, config: EvalConfig, store: TrajectoryStore, bundle) -> None:
     """Make ``out`` this evaluation's folder, or check that it already is
     (:func:`twin.runners.folders.claim`)."""
     claim(
         out, IDENTITY, _identity(config, store, bundle), kind="evaluation",
         noun="evaluation", error=EvaluationError,
+        defaults={"config": _config_identity(EvalConfig())},
     )  # fmt: skip
 
 

@@ -5,7 +5,9 @@ else. Work already finished in it is kept; the same command resumes it.
 The identity is a JSON marker file whose ``format`` names the kind of folder; a rerun
 must bring the same identity, setting by setting (nested tables are compared key by
 key, and a TOML document held as text is compared as its settings), so that the
-results it adds match those already there.
+results it adds match those already there. A setting the folder does not hold (one
+added to the twin since the folder was made) matches when it is asked at its default,
+which is what the folder was made with.
 """
 
 import json
@@ -26,6 +28,7 @@ def claim(
     error: type[TwinError] = TwinError,
     files: dict[str, str] | None = None,
     toml: tuple[str, ...] = (),
+    defaults: dict | None = None,
     hint: str = "",
 ) -> None:
     """Make ``out`` the folder of ``identity``, or check that it already is.
@@ -40,6 +43,8 @@ def claim(
             written first: a folder with its marker is complete.
         toml: keys of ``identity`` whose value is a TOML document, compared setting by
             setting.
+        defaults: an identity made with the default settings: a setting missing from
+            the folder's identity matches where it is asked at this default.
         hint: added to the error when the settings differ (how to resume).
 
     Raises:
@@ -53,7 +58,7 @@ def claim(
         raise error(f"--out {out} is a file, not an {kind} folder")
     if out.is_dir() and any(out.iterdir()):
         held = _held(path, identity["format"], kind, error)
-        differ = differences(held, identity, noun, toml)
+        differ = differences(held, identity, noun, toml, defaults)
         if differ:
             raise error(
                 f"{out} holds an {kind} made with other settings or data "
@@ -86,14 +91,22 @@ def _held(path: Path, fmt: str, kind: str, error) -> dict:
     return held
 
 
-def differences(held: dict, wanted: dict, noun: str, toml: tuple[str, ...] = ()) -> list[str]:
+def differences(
+    held: dict,
+    wanted: dict,
+    noun: str,
+    toml: tuple[str, ...] = (),
+    defaults: dict | None = None,
+) -> list[str]:
     """``"key: <noun> has A, asked B"`` for every setting in which two identities
-    differ (nested keys joined by dots; the values of ``toml`` keys read as TOML)."""
+    differ (nested keys joined by dots; the values of ``toml`` keys read as TOML; a
+    key ``held`` lacks matches where it is asked at its value in ``defaults``)."""
     a, b = _flat(held, toml), _flat(wanted, toml)
+    d = _flat(defaults or {}, toml)
     return [
         f"{key}: {noun} has {a.get(key)!r}, asked {b.get(key)!r}"
         for key in sorted(a.keys() | b.keys())
-        if a.get(key) != b.get(key)
+        if a.get(key) != b.get(key) and not (key not in a and key in d and b[key] == d[key])
     ]
 
 

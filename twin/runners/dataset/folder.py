@@ -80,5 +80,6 @@ def claim_folder(out: Path, config: DatasetConfig, store: TrajectoryStore, bundl
     claim(
         out, IDENTITY, identity, kind="i24-twin dataset", noun="dataset", error=DatasetError,
         files={"config.toml": identity["config"]}, toml=("config",),
+        defaults={"config": DatasetConfig().to_toml()},
         hint=f" ({Path(out) / 'config.toml'} loads back with --config)",
     )  # fmt: skip
