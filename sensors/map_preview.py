@@ -13,9 +13,7 @@ from mapgen.build import MapBundle
 from mapgen.road import mile_marker_of
 from twin.core.atomic import atomic_file
 from twin.core.i24 import Road, lane_center
-from twin.physics.bullet import pybullet as p
-from twin.physics.map_bodies import load_map_bodies
-from twin.physics.render import LIGHT, SKY_HORIZON, SKY_TOP
+from twin.physics.map_view import MapView
 
 WIDTH = 1600  # [px] of the picture
 
@@ -27,18 +25,14 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
         ``out``.
     """
     out = Path(out)
-    client = p.connect(p.DIRECT)
-    try:
-        load_map_bodies(client, bundle, collision=False)
-        road = bundle.road
-        s0, s1 = road.station_range
-        overpass = bundle.description["objects"]["overpass"]["station_m"]
-        half_width = road.outer_edge + 60.0
-        overview = _top_view(client, road, (s0, s1), half_width, WIDTH)
-        close = _top_view(client, road, (overpass - 110.0, overpass + 110.0), 55.0, WIDTH)
-        eye = _drivers_eye(client, road, overpass - 140.0, WIDTH, WIDTH * 9 // 16)
-    finally:
-        p.disconnect(client)
+    road = bundle.road
+    s0, s1 = road.station_range
+    overpass = bundle.description["objects"]["overpass"]["station_m"]
+    half_width = road.outer_edge + 60.0
+    with MapView(bundle) as view:
+        overview = _top_view(view, road, (s0, s1), half_width, WIDTH)
+        close = _top_view(view, road, (overpass - 110.0, overpass + 110.0), 55.0, WIDTH)
+        eye = _drivers_eye(view, road, overpass - 140.0, WIDTH, WIDTH * 9 // 16)
     panels = [
         _titled(
             overview,
@@ -54,7 +48,7 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
     return out
 
 
-def _top_view(client, road, stations, half_width, width) -> np.ndarray:
+def _top_view(view: MapView, road, stations, half_width, width) -> np.ndarray:
     """View from straight above, eastbound travel to the right and westbound on top.
 
     TinyRenderer takes its near and far planes from a perspective matrix, so the view
@@ -66,41 +60,22 @@ def _top_view(client, road, stations, half_width, width) -> np.ndarray:
     altitude = 20_000.0  # [m]
     eye = [center[0], center[1], altitude]
     up = -road.right_vector
-    view = p.computeViewMatrix(eye, [center[0], center[1], 0.0], [up[0], up[1], 0.0])
     fov = np.degrees(2.0 * np.arctan(half_width / altitude))
-    projection = p.computeProjectionMatrixFOV(fov, length / (2.0 * half_width), 19_000.0, 21_000.0)
-    return _render(client, view, projection, width, height)
+    target = [center[0], center[1], 0.0]
+    return view.look(
+        eye, target, [up[0], up[1], 0.0], fov, 19_000.0, 21_000.0, width, height,
+        aspect=length / (2.0 * half_width),
+    )  # fmt: skip
 
 
-def _drivers_eye(client, road, station, width, height) -> np.ndarray:
+def _drivers_eye(view: MapView, road, station, width, height) -> np.ndarray:
     """Perspective view from 1.4 m above the centre of eastbound lane -2."""
     x = station
     position, _, _ = road.to_world(Road.EASTBOUND, [x], [float(lane_center(-2))])
     eye = position[0] + [0.0, 0.0, 1.4]
     ahead, _, _ = road.to_world(Road.EASTBOUND, [x + 60.0], [float(lane_center(-2))])
     target = ahead[0] + [0.0, 0.0, 0.4]
-    view = p.computeViewMatrix(eye.tolist(), target.tolist(), [0.0, 0.0, 1.0])
-    projection = p.computeProjectionMatrixFOV(60.0, width / height, 0.3, 2500.0)
-    return _render(client, view, projection, width, height, horizon=True)
-
-
-def _render(client, view, projection, width, height, horizon=False) -> np.ndarray:
-    _, _, rgba, _, seg = p.getCameraImage(
-        width,
-        height,
-        view,
-        projection,
-        renderer=p.ER_TINY_RENDERER,
-        physicsClientId=client,
-        **LIGHT,
-    )
-    rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))[:, :, :3].copy()
-    sky = np.reshape(np.asarray(seg), (height, width)) < 0
-    rows = np.linspace(0.0, 1.0, height)[:, None] if horizon else np.full((height, 1), 0.5)
-    gradient = SKY_TOP + (SKY_HORIZON - SKY_TOP) * np.minimum(rows * 2.0, 1.0)
-    background = np.broadcast_to(gradient[:, None, :], (height, width, 3)).astype(np.uint8)
-    rgb[sky] = background[sky]
-    return rgb
+    return view.look(eye, target, [0.0, 0.0, 1.0], 60.0, 0.3, 2500.0, width, height, horizon=True)
 
 
 def _titled(image: np.ndarray, title: str) -> np.ndarray:
