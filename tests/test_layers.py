@@ -81,6 +81,35 @@ def imports(name: str, path: Path) -> set[str]:
 def test_every_module_belongs_to_a_layer():
     for name in modules():
         package_of(name)
+    # a new package under twin/ is placed in LAYERS, not taken for the top layer
+    packages = {p.parent.name for p in (ROOT / "twin").glob("*/__init__.py")}
+    unplaced = sorted(f"twin.{name}" for name in packages if f"twin.{name}" not in RANK)
+    assert not unplaced, f"packages missing from LAYERS: {unplaced}"
+
+
+def test_only_the_physics_package_imports_pybullet():
+    outside = []
+    for name, path in modules().items():
+        if package_of(name) == "twin.physics":
+            continue
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in ast.walk(tree):
+            names = (
+                [alias.name for alias in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            names += (
+                [f"{node.module}.{alias.name}" for alias in node.names]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            if any(n.split(".")[0] == "pybullet" or n == "twin.physics.bullet.pybullet"
+                   for n in names):  # fmt: skip
+                outside.append(name)
+    assert not outside, f"pybullet used outside twin/physics: {sorted(set(outside))}"
 
 
 def test_no_module_imports_a_higher_layer():
@@ -94,13 +123,50 @@ def test_no_module_imports_a_higher_layer():
     assert not upward, "upward imports:\n" + "\n".join(sorted(upward))
 
 
-def test_no_two_packages_import_each_other():
-    edges = set()
+def test_no_packages_import_each_other_round_a_cycle():
+    graph: dict[str, set[str]] = {}
     for name, path in modules().items():
         mine = package_of(name)
-        edges.update((mine, package_of(o)) for o in imports(name, path) if package_of(o) != mine)
-    cycles = sorted(f"{a} <-> {b}" for a, b in edges if (b, a) in edges and a < b)
-    assert not cycles, "packages importing each other: " + ", ".join(cycles)
+        graph.setdefault(mine, set()).update(
+            package_of(o) for o in imports(name, path) if package_of(o) != mine
+        )
+    cycles = [sorted(c) for c in strongly_connected(graph) if len(c) > 1]
+    assert not cycles, f"packages importing each other round a cycle: {cycles}"
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[set[str]]:
+    """The strongly connected components of a directed graph (Tarjan's algorithm)."""
+    index, low, stack, on_stack, out = {}, {}, [], set(), []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in graph.get(node, ()):
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = set()
+            while True:
+                top = stack.pop()
+                on_stack.discard(top)
+                component.add(top)
+                if top == node:
+                    break
+            out.append(component)
+
+    for node in list(graph):
+        if node not in index:
+            visit(node)
+    return out
+
+
+def test_the_cycle_search_finds_a_cycle_of_three():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert [sorted(c) for c in strongly_connected(graph) if len(c) > 1] == [["a", "b", "c"]]
 
 
 @pytest.mark.parametrize(
