@@ -306,7 +306,7 @@ class WaveDampeningEnv(gym.Env):
 
     def _metrics(self) -> dict:
         from twin.metrics.measure import measure
-        from twin.runners.evaluation import flatten
+        from twin.metrics.table import flatten
 
         figures, _ = measure(self.sim, self.store, 0.0, 0.0)
         return flatten(figures)

@@ -105,8 +105,8 @@ METRICS: tuple[Metric, ...] = (
            ("counts", "lane_changes"), summary="sum"),
     Metric("lane_changes_recorded", "count", "lane changes the recording makes in the same "
            "moving window", ("counts", "lane_changes_recorded_in_window"), summary="sum"),
-    Metric("collisions", "count", "pairs of bodies that touched", ("physics", "collisions"),
-           summary="sum"),
+    Metric("collisions", "count", "new contacts between vehicle bodies",
+           ("physics", "collisions"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
     Metric("vehicles_off_road", "count", "vehicles that left the road",

@@ -25,7 +25,7 @@ class SynthResult:
     tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
     vehicle_class: np.ndarray
     dimensions: np.ndarray  # (m, 3) [m]
-    drivers: IDMParams  # (m,) each: the traits each vehicle drove with (its model's from_traits)
+    drivers: IDMParams  # (m,) each: the traits drawn for each vehicle (its model's from them)
     lane_changes: int
     collisions: int
 
