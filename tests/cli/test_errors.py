@@ -51,7 +51,10 @@ def _fail_with(monkeypatch, error: BaseException) -> None:
         (["bench", "eval", "--workers", "1,x"], "--workers must be integers like 1,2, got '1,x'"),
         (["bench", "env", "--steps", "0"], "--steps, --repeats and --workers must be >= 1"),
         (["bench", "traffic", "--vehicles", "0"], "--vehicles must be > 0, got 0"),
-        (["map", "build", "--seed", "-1", "--out", "m"], "seed must be a non-negative integer, got -1"),
+        (
+            ["map", "build", "--seed", "-1", "--out", "m"],
+            "seed must be a non-negative integer, got -1",
+        ),
     ],
 )
 def test_a_value_the_twin_cannot_use_is_one_line_with_status_2(

@@ -1,8 +1,12 @@
-"""Heterogeneous drivers: IDM parameters drawn per vehicle from its class.
+"""Heterogeneous drivers: each vehicle's traits drawn from its class.
 
-Class means come from ``assets/vehicle_classes.csv`` (desired speed and its spread,
-maximum acceleration, time headway); the spreads around them are settings here.
-Draws are standard normals clipped to +/- 2 sd, so no driver is absurd.
+A driver's traits are what the class table describes (desired speed, time headway,
+maximum acceleration) with a minimum gap, a comfortable deceleration and IDM's
+acceleration exponent; every car-following model turns them into its parameters
+(``CarFollowingModel.from_traits``). Class means come from
+``assets/vehicle_classes.csv`` (desired speed and its spread, maximum acceleration,
+time headway); the spreads around them are settings here. Draws are standard normals
+clipped to +/- 2 sd, so no driver is absurd.
 """
 
 from dataclasses import dataclass
@@ -10,14 +14,31 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.vehicle_classes import VehicleClassTable
-from twin.traffic.models.idm import IDMParams
 
 CLIP_SD = 2.0  # draws are clipped to this many standard deviations
 
 
 @dataclass(frozen=True)
+class DriverTraits:
+    """Drivers' traits, struct-of-arrays; each field (n,) float64 or a scalar.
+
+    Attributes:
+        desired_speed: [m/s]. time_headway: [s]. min_gap: [m] at a standstill.
+        max_accel: [m/s^2]. comfortable_decel: [m/s^2], positive.
+        delta: [-] IDM's acceleration exponent.
+    """
+
+    desired_speed: np.ndarray | float
+    time_headway: np.ndarray | float
+    min_gap: np.ndarray | float
+    max_accel: np.ndarray | float
+    comfortable_decel: np.ndarray | float
+    delta: np.ndarray | float = 4.0
+
+
+@dataclass(frozen=True)
 class DriverDistribution:
-    """How IDM parameters are drawn per vehicle.
+    """How drivers' traits are drawn per vehicle.
 
     Attributes:
         time_headway_sd_log: [-] log-normal spread of T around the class's T.
@@ -63,8 +84,8 @@ class DriverDistribution:
 
     def draw(
         self, classes: VehicleClassTable, vehicle_class: np.ndarray, rng: np.random.Generator
-    ) -> IDMParams:
-        """IDM parameters (n,) for vehicles of ``vehicle_class`` (n,) ints.
+    ) -> DriverTraits:
+        """Traits (n,) of the drivers of vehicles of ``vehicle_class`` (n,) ints.
 
         The draws are made in the order v0, T, s0, a, b, each ``n`` at a time.
         """
@@ -91,6 +112,6 @@ class DriverDistribution:
         decel = np.full(n, self.comfortable_decel)
         if self.comfortable_decel_sd > 0:
             decel = decel + self.comfortable_decel_sd * z()
-        return IDMParams(
+        return DriverTraits(
             desired_speed, time_headway, min_gap, max_accel, decel, np.full(n, self.delta)
         )

@@ -33,9 +33,9 @@ from twin.traffic.config import TrafficConfig
 from twin.traffic.controlled import Controllers
 from twin.traffic.controller_api import EgoController, lane_change_direction
 from twin.traffic.driver_state import MOBIL_FIELDS, DriverState
+from twin.traffic.drivers import DriverTraits
 from twin.traffic.models import car_following_model
 from twin.traffic.models.base import concatenate
-from twin.traffic.models.idm import IDMParams
 from twin.traffic.scene import NO_OBSTACLES, Commands, Obstacles, Scene
 
 
@@ -370,7 +370,7 @@ class TrafficManager:
         once: the table is fixed for a manager's life."""
         drivers = self.config.drivers
         share = self.classes.column("share")
-        traits = IDMParams(
+        traits = DriverTraits(
             desired_speed=float(share @ self.classes.column("desired_speed_mps")),
             time_headway=float(share @ self.classes.column("time_headway_s")),
             min_gap=drivers.min_gap,

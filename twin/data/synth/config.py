@@ -13,7 +13,6 @@ MAX_DECEL = 9.0  # [m/s^2] full braking on dry asphalt
 COMFORT_DECEL = 1.7  # [m/s^2] IDM b
 MIN_GAP = 2.0  # [m] IDM s0 mean
 DRIVERS = DriverDistribution(min_gap=MIN_GAP, comfortable_decel=COMFORT_DECEL)
-IDM_NAMES = ("desired_speed", "time_headway", "min_gap", "max_accel", "comfortable_decel", "delta")
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@ resampled at the camera rate with tracking noise, written in the real JSON layou
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +11,9 @@ import orjson
 from tqdm import tqdm
 
 from twin.core import i24
-from twin.data.synth.config import IDM_NAMES, SynthConfig
+from twin.data.synth.config import SynthConfig
 from twin.data.synth.simulation import Simulation
-from twin.traffic.models.idm import IDMParams
+from twin.traffic.drivers import DriverTraits
 
 
 @dataclass
@@ -25,7 +25,7 @@ class SynthResult:
     tracks: list  # per vehicle: (t, x, y) arrays at the recording rate, noise added
     vehicle_class: np.ndarray
     dimensions: np.ndarray  # (m, 3) [m]
-    drivers: IDMParams  # (m,) each: the traits drawn for each vehicle (its model's from them)
+    drivers: DriverTraits  # (m,) each: the traits drawn for each vehicle
     lane_changes: int
     collisions: int
 
@@ -85,10 +85,10 @@ def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
         ids.append(v)
         tracks.append((t, xs, ys))
     ids = np.array(ids, dtype=np.int64)
-    drivers = IDMParams(
+    drivers = DriverTraits(
         *(
             np.concatenate([getattr(batch, name) for batch in sim.registry_drivers])[ids]
-            for name in IDM_NAMES
+            for name in (f.name for f in fields(DriverTraits))
         )
     )
     return SynthResult(

@@ -10,11 +10,11 @@ import numpy as np
 from twin.core import i24
 from twin.core.vehicle_classes import vehicle_classes
 from twin.data.synth.config import HOUR, MAX_DECEL, MIN_GAP, Slowdown, SynthConfig
+from twin.traffic.drivers import DriverTraits
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
 from twin.traffic.models import car_following_model
 from twin.traffic.models.base import take
-from twin.traffic.models.idm import IDMParams
 
 
 @dataclass
@@ -56,9 +56,9 @@ class _Vehicles:
             setattr(self, name, np.concatenate([value, getattr(other, name)]))
 
     @property
-    def traits(self) -> IDMParams:
-        """The drivers' traits (the class table's terms: IDM's parameters)."""
-        return IDMParams(self.v0, self.T, self.s0, self.a, self.b, self.delta)
+    def traits(self) -> DriverTraits:
+        """The drivers' traits."""
+        return DriverTraits(self.v0, self.T, self.s0, self.a, self.b, self.delta)
 
 
 class Simulation:
@@ -88,7 +88,7 @@ class Simulation:
         self.until_slow: list[int] | None = None  # drivers to each lane's next hesitant one
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
-        self.registry_drivers: list[IDMParams] = []  # by vid
+        self.registry_drivers: list[DriverTraits] = []  # by vid
         self.vehicles = self._new_vehicles(np.zeros(0, np.int8), np.zeros(0), np.zeros(0))
 
     # -- creation ---------------------------------------------------------------------
@@ -167,14 +167,14 @@ class Simulation:
         mean = 1.0 / self.cfg.bottleneck.slow_share
         return max(1, round(mean * self.rng.uniform(0.5, 1.5)))
 
-    def _traits(self) -> IDMParams:
+    def _traits(self) -> DriverTraits:
         """The drivers' traits, with the bottleneck's speeds for those in it."""
         veh, b = self.vehicles, self.cfg.bottleneck
         if b is None:
             return veh.traits
         inside = (veh.x + veh.length >= b.x) & (veh.x <= b.x + b.length)
         v0 = np.where(inside, np.minimum(veh.v0, veh.bottleneck_speed), veh.v0)
-        return IDMParams(v0, veh.T, veh.s0, veh.a, veh.b, veh.delta)
+        return DriverTraits(v0, veh.T, veh.s0, veh.a, veh.b, veh.delta)
 
     def populate(self) -> None:
         """Fill the road with traffic at each lane's demand, at free-flow spacing."""

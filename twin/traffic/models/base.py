@@ -14,8 +14,10 @@ and each model says what its parameters are for a driver with those traits
 (``from_traits``): the identity for IDM, Gipps' reaction time and braking from the
 time headway and the comfortable deceleration.
 
-Every model's parameters include ``desired_speed`` [m/s] (the cosimulation sets it)
-and ``max_accel`` [m/s^2] (the traffic manager's acceleration limit).
+Every model's parameters include ``desired_speed`` [m/s] (the cosimulation sets it;
+it is fitted, since the calibration weighs it against the free-flow speeds) and
+``max_accel`` [m/s^2] (the traffic manager's acceleration limit). Bounds are positive:
+fits move in the logarithm of a parameter.
 """
 
 from collections.abc import Callable
@@ -72,8 +74,8 @@ class CarFollowingModel:
             bumper-to-bumper ``gap`` (n,) [m] (``inf``: a free road, ``v_lead``
             ignored); unclipped. A desired speed of 0 brakes to a stop and holds it.
         from_traits: ``from_traits(traits) -> params``: the model's parameters for
-            drivers with the class table's traits (an ``IDMParams`` of (n,) arrays
-            or scalars).
+            drivers with these traits (:class:`~twin.traffic.drivers.DriverTraits` of
+            (n,) arrays or scalars).
     """
 
     name: str
@@ -90,6 +92,8 @@ class CarFollowingModel:
         missing = [name for name in REQUIRED if name not in names]
         if missing:
             raise ValueError(f"{self.name}: every model needs the parameters {missing}")
+        if "desired_speed" not in (p.name for p in self.fitted):
+            raise ValueError(f"{self.name}: desired_speed must be a fitted parameter")
 
     @property
     def names(self) -> tuple[str, ...]:

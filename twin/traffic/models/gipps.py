@@ -69,7 +69,8 @@ def gipps_acceleration(
 
 
 def from_traits(traits) -> GippsParams:
-    """Gipps drivers for the class table's traits (an ``IDMParams``): reaction time 2/3
+    """Gipps drivers with the traits ``traits`` (:class:`~twin.traffic.drivers.DriverTraits`):
+    reaction time 2/3
     of the time headway, most severe braking twice the comfortable deceleration."""
     return GippsParams(
         desired_speed=traits.desired_speed,

@@ -146,9 +146,16 @@ PARAMETERS = (
 )
 
 
-def _same(traits: IDMParams) -> IDMParams:
-    """The class table's traits are IDM's parameters."""
-    return traits
+def _from_traits(traits) -> IDMParams:
+    """IDM's parameters are the drivers' traits (:class:`~twin.traffic.drivers.DriverTraits`)."""
+    return IDMParams(
+        traits.desired_speed,
+        traits.time_headway,
+        traits.min_gap,
+        traits.max_accel,
+        traits.comfortable_decel,
+        traits.delta,
+    )
 
 
 IDM = CarFollowingModel(
@@ -157,7 +164,7 @@ IDM = CarFollowingModel(
     params=IDMParams,
     parameters=PARAMETERS,
     accel=twin_idm_acceleration,
-    from_traits=_same,
+    from_traits=_from_traits,
 )
 
 TEXTBOOK_IDM = replace(

@@ -4,6 +4,8 @@ the desired speed, braking behind a stopped leader, a stop where the desired spe
 is 0, parameters for the class table's drivers, and a calibration box around its
 start."""
 
+from dataclasses import fields, replace
+
 import numpy as np
 import pytest
 
@@ -59,6 +61,29 @@ def test_parameters_are_declared_bounded_and_sliced_as_struct_of_arrays(name):
     assert all(np.shape(getattr(both, p)) == (7,) for p in model.names)
     start = model.from_fitted(np.array([[p.start for p in model.fitted]]))
     assert all(np.ndim(getattr(start, p.name)) in (0, 1) for p in model.parameters)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_one_driver_of_scalar_traits_is_the_same_as_in_an_array(name):
+    """The traffic manager judges the ghosts as the class table's mean driver, given
+    as scalar traits."""
+    model = MODELS[name]
+    traits = DriverDistribution().draw(
+        vehicle_classes(), np.array([0, 4]), np.random.default_rng(3)
+    )
+    one = model.from_traits(replace(traits, **{f.name: float(getattr(traits, f.name)[1])
+                                               for f in fields(traits)}))  # fmt: skip
+    many = model.from_traits(traits)
+    v, lead, gap = np.array([12.0]), np.array([10.0]), np.array([30.0])
+    assert model.accel(v, lead, gap, one)[0] == model.accel(v, lead, gap, take(many, [1]))[0]
+
+
+def test_a_model_must_fit_its_desired_speed():
+    idm = MODELS["idm"]
+    fixed = tuple(replace(p, fitted=False) if p.name == "desired_speed" else p
+                  for p in idm.parameters)  # fmt: skip
+    with pytest.raises(ValueError, match="desired_speed must be a fitted parameter"):
+        replace(idm, name="broken", parameters=fixed)
 
 
 def test_an_unknown_model_is_named_with_the_known_ones():
