@@ -330,6 +330,3 @@ def _fit_chunk(runs: FollowingRuns, vehicle: np.ndarray, m: int, settings: FitSe
 def median_relative_error(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """(k,) median over vehicles of |estimate - truth| / truth, per parameter."""
     return np.median(np.abs(estimate - truth) / truth, axis=0)
-
-
-# -- desired speeds -------------------------------------------------------------------

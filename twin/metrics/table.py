@@ -163,7 +163,6 @@ METRICS: tuple[Metric, ...] = (
     ),
 )  # fmt: skip
 
-BY_NAME = {metric.name: metric for metric in METRICS}
 #: How ``twin eval`` summarises each metric it summarises: ``stats`` or ``sum``.
 SUMMARISED = {m.name: m.summary for m in METRICS if m.summary != "none"}
 #: The metrics the paired benchmark compares with ``human``: whether more is better.

@@ -15,33 +15,21 @@ Vehicle positions are recorded at the simulation step and resampled to the
 camera rate (25 Hz) with a per-vehicle phase and small tracking noise.
 """
 
-from twin.data.synth.config import (
-    COMFORT_DECEL,
-    DRIVERS,
-    HOUR,
-    MAX_DECEL,
-    MIN_GAP,
-    Bottleneck,
-    Slowdown,
-    SynthConfig,
-)
+from twin.data.synth.config import COMFORT_DECEL, Bottleneck, Slowdown, SynthConfig
 from twin.data.synth.presets import (
     ALL_PRESETS,
-    MORNING_DRIVERS,
     OTHER_DRIVERS,
     OTHER_LANE_CHANGES,
     PRESET_A,
     PRESET_B,
     PRESET_C,
     PRESET_S,
-    PRESETS,
 )
 from twin.data.synth.recording import SynthResult, synthesize, write_i24_json
 from twin.data.synth.simulation import Simulation
 
 __all__ = [
-    "ALL_PRESETS", "COMFORT_DECEL", "DRIVERS", "HOUR", "MAX_DECEL", "MIN_GAP", "MORNING_DRIVERS",
-    "OTHER_DRIVERS", "OTHER_LANE_CHANGES", "PRESETS", "PRESET_A", "PRESET_B", "PRESET_C",
-    "PRESET_S", "Bottleneck", "Simulation", "Slowdown", "SynthConfig", "SynthResult",
-    "synthesize", "write_i24_json",
+    "ALL_PRESETS", "COMFORT_DECEL", "OTHER_DRIVERS", "OTHER_LANE_CHANGES", "PRESET_A",
+    "PRESET_B", "PRESET_C", "PRESET_S", "Bottleneck", "Simulation", "Slowdown", "SynthConfig",
+    "SynthResult", "synthesize", "write_i24_json",
 ]  # fmt: skip

@@ -34,32 +34,18 @@ A rerun of the same command skips the complete episodes, so an interrupted run
 resumes where it stopped and ends with the same dataset as an uninterrupted one.
 """
 
-from twin.runners.dataset.assemble import assemble, coco_document, statistics
 from twin.runners.dataset.config import (
-    COCO,
-    EPISODE,
     EPISODES,
-    IDENTITY,
-    MANIFEST,
     DatasetConfig,
     DatasetError,
     LabelFilters,
     load_dataset_config,
-    resolved_renderer,
 )
-from twin.runners.dataset.episode import render_episode, sample_labels
-from twin.runners.dataset.folder import (
-    claim_folder,
-    draw_episodes,
-    episode_folder,
-    is_dataset,
-    is_episode,
-)
+from twin.runners.dataset.episode import render_episode
+from twin.runners.dataset.folder import draw_episodes, is_episode
 from twin.runners.dataset.run import DatasetResult, generate, summary
 
 __all__ = [
-    "COCO", "EPISODE", "EPISODES", "IDENTITY", "MANIFEST", "DatasetConfig", "DatasetError",
-    "DatasetResult", "LabelFilters", "assemble", "claim_folder", "coco_document", "draw_episodes",
-    "episode_folder", "generate", "is_dataset", "is_episode", "load_dataset_config",
-    "render_episode", "resolved_renderer", "sample_labels", "statistics", "summary",
+    "EPISODES", "DatasetConfig", "DatasetError", "DatasetResult", "LabelFilters",
+    "draw_episodes", "generate", "is_episode", "load_dataset_config", "render_episode", "summary",
 ]  # fmt: skip

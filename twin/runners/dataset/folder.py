@@ -54,10 +54,6 @@ def is_episode(path: Path) -> bool:
     return marked_as(path, EPISODE, EPISODE_FORMAT)
 
 
-def is_dataset(path: Path) -> bool:
-    return marked_as(path, IDENTITY, FORMAT)
-
-
 def _identity(config: DatasetConfig, store: TrajectoryStore, bundle) -> dict:
     data = {k: v for k, v in store.metadata.items() if k in ("format", "version", "roads")}
     data["sources"] = [

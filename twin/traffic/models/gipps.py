@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.traffic.models.base import CarFollowingModel, Parameter, take
+from twin.traffic.models.base import CarFollowingModel, Parameter
 
 
 @dataclass(frozen=True)
@@ -42,9 +42,6 @@ class GippsParams:
     decel: np.ndarray | float
     reaction_time: np.ndarray | float
     min_gap: np.ndarray | float
-
-    def take(self, index) -> "GippsParams":
-        return take(self, index)
 
 
 def gipps_acceleration(

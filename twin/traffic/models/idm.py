@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from twin.traffic.models.base import CarFollowingModel, Parameter, take
+from twin.traffic.models.base import CarFollowingModel, Parameter
 
 
 @dataclass(frozen=True)
@@ -38,10 +38,6 @@ class IDMParams:
     max_accel: np.ndarray | float
     comfortable_decel: np.ndarray | float
     delta: np.ndarray | float = 4.0
-
-    def take(self, index: np.ndarray) -> "IDMParams":
-        """The parameters of the vehicles at ``index`` (scalars are kept as they are)."""
-        return take(self, index)
 
 
 def desired_gap(v: np.ndarray, v_lead: np.ndarray, params: IDMParams) -> np.ndarray:
