@@ -45,7 +45,7 @@ import numpy as np
 
 from twin.core.i24 import LANES
 from twin.cosim.config import SCENARIO_B, CosimConfig
-from twin.metrics.energy import followers
+from twin.metrics.economy import followers
 from twin.physics import energy
 from twin.traffic.controller_api import EgoCommand, Observation
 

@@ -3,8 +3,8 @@
 :mod:`twin.metrics.table`).
 
 Sections: ``ego`` (the simulated ego against its recording), ``traffic`` (speeds and
-the speed field against the recording), ``energy`` (:mod:`twin.metrics.energy`),
-``control`` (:mod:`twin.metrics.control`), ``counts``, ``physics`` and ``timing``.
+the speed field against the recording), ``energy`` (:mod:`twin.metrics.economy`),
+``control`` (:mod:`twin.metrics.wave_dampening`), ``counts``, ``physics`` and ``timing``.
 """
 
 import math
@@ -15,9 +15,7 @@ from twin import __version__
 from twin.calibration import following
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
-from twin.metrics import control as control_metrics
-from twin.metrics import energy
-from twin.metrics import fidelity as metrics
+from twin.metrics import economy, fidelity, wave_dampening
 
 RUN_FORMAT = "i24-twin-run"
 COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
@@ -35,7 +33,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
     vehicles, windows, ghosts = log.vehicles(), log.windows(), log.ghosts()
     recorded_ego = store.trajectory(sim.ego.tid)
     ego_rows = vehicles[vehicles["role"] == 0]
-    every = max(1, round(metrics.SAMPLE_PERIOD / cfg.dt))
+    every = max(1, round(fidelity.SAMPLE_PERIOD / cfg.dt))
     step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
     sampled = vehicles[step_of % every == 0]
     sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
@@ -52,12 +50,12 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
         "ended_early": sim.counters.ended or None,
         "ego": _ego(sim, ego_rows, recorded_ego),
         "traffic": {
-            **metrics.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
-            "speed_field": metrics.speed_field_metrics(
+            **fidelity.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
+            "speed_field": fidelity.speed_field_metrics(
                 sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
             ),
         },
-        "energy": energy.run_figures(
+        "energy": economy.run_figures(
             vehicles,
             sim.ego_id,
             sim.world.road,
@@ -67,11 +65,11 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             avs=sorted(sim.av_ids),
         ),
         "control": {
-            **control_metrics.control_figures(
+            **wave_dampening.control_figures(
                 vehicles,
                 ghosts,
                 sim.ego_id,
-                energy.followers(vehicles, sim.ego_id),
+                economy.followers(vehicles, sim.ego_id),
                 lengths,
                 cfg.dt,
             ),
@@ -104,9 +102,9 @@ def _ego(sim: Cosimulator, ego_rows, recorded_ego) -> dict:
             "time": sim.ego.t,
             "speed_mps": round(sim.ego.speed, 3),
         },
-        **metrics.ego_metrics(ego_rows, recorded_ego, sim.t0),
-        "position_error_m": metrics.ego_position_errors(ego_rows, recorded_ego, sim.t0),
-        "slow_spells": metrics.slow_spell_timing(ego_rows, recorded_ego, sim.t0),
+        **fidelity.ego_metrics(ego_rows, recorded_ego, sim.t0),
+        "position_error_m": fidelity.ego_position_errors(ego_rows, recorded_ego, sim.t0),
+        "slow_spells": fidelity.slow_spell_timing(ego_rows, recorded_ego, sim.t0),
     }
 
 
@@ -124,10 +122,10 @@ def _counts(sim: Cosimulator, store, vehicles, windows, sampled) -> dict:
         "spawns_skipped_invalid": counters.skipped_invalid,
         "visible_max": int(vehicles.groupby("time").size().max()) - 1,
         "lane_changes": sim.manager.lane_changes,
-        "lane_changes_recorded_in_window": metrics.recorded_lane_changes_in_window(
+        "lane_changes_recorded_in_window": fidelity.recorded_lane_changes_in_window(
             recorded_changes.time, recorded_changes.x, windows, sim.t0
         ),
-        "stalled_across_lines": metrics.stalled_across_lines(sampled, metrics.SAMPLE_PERIOD),
+        "stalled_across_lines": fidelity.stalled_across_lines(sampled, fidelity.SAMPLE_PERIOD),
     }
 
 

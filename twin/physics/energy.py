@@ -24,7 +24,7 @@ times the wheel spin, summed over the driven wheels (:mod:`twin.physics.vehicle`
 logged per step as ``drive_power`` [W].
 
 A run's figures (fuel economy of the ego and its followers, tractive energy per
-vehicle) are :mod:`twin.metrics.energy`'s.
+vehicle) are :mod:`twin.metrics.economy`'s.
 """
 
 from dataclasses import dataclass

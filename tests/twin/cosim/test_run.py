@@ -13,7 +13,7 @@ from twin.cli import main
 from twin.core.i24 import MILE
 from twin.cosim.config import load_config
 from twin.data.empirical import EmpiricalTraffic
-from twin.metrics import energy
+from twin.metrics import economy
 from twin.metrics import fidelity as metrics
 from twin.physics.energy import RAV4_2019
 
@@ -98,7 +98,7 @@ def test_energy_in_the_log_and_in_metrics_json(run_folder):
     assert ego["fuel_feasible"].all() and ego["drive_power"].median() > 500.0  # [W]
     assert m["ego"]["fuel_g"] == pytest.approx(ego["fuel_rate"].sum() * 0.01, abs=1e-3)
     assert m["ego"]["mpg"] == pytest.approx(
-        m["ego"]["distance_m"] / MILE / (m["ego"]["fuel_g"] / energy.GRAMS_PER_GALLON), rel=1e-3
+        m["ego"]["distance_m"] / MILE / (m["ego"]["fuel_g"] / economy.GRAMS_PER_GALLON), rel=1e-3
     )
     simulated = frame[frame["role"] != "ghost"]
     assert m["window"]["vehicles"] == simulated["id"].nunique()

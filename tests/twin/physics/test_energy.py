@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from twin.core.i24 import LANE_WIDTH, MILE
-from twin.metrics import energy as figures
+from twin.metrics import economy
 from twin.physics import energy
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
 from twin.physics.world import PhysicsWorld, SpawnStates
@@ -16,10 +16,10 @@ RAV4 = energy.RAV4_2019
 def test_the_rav4_model_gives_the_check_values_of_control_md():
     cruise = RAV4.rate(30.0, 0.0, 0.0)
     assert cruise == pytest.approx(1.2524, abs=5e-4)  # g/s
-    assert cruise * figures.GALLONS_PER_HOUR_PER_GRAM_PER_S == pytest.approx(1.59, abs=5e-3)
-    hour = figures.economy(30.0 * 3600.0, float(cruise) * 3600.0)
+    assert cruise * economy.GALLONS_PER_HOUR_PER_GRAM_PER_S == pytest.approx(1.59, abs=5e-3)
+    hour = economy.economy(30.0 * 3600.0, float(cruise) * 3600.0)
     assert hour["mpg"] == pytest.approx(42.3, abs=0.1)  # 67.1 mph on 1.59 gal/h
-    l_per_100km_times_mpg = 100.0 * figures.LITRES_PER_GALLON / (MILE / 1000.0)  # 235.2
+    l_per_100km_times_mpg = 100.0 * economy.LITRES_PER_GALLON / (MILE / 1000.0)  # 235.2
     assert hour["l_per_100km"] == pytest.approx(l_per_100km_times_mpg / hour["mpg"], rel=1e-9)
     # a 1.1 % grade adds 0.436 g/s: m g sin(theta) v = 5.6 kW at about 28 % efficiency
     climb = RAV4.rate(30.0, 0.0, 0.011) - cruise

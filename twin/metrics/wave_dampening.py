@@ -67,7 +67,7 @@ def control_figures(
     Args:
         vehicles: the log's simulated-vehicle rows (``time``, ``id``, ``tid``, ``lane``,
             ``x``, ``speed``). ghosts: the log's ghost rows.
-        ego_id: the AV. followers: its followers' ids (:func:`twin.metrics.energy.followers`).
+        ego_id: the AV. followers: its followers' ids (:func:`twin.metrics.economy.followers`).
         length: [m] vehicle length per store tid. dt: [s] the log's step.
     """
     rows = sample(vehicles, dt)

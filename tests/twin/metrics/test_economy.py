@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from twin.core.i24 import MILE
-from twin.metrics import energy
+from twin.metrics import economy
 
 
 def test_group_economy_is_total_distance_over_total_fuel():
@@ -18,10 +18,10 @@ def test_group_economy_is_total_distance_over_total_fuel():
             "drive_power": [1000.0, -50.0, 2000.0, 2000.0],
         }
     )
-    vehicles = energy.per_vehicle(rows, dt=2.0)
+    vehicles = economy.per_vehicle(rows, dt=2.0)
     assert vehicles.loc[1, "fuel_g"] == 1.0 and vehicles.loc[1, "tractive_j"] == 2000.0
-    both = energy.group_figures(vehicles, [1, 2, 99])  # 99: not simulated, ignored
+    both = economy.group_figures(vehicles, [1, 2, 99])  # 99: not simulated, ignored
     assert both["vehicles"] == 2 and both["distance_m"] == 160.0 and both["fuel_g"] == 5.0
-    gallons = 5.0 / energy.GRAMS_PER_GALLON
+    gallons = 5.0 / economy.GRAMS_PER_GALLON
     assert both["mpg"] == pytest.approx(160.0 / MILE / gallons, rel=1e-3)
     assert both["infeasible_s"] == 2.0 and both["tractive_kj"] == 10.0
