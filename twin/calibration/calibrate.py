@@ -45,7 +45,8 @@ from twin.traffic.models.idm import IDM
 CALIBRATION = "calibration.json"
 FITS = "calibration_fits.parquet"
 FORMAT = "i24-twin-calibration"
-VERSION = 1
+VERSION = 2  # 2 names the car-following model fitted (car_following_model)
+READS = (1, 2)  # version 1 calibrations are of IDM
 
 
 @dataclass(frozen=True)
@@ -264,10 +265,10 @@ def read_calibration(store: TrajectoryStore) -> dict | None:
         raise StoreError(f"{path} is not valid JSON: {error}; run 'twin calibrate' again") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise StoreError(f"{path} is not an i24-twin calibration")
-    if doc.get("version") != VERSION:
+    if doc.get("version") not in READS:
         raise StoreError(
-            f"{path} has calibration version {doc.get('version')}, this twin reads {VERSION}: "
-            "run 'twin calibrate' again"
+            f"{path} has calibration version {doc.get('version')}, this twin reads "
+            f"{' and '.join(map(str, READS))}: run 'twin calibrate' again"
         )
     return doc
 

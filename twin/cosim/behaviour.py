@@ -20,9 +20,9 @@ The calibrated behaviours drive the model the calibration fitted (``twin calibra
 --model``), which must be the run's ``traffic.car_following``.
 
 ``auto`` (the default of ``twin run``) is :data:`AUTO_CHOICE` where the store has a
-calibration of the road, else ``paper``: the behaviour ``twin eval`` found most
-faithful on data it was not calibrated on (README, "Calibration, behaviours and
-fidelity", for the figures).
+calibration of the road for the run's car-following model, else ``paper``: the
+behaviour ``twin eval`` found most faithful on data it was not calibrated on (README,
+"Calibration, behaviours and fidelity", for the figures).
 """
 
 from dataclasses import dataclass
@@ -51,13 +51,19 @@ class BehaviourError(TwinError):
     """A behaviour cannot be used with these data (unknown, or the store is not calibrated)."""
 
 
-def resolve(name: str, store: TrajectoryStore, road: Road | str) -> str:
+def resolve(name: str, store: TrajectoryStore, road: Road | str, car_following: str = "idm") -> str:
     """The behaviour ``name`` stands for: ``auto`` is :data:`AUTO_CHOICE` where ``store``
-    has a calibration of ``road``, else ``paper``; others are themselves."""
+    has a calibration of ``road`` fitted for the run's ``car_following`` model, else
+    ``paper``; others are themselves."""
     if name != AUTO:
         return check_behaviour(name)
     doc = read_calibration(store)
-    return AUTO_CHOICE if doc is not None and Road.parse(road).value in doc["roads"] else "paper"
+    calibrated = (
+        doc is not None
+        and Road.parse(road).value in doc["roads"]
+        and calibration_model(doc).name == car_following
+    )
+    return AUTO_CHOICE if calibrated else "paper"
 
 
 def check_behaviour(name: str) -> str:

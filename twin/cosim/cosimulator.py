@@ -108,7 +108,7 @@ class Cosimulator:
         self.road = config.road
         self.direction = config.road.direction
         self.behaviour = Behaviour(
-            resolve(config.behaviour, traffic.store, config.road),
+            resolve(config.behaviour, traffic.store, config.road, config.traffic.car_following),
             traffic.store,
             config.road,
             config.seed,

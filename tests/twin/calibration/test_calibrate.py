@@ -115,3 +115,14 @@ def test_calibrate_model_gipps_is_driven_when_the_run_names_it(store, tmp_path, 
     assert "traffic.car_following=gipps" in capsys.readouterr().err
     assert main([*run, str(tmp_path / "gipps"), "--set", "traffic.car_following=gipps"]) == 0
     assert "behaviour calibrated" in capsys.readouterr().out
+
+
+def test_a_version_1_calibration_is_read_as_idm(store):
+    """Calibrations written before the model was named are of IDM, and still drive."""
+    from twin.calibration.calibrate import calibrate, calibration_model, write_calibration
+
+    doc, fits = calibrate(store, ["westbound"])
+    doc["version"] = 1
+    del doc["car_following_model"]
+    write_calibration(store, doc, fits)
+    assert calibration_model(read_calibration(store)).name == "idm"

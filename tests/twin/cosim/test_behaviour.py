@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from twin.calibration.calibrate import read_fits
-from twin.cosim.behaviour import Behaviour, BehaviourError
+from twin.cosim.behaviour import Behaviour, BehaviourError, resolve
 from twin.cosim.config import SCENARIO_B, ConfigError
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
@@ -154,6 +154,9 @@ def test_a_gipps_calibration_drives_gipps_drivers_and_names_the_model_it_needs(
     ]  # fmt: skip
     with pytest.raises(BehaviourError, match=r"traffic\.car_following=gipps"):
         Behaviour("calibrated", store, "westbound", 0)  # the run drives IDM
+    # auto: the calibration where it is of the run's model, else the paper's drivers
+    assert resolve("auto", store, "westbound") == "paper"
+    assert resolve("auto", store, "westbound", "gipps") == "calibrated"
     config = replace(
         SCENARIO_B, behaviour="calibrated", t_max=3.0,
         traffic=replace(SCENARIO_B.traffic, car_following="gipps"),
