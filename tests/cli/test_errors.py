@@ -128,3 +128,12 @@ def test_repeats_below_one_are_refused_by_every_benchmark(capsys):
         main(["bench", "map", "--repeats", "0"])
     assert stop.value.code == EXIT_USER_ERROR
     assert "argument --repeats: must be >= 1, got 0" in capsys.readouterr().err
+
+
+def test_the_behaviours_the_command_line_offers_are_the_cosimulations():
+    from twin.cli import build_parser
+    from twin.cosim.behaviour import AUTO, BEHAVIOURS
+
+    commands = build_parser()._subparsers._group_actions[0].choices
+    (action,) = [a for a in commands["run"]._actions if a.dest == "behaviour"]
+    assert tuple(action.choices) == (AUTO, *BEHAVIOURS)
