@@ -2,6 +2,7 @@
 
 from twin.cli.options import (
     UsageError,
+    add_car_following,
     add_quiet,
     add_store,
     add_window,
@@ -9,7 +10,6 @@ from twin.cli.options import (
     open_store,
     unix_time,
 )
-from twin.traffic.models import MODELS, car_following_model
 
 
 def register(commands) -> None:
@@ -32,12 +32,12 @@ def register(commands) -> None:
         help="eastbound or westbound (repeatable; default: all)",
     )
     add_window(p, "start: unix or ISO 8601 with offset", "end: unix or ISO 8601 with offset")
-    p.add_argument(
+    add_car_following(
+        p,
         "--model",
-        choices=sorted(MODELS),
-        default="idm",
-        help="the car-following model fitted (default idm); a calibrated run drives it with "
-        "--set traffic.car_following=MODEL",
+        "idm",
+        "the car-following model fitted: %(choices)s (default idm); a calibrated run drives "
+        "it with --set traffic.car_following=MODEL",
     )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
@@ -51,6 +51,8 @@ def _calibrate(args) -> int:
     t_from, t_until = unix_time(args.t_from), unix_time(args.t_until)
     if t_from is not None and t_until is not None and not t_from < t_until:
         raise UsageError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
+    from twin.traffic.models import car_following_model
+
     model = car_following_model(args.model)
     doc, fits = calibrate(store, roads, t_from, t_until, model=model, progress=not args.quiet)
     path = write_calibration(store, doc, fits)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from twin.cli.options import (
     UsageError,
+    add_car_following,
     add_quiet,
     add_start,
     add_store,
@@ -14,7 +15,6 @@ from twin.cli.options import (
     open_store,
     unix_time,
 )
-from twin.traffic.models import MODELS
 
 WINDOW_START_HELP = "unix or ISO 8601 with offset (default: data start)"
 
@@ -109,12 +109,12 @@ def _register_synth(commands) -> None:
         default="default",
         help="other: drivers and lane changing unlike the twin's defaults (test data)",
     )
-    p.add_argument(
+    add_car_following(
+        p,
         "--car-following",
-        choices=sorted(MODELS),
-        default="idm-textbook",
-        help="the drivers' model: idm-textbook (IDM as published, the presets'), idm (the "
-        "twin's drivers) or gipps (one the twin's defaults do not drive with)",
+        "idm-textbook",
+        "the drivers' model: %(choices)s (idm-textbook: IDM as published, the presets'; "
+        "idm: the twin's drivers; gipps: one the twin's defaults do not drive with)",
     )
     for flag, unit in (
         ("--politeness", "-"),

@@ -30,6 +30,28 @@ def add_store(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _ModelNames:
+    """The registered car-following models' names, read from the registry only when
+    argparse checks a value or writes a help (it imports numpy)."""
+
+    def _names(self) -> list[str]:
+        from twin.traffic.models import MODELS
+
+        return sorted(MODELS)
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+
+def add_car_following(parser: argparse.ArgumentParser, flag: str, default: str, help: str):
+    """A car-following model by its registered name (``help`` may say
+    ``%(choices)s``)."""
+    parser.add_argument(flag, choices=_ModelNames(), default=default, metavar="MODEL", help=help)
+
+
 def add_repeats(parser: argparse.ArgumentParser, default: int) -> None:
     """``--repeats``: how often a benchmark is timed (its figures are the medians), >= 1."""
     parser.add_argument("--repeats", type=at_least_one, default=default)
