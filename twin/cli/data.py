@@ -217,8 +217,8 @@ def _register_waves(commands) -> None:
         "--tables",
         type=Path,
         default=None,
-        help="summarise a folder of lane_N tables instead (e.g. the real ones in "
-        "../shared/data/i24_waves/2022-11-22)",
+        help="summarise a folder of lane_N tables instead (e.g. the I-24 MOTION team's "
+        "published tables of the real 2022-11-22 morning)",
     )
     p.add_argument(
         "--miles", type=float, default=None,

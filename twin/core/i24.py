@@ -1,7 +1,7 @@
 """The I-24 MOTION boundary: units, roads, lanes and the conversion to the twin's road frame.
 
 Feet and mile markers exist only here (and in plots). Conventions are those of
-``shared/docs/DESIGN.md``:
+the twin's (``docs/architecture.md``):
 
 * road ``eastbound`` (direction +1, mile markers increase) or ``westbound`` (-1);
 * ``x`` [m] along the direction of travel from the segment entry

@@ -1,8 +1,8 @@
 """What a wave-dampening benchmark reports of one run (``metrics.json`` ``control``).
 
-The words are the field's (``../shared/docs/CONTROL.md``, "What benchmarks report"):
+The words are the field's (the CIRCLES and Stern et al. wave-dampening benchmarks'):
 fuel economy of the AV (the ego), of its K followers and of the window
-(:mod:`twin.physics.energy`); the speed standard deviation and the wave amplitude behind the
+(:mod:`twin.metrics.economy`); the speed standard deviation and the wave amplitude behind the
 AV; throughput past the ego's starting point; safety (minimum time to collision, the
 share of time under 4 s, time gaps); comfort (acceleration and jerk RMS).
 

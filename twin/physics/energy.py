@@ -2,9 +2,9 @@
 energy of the twin's own powertrain.
 
 **Fuel.** The CIRCLES consortium's polynomial fit of a 2019 Toyota RAV4 to Autonomie
-powertrain simulations (model version 2.0; ``trajectory/env/energy_models.py`` of the
-CIRCLES trajectory-training code; formula, coefficients and check values in
-``../shared/docs/CONTROL.md``). Fuel rate [g/s] from the speed v [m/s], the acceleration
+powertrain simulations (model version 2.0; formula and coefficients from
+``trajectory/env/energy_models.py`` of the CIRCLES trajectory-training code, its check
+values in ``tests/twin/physics/test_energy.py``). Fuel rate [g/s] from the speed v [m/s], the acceleration
 a [m/s^2] and the road grade g (rise over run)::
 
     f = C0 + C1 v + C2 v^2 + C3 v^3 + p0 a + p1 a v + p2 a v^2

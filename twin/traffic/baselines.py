@@ -17,8 +17,9 @@ table (``--set controller.follower_stopper.desired_speed=25``):
   string-unstable at short gaps).
 
 FollowerStopper and PI with saturation command a speed; the ego tracks it with a
-low-level speed loop (``accel = gain (v_cmd - v)``, within the comfort limits). The
-formulas and their parameters' values are those of ``../shared/docs/CONTROL.md``.
+low-level speed loop (``accel = gain (v_cmd - v)``, within the comfort limits). Their
+formulas and parameter values are Stern et al.'s (2018); the ACC's gains are of the
+order Milanes and Shladover (2014) report.
 Under each of the three sits a safety layer, the drivers' emergency braking
 (``[controller] emergency_braking``, on by default): PI with saturation as defined
 keeps its target speed until the gap is within ``dx_s + gamma`` (6 m when closing),
