@@ -4,8 +4,8 @@ energy of the twin's own powertrain.
 **Fuel.** The CIRCLES consortium's polynomial fit of a 2019 Toyota RAV4 to Autonomie
 powertrain simulations (model version 2.0; formula and coefficients from
 ``trajectory/env/energy_models.py`` of the CIRCLES trajectory-training code, its check
-values in ``tests/twin/physics/test_energy.py``). Fuel rate [g/s] from the speed v [m/s], the acceleration
-a [m/s^2] and the road grade g (rise over run)::
+values in ``tests/twin/physics/test_energy.py``). Fuel rate [g/s] from the speed v
+[m/s], the acceleration a [m/s^2] and the road grade g (rise over run)::
 
     f = C0 + C1 v + C2 v^2 + C3 v^3 + p0 a + p1 a v + p2 a v^2
         + q0 max(a, 0)^2 + q1 max(a, 0)^2 v + z0 g + z1 g v
