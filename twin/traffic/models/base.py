@@ -22,6 +22,7 @@ fits move in the logarithm of a parameter.
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from functools import cache
 
 import numpy as np
 
@@ -133,7 +134,7 @@ def take(params, index) -> object:
     return type(params)(
         *(
             value if np.ndim(value) == 0 else np.asarray(value)[index]
-            for value in (getattr(params, f.name) for f in fields(params))
+            for value in (getattr(params, name) for name in _names(type(params)))
         )
     )
 
@@ -143,8 +144,18 @@ def concatenate(params, extra) -> object:
     (scalars are repeated to their side's length)."""
 
     def column(p, name):
-        return np.broadcast_to(getattr(p, name), np.shape(p.desired_speed))
+        value = getattr(p, name)
+        return value if np.ndim(value) else np.full(np.shape(p.desired_speed), value)
 
     return type(params)(
-        *(np.concatenate([column(params, f.name), column(extra, f.name)]) for f in fields(params))
+        *(
+            np.concatenate([column(params, name), column(extra, name)])
+            for name in _names(type(params))
+        )
     )
+
+
+@cache
+def _names(params: type) -> tuple[str, ...]:
+    """The fields of a parameter dataclass (the step asks for them often)."""
+    return tuple(f.name for f in fields(params))
