@@ -64,12 +64,13 @@ def files_digest(paths) -> str:
     return digest.hexdigest()
 
 
-def _twin(*argv) -> None:
+def twin(command: str) -> None:
+    """Run ``twin COMMAND`` as a user would (words split on spaces)."""
     from twin.cli import main
 
-    code = main([str(a) for a in argv])
+    code = main(command.split())
     if code != 0:
-        raise RuntimeError(f"twin {' '.join(map(str, argv))} exited with {code}")
+        raise RuntimeError(f"twin {command} exited with {code}")
 
 
 def run_digests(work: Path) -> dict[str, str]:
@@ -77,19 +78,9 @@ def run_digests(work: Path) -> dict[str, str]:
     out = {}
     for scenario in ("A", "B"):
         folder = work / f"run_{scenario}"
-        _twin(
-            "run",
-            "--scenario",
-            scenario,
-            "--seed",
-            3,
-            "--duration",
-            10,
-            "--behaviour",
-            "paper",
-            "--quiet",
-            "--out",
-            folder,
+        twin(
+            f"run --scenario {scenario} --seed 3 --duration 10 --behaviour paper --quiet "
+            f"--out {folder}"
         )
         out[f"run_{scenario}_paper"] = table_digest(folder / "trajectories.parquet")
         out[f"run_{scenario}_paper_metrics"] = metrics_digest(folder / "metrics.json")
@@ -105,35 +96,16 @@ def calibrated_run_digest(work: Path) -> dict[str, str]:
     shutil.copytree(default_store().path, store)
     for stale in ("calibration.json", "calibration_fits.parquet"):
         (store / stale).unlink(missing_ok=True)
-    _twin(
-        "calibrate",
-        store,
-        "--road",
-        "westbound",
-        "--from",
-        "2022-11-30T06:39:30-06:00",
-        "--until",
-        "2022-11-30T06:49:30-06:00",
-        "--quiet",
+    twin(
+        f"calibrate {store} --road westbound --from 2022-11-30T06:39:30-06:00 "
+        "--until 2022-11-30T06:49:30-06:00 --quiet"
     )
     calibration = json.loads((store / "calibration.json").read_text())
     calibration.pop("created", None)
     folder = work / "run_B_calibrated"
-    _twin(
-        "run",
-        "--scenario",
-        "B",
-        "--data",
-        store,
-        "--seed",
-        3,
-        "--duration",
-        10,
-        "--behaviour",
-        "calibrated",
-        "--quiet",
-        "--out",
-        folder,
+    twin(
+        f"run --scenario B --data {store} --seed 3 --duration 10 --behaviour calibrated "
+        f"--quiet --out {folder}"
     )
     return {
         "calibration": hashlib.sha256(
@@ -164,39 +136,13 @@ def _without_keys(value, keys):
 
 def eval_digest(work: Path) -> dict[str, str]:
     folder = work / "eval"
-    _twin(
-        "eval",
-        "--episodes",
-        4,
-        "--duration",
-        20,
-        "--seed",
-        1,
-        "--workers",
-        1,
-        "--quiet",
-        "--out",
-        folder,
-    )
+    twin(f"eval --episodes 4 --duration 20 --seed 1 --workers 1 --quiet --out {folder}")
     return {"eval_episodes": table_digest(folder / "episodes.parquet", drop=TIMING_COLUMNS)}
 
 
 def dataset_digest(work: Path) -> dict[str, str]:
     folder = work / "dataset"
-    _twin(
-        "dataset",
-        "--episodes",
-        2,
-        "--frames-per-episode",
-        3,
-        "--seed",
-        5,
-        "--workers",
-        1,
-        "--quiet",
-        "--out",
-        folder,
-    )
+    twin(f"dataset --episodes 2 --frames-per-episode 3 --seed 5 --workers 1 --quiet --out {folder}")
     labels = [(folder, p) for p in folder.rglob("*.txt") if "label" in str(p.relative_to(folder))]
     coco = [
         (folder, p)
@@ -232,7 +178,7 @@ def env_digest() -> dict[str, str]:
 
 def synth_digest(work: Path) -> dict[str, str]:
     path = work / "b.json"
-    _twin("data", "synth", "--preset", "B", "--minutes", 2, "--quiet", "--out", path)
+    twin(f"data synth --preset B --minutes 2 --quiet --out {path}")
     return {"synth_B_2min": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
