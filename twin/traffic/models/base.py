@@ -130,10 +130,11 @@ class CarFollowingModel:
 
 
 def take(params, index) -> object:
-    """The parameters of the vehicles at ``index`` (scalars are kept as they are)."""
+    """The parameters of the vehicles at ``index`` (scalars are kept as they are; the
+    parameters are numpy arrays or scalars)."""
     return type(params)(
         *(
-            value if np.ndim(value) == 0 else np.asarray(value)[index]
+            value[index] if isinstance(value, np.ndarray) and value.ndim else value
             for value in (getattr(params, name) for name in _names(type(params)))
         )
     )
@@ -145,7 +146,9 @@ def concatenate(params, extra) -> object:
 
     def column(p, name):
         value = getattr(p, name)
-        return value if np.ndim(value) else np.full(np.shape(p.desired_speed), value)
+        if isinstance(value, np.ndarray) and value.ndim:
+            return value
+        return np.full(np.shape(p.desired_speed), value)
 
     return type(params)(
         *(
