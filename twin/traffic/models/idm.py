@@ -16,12 +16,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from twin.traffic.drivers import DriverTraits
 from twin.traffic.models.base import CarFollowingModel, Parameter
 
 
 @dataclass(frozen=True)
-class IDMParams:
+class IDMParams(DriverTraits):
     """Per-vehicle IDM parameters as struct-of-arrays; each field (n,) float64 or a scalar.
+    They are a driver's traits read as IDM reads them (the fields of
+    :class:`~twin.traffic.drivers.DriverTraits`).
 
     Attributes:
         desired_speed: v0 [m/s].
@@ -31,13 +34,6 @@ class IDMParams:
         comfortable_decel: b [m/s^2], positive.
         delta: acceleration exponent [-].
     """
-
-    desired_speed: np.ndarray | float
-    time_headway: np.ndarray | float
-    min_gap: np.ndarray | float
-    max_accel: np.ndarray | float
-    comfortable_decel: np.ndarray | float
-    delta: np.ndarray | float = 4.0
 
 
 def desired_gap(v: np.ndarray, v_lead: np.ndarray, params: IDMParams) -> np.ndarray:
