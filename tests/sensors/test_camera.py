@@ -12,7 +12,8 @@ from mapgen.build import MapBundle
 from sensors.camera import CameraError, CameraRig, CameraSettings, CameraSpec
 from twin.core.i24 import VEHICLE_CLASSES, Road, lane_center
 from twin.core.vehicle_classes import vehicle_classes
-from twin.physics.world import PhysicsWorld, SpawnStates
+from twin.physics.states import SpawnStates
+from twin.physics.world import PhysicsWorld
 
 EGO_X = 300.0  # [m] back of the ego, eastbound lane -2
 AHEAD = 20.0  # [m] from the camera to the rear face of the vehicle ahead

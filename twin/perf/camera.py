@@ -84,7 +84,7 @@ def _eastbound_scene(table, rng: np.random.Generator, vehicles: int):
     """Spawn states of ``vehicles`` vehicles nose to tail in the four eastbound lanes,
     centred on the ego at 400 m, and the index of the ego."""
     from twin.core.i24 import LANE_WIDTH
-    from twin.physics.world import SpawnStates
+    from twin.physics.states import SpawnStates
 
     lane = np.arange(vehicles) % 4
     classes = class_mix(table, rng, vehicles)

@@ -73,7 +73,7 @@ def _both_carriageways(table, rng: np.random.Generator, n: int):
     """Spawn states of ``n`` vehicles, four a carriageway in turn, spread over 1900 m
     from station -350 m, each lane at its own speed."""
     from twin.core.i24 import LANE_WIDTH
-    from twin.physics.world import SpawnStates
+    from twin.physics.states import SpawnStates
 
     lane = np.arange(n) % 4
     classes = class_mix(table, rng, n)

@@ -35,7 +35,8 @@ from twin.core.vehicle_classes import vehicle_paints
 from twin.physics.bullet import filtered_native_output
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import visual_body
-from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld, rotation_matrices
+from twin.physics.states import rotation_matrices
+from twin.physics.world import PARK_DEPTH, SIZE_STEP, PhysicsWorld
 
 SKY_TOP = np.array([118, 164, 214], dtype=np.float64)  # RGB
 SKY_HORIZON = np.array([206, 222, 238], dtype=np.float64)

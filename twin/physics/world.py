@@ -15,10 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.i24 import Road
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
+from twin.physics.states import (
+    SpawnStates,
+    VehicleStates,
+    quaternion_of,
+    rotation_matrices,
+)
 from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
 
 _chain = itertools.chain.from_iterable
@@ -28,7 +33,6 @@ VEHICLE_GROUP = 4
 OBSTACLE_GROUP = 8
 SIZE_STEP = 0.05  # [m] body sizes are rounded to this for the pool's shapes
 PARK_DEPTH = -1000.0  # [m] where idle bodies wait, frozen
-MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 
 
 @dataclass(frozen=True)
@@ -53,95 +57,6 @@ class PhysicsConfig:
             raise ValueError(f"dt must be in (0, 0.02] s, got {self.dt}")
         if self.ray_threads < 0 or self.solver_iterations < 1:
             raise ValueError("ray_threads must be >= 0 and solver_iterations >= 1")
-
-
-@dataclass(frozen=True, eq=False)
-class SpawnStates:
-    """Vehicles to spawn, struct-of-arrays (n,).
-
-    ``road`` holds directions (+1 eastbound, -1 westbound); ``x`` [m] is the back
-    centre along the road as in I-24 MOTION, ``y`` [m] the centre from the median;
-    ``speed`` [m/s] along the lane; sizes [m].
-    """
-
-    road: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    speed: np.ndarray
-    vehicle_class: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    height: np.ndarray
-
-    @classmethod
-    def make(cls, road, x, y, speed, vehicle_class, length, width, height) -> "SpawnStates":
-        """Coerce and check: every array the same length, values finite and in range.
-
-        Raises:
-            ValueError: naming the bad field.
-        """
-        x = np.atleast_1d(np.asarray(x, dtype=np.float64))
-        n = x.size
-        if np.ndim(road) == 0:
-            road = np.full(n, Road.parse(road).direction)
-        values = {
-            "road": np.asarray(road, dtype=np.int8),
-            "x": x,
-            "y": np.broadcast_to(np.asarray(y, dtype=np.float64), (n,)).copy(),
-            "speed": np.broadcast_to(np.asarray(speed, dtype=np.float64), (n,)).copy(),
-            "vehicle_class": np.broadcast_to(
-                np.asarray(vehicle_class, dtype=np.int64), (n,)
-            ).copy(),
-            "length": np.broadcast_to(np.asarray(length, dtype=np.float64), (n,)).copy(),
-            "width": np.broadcast_to(np.asarray(width, dtype=np.float64), (n,)).copy(),
-            "height": np.broadcast_to(np.asarray(height, dtype=np.float64), (n,)).copy(),
-        }
-        for name, value in values.items():
-            if value.shape != (n,):
-                raise ValueError(f"spawn field {name} has shape {value.shape}, expected ({n},)")
-            if not np.all(np.isfinite(value)):
-                raise ValueError(f"spawn field {name} holds a non-finite value")
-        if not np.all(np.isin(values["road"], (-1, 1))):
-            raise ValueError("spawn road must be +1 (eastbound) or -1 (westbound)")
-        if np.any(values["speed"] < 0) or np.any(values["speed"] > MAX_SPEED):
-            raise ValueError(f"spawn speeds must be in 0..{MAX_SPEED} m/s")
-        return cls(**values)
-
-    def __len__(self) -> int:
-        return self.x.size
-
-
-@dataclass(frozen=True, eq=False)
-class VehicleStates:
-    """The active vehicles after the last step, struct-of-arrays.
-
-    Attributes:
-        id: (n,) twin ids. position: (n, 3) [m] centre of mass; orientation: (n, 4)
-        quaternion (x, y, z, w); velocity, angular_velocity: (n, 3) world frame.
-        speed: (n,) [m/s] along the body's heading; yaw_rate: (n,) [rad/s] about the
-        world's up axis; heading: (n,) [rad] world yaw.
-        road, x, y, lane: road frame (x of the back centre, as the data's x).
-        wheel_spin, load: (n, 4) [rad/s], [N]; contact: (n, 4) bool.
-        drive_power: (n,) [W] what the powertrain delivered at the wheels in the last
-        step (drive torque times wheel spin; braking and coasting deliver none).
-    """
-
-    id: np.ndarray
-    position: np.ndarray
-    orientation: np.ndarray
-    velocity: np.ndarray
-    angular_velocity: np.ndarray
-    speed: np.ndarray
-    yaw_rate: np.ndarray
-    heading: np.ndarray
-    road: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    lane: np.ndarray
-    wheel_spin: np.ndarray
-    load: np.ndarray
-    contact: np.ndarray
-    drive_power: np.ndarray
 
 
 class PhysicsWorld:
@@ -197,6 +112,11 @@ class PhysicsWorld:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    @property
+    def dt(self) -> float:
+        """[s] the fixed step."""
+        return self.config.dt
 
     @property
     def ids(self) -> np.ndarray:
@@ -262,7 +182,7 @@ class PhysicsWorld:
             axis=1,
         )
         position = ground + normal * params.cg_height[:, None]
-        quaternion = _quaternion(heading, pitch)
+        quaternion = quaternion_of(heading, pitch)
         direction = np.stack(
             [np.cos(pitch) * np.cos(heading), np.cos(pitch) * np.sin(heading), np.sin(pitch)],
             axis=1,
@@ -516,26 +436,3 @@ def _size_key(half: np.ndarray, center: np.ndarray) -> tuple:
     """Pool key: box half extents and the box centre's height in the body frame, in
     SIZE_STEP units (bodies of one key share a collision shape)."""
     return (*(max(1, round(v / SIZE_STEP)) for v in half), round(center[2] / SIZE_STEP))
-
-
-def _quaternion(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
-    """(n, 4) quaternions (x, y, z, w) of a yaw about z then a nose-up pitch.
-
-    Body x forward and z up: nose-up is a negative rotation about the body's y (left).
-    """
-    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
-    cp, sp = np.cos(-pitch / 2), np.sin(-pitch / 2)
-    return np.stack([-sy * sp, cy * sp, sy * cp, cy * cp], axis=1)
-
-
-def rotation_matrices(q: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rotation matrices (body to world) of (n, 4) quaternions (x, y, z, w)."""
-    x, y, z, w = q.T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=1,
-    )

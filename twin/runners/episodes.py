@@ -27,7 +27,7 @@ from twin.cosim.config import CosimConfig
 from twin.cosim.windows import ScenarioError
 from twin.data.speed_field import speed_field
 from twin.data.store import TrajectoryStore
-from twin.physics.world import MAX_SPEED
+from twin.physics.states import MAX_SPEED
 
 READ_CHUNK = 120.0  # [s] of samples read from the store at a time
 MIN_CELL_SAMPLES = 25  # a cell with fewer samples is too thin to measure

@@ -12,7 +12,8 @@ import numpy as np
 
 from twin.core.i24 import LANES, lane_center
 from twin.core.vehicle_classes import vehicle_classes
-from twin.physics.world import PhysicsWorld, SpawnStates
+from twin.physics.states import SpawnStates
+from twin.physics.world import PhysicsWorld
 from twin.traffic.manager import TrafficManager
 
 ENTRY_MARGIN = 20.0  # [m] from the map's ends to the entry and the exit

@@ -7,8 +7,9 @@ import pytest
 from twin.core.i24 import LANE_WIDTH, MILE
 from twin.metrics import economy
 from twin.physics import energy
+from twin.physics.states import SpawnStates
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
-from twin.physics.world import PhysicsWorld, SpawnStates
+from twin.physics.world import PhysicsWorld
 
 RAV4 = energy.RAV4_2019
 

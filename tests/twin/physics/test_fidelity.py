@@ -5,8 +5,9 @@ import pytest
 
 from twin.core.i24 import LANE_WIDTH, VEHICLE_CLASSES
 from twin.core.vehicle_classes import vehicle_classes
+from twin.physics.states import SpawnStates
 from twin.physics.vehicle import AIR_DENSITY, GRAVITY
-from twin.physics.world import PhysicsWorld, SpawnStates
+from twin.physics.world import PhysicsWorld
 
 LANE_2 = 2.5 * LANE_WIDTH  # [m] centre of lane -2
 

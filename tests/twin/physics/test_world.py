@@ -7,7 +7,8 @@ import pytest
 
 from twin.core.i24 import LANE_WIDTH, SEGMENT_LENGTH
 from twin.core.vehicle_classes import vehicle_classes
-from twin.physics.world import PhysicsConfig, PhysicsWorld, SpawnStates
+from twin.physics.states import SpawnStates
+from twin.physics.world import PhysicsConfig, PhysicsWorld
 
 
 @pytest.fixture

@@ -8,8 +8,9 @@ import pytest
 
 from twin.core.i24 import lane_center
 from twin.core.vehicle_classes import vehicle_classes
+from twin.physics.states import SpawnStates
 from twin.physics.vehicle import VehicleParams
-from twin.physics.world import PhysicsWorld, SpawnStates
+from twin.physics.world import PhysicsWorld
 from twin.traffic.config import TrafficConfig
 from twin.traffic.manager import TrafficManager
 
@@ -62,7 +63,7 @@ def run(world, manager, seconds, obstacles=None, each_step=None) -> Recording:
     ghosts of each step; ``each_step(states)`` is called before each decision."""
     rows = {k: [] for k in ("time", "x", "y", "speed", "lane", "changing", "accel")}
     contacts = 0
-    for _ in range(round(seconds / world.config.dt)):
+    for _ in range(round(seconds / world.dt)):
         states = world.states()
         if each_step is not None:
             each_step(states)
