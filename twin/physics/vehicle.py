@@ -362,18 +362,11 @@ def _torques(params, controls, speed, sin_pitch):
     speed along the heading (n,) [m/s] and the sine of the body's pitch (n,)."""
     radius = params.wheel_radius
     # the force at the wheels that makes the body accelerate at `accel` (feedforward)
-    resist = (
-        0.5 * AIR_DENSITY * params.drag_area * speed * np.abs(speed)
-        + params.rolling
-        * params.mass
-        * GRAVITY
-        * np.sqrt(1.0 - sin_pitch**2)
-        * np.tanh(speed / ROLLING_SPEED)
-        + params.mass * GRAVITY * sin_pitch
+    wanted = params.effective_mass * np.nan_to_num(controls.accel) + resistance(
+        params, speed, sin_pitch
     )
-    wanted = params.effective_mass * np.nan_to_num(controls.accel) + resist
     power_limit = params.max_power / np.maximum(np.abs(speed), POWER_SPEED_MIN)
-    full_brake = BRAKE_LOCK_MARGIN * params.mu * params.mass * GRAVITY / 4.0 * radius  # per wheel
+    full_brake = full_brake_torque(params)  # per wheel
     raw = np.isnan(controls.accel)
     drive_force = np.where(raw, controls.drive * power_limit, np.clip(wanted, 0.0, power_limit))
     brake_force = np.where(raw, 0.0, np.maximum(-wanted, 0.0))
@@ -384,3 +377,23 @@ def _torques(params, controls, speed, sin_pitch):
         raw[:, None], (controls.brake * 4.0 * full_brake)[:, None] * params.brake_share, brake
     )
     return drive, brake
+
+
+def resistance(params: VehicleParams, speed: np.ndarray, sin_pitch: np.ndarray) -> np.ndarray:
+    """(n,) [N] what aerodynamic drag, rolling resistance and the grade take along the
+    heading at ``speed`` [m/s] on a grade of pitch sine ``sin_pitch`` (nose-up
+    positive): the force the powertrain adds to its feedforward."""
+    return (
+        0.5 * AIR_DENSITY * params.drag_area * speed * np.abs(speed)
+        + params.rolling
+        * params.mass
+        * GRAVITY
+        * np.sqrt(1.0 - sin_pitch**2)
+        * np.tanh(speed / ROLLING_SPEED)
+        + params.mass * GRAVITY * sin_pitch
+    )
+
+
+def full_brake_torque(params: VehicleParams) -> np.ndarray:
+    """(n,) [N m] per wheel at full brake: enough to lock a wheel at rest."""
+    return BRAKE_LOCK_MARGIN * params.mu * params.mass * GRAVITY / 4.0 * params.wheel_radius
