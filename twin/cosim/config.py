@@ -17,7 +17,8 @@ from twin.core.errors import TwinError
 from twin.core.i24 import SCENARIO_TIME, Road
 from twin.core.timeutil import steps_per_sample
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
-from twin.physics.world import MAX_SPEED, PhysicsConfig
+from twin.physics.states import MAX_SPEED
+from twin.physics.worlds import DEFAULT_DT, check_world
 from twin.traffic.baselines import ControllerSettings
 from twin.traffic.config import TrafficConfig
 
@@ -39,7 +40,12 @@ class CosimConfig:
         lane, x, time: the desired ego lane, road-frame x [m] and unix time [s]; the
             ego is the recorded vehicle closest to them.
         t_max: [s] episode length.
-        dt: [s] step of physics and cosimulation.
+        dt: [s] step of the world and the cosimulation (each world's default:
+            0.01 s physics, 0.1 s kinematic; see :func:`switch_world`).
+        world: where the vehicles move: ``physics`` (pybullet rigid bodies, the
+            reference, the only world with cameras) or ``kinematic`` (point masses on
+            kinematic bicycles in numpy, for training and sweeps); see
+            :mod:`twin.physics.worlds`.
         vel_default: [m/s] desired speed of the ego and of the visible vehicles that
             do not lead their lane ahead of the ego.
         w_visible: [m] visible window each side of the ego.
@@ -81,6 +87,7 @@ class CosimConfig:
     time: float = SCENARIO_TIME
     t_max: float = 30.0
     dt: float = 0.01
+    world: str = "physics"
     vel_default: float = VEL_DEFAULT
     w_visible: float = 150.0
     w_ghost: float = 50.0
@@ -141,9 +148,14 @@ class CosimConfig:
                 f"vel_default must be in (0, {MAX_SPEED}] m/s, got {self.vel_default}"
             )
         try:
-            PhysicsConfig(dt=self.dt)
+            check_world(self.world, self.dt)
         except ValueError as error:
             raise ConfigError(str(error)) from None
+        if self.world != "physics" and self.camera.enabled:
+            raise ConfigError(
+                f"cameras need the physics world: the {self.world} world has no bodies to "
+                'render (set world = "physics", or turn the camera off)'
+            )
         try:
             steps_per_sample(self.ghost_log_rate, self.dt)
         except ValueError as error:
@@ -200,6 +212,30 @@ SCENARIO_A = CosimConfig(scenario="A", road=Road.EASTBOUND, lane=-2, x=300.0)
 #: Scenario B of the paper: westbound, HOV lane, x = 700 m, a stop-and-go wave arrives.
 SCENARIO_B = CosimConfig(scenario="B", road=Road.WESTBOUND, lane=-1, x=700.0)
 PRESETS = {"A": SCENARIO_A, "B": SCENARIO_B}
+
+
+def switch_world(config: CosimConfig, world: str) -> CosimConfig:
+    """``config`` in ``world``, its step carried along: a step at the old world's
+    default becomes the new world's default (0.01 s physics, 0.1 s kinematic); a step
+    set by hand is kept. ``--world`` and ``world = ...`` in a TOML file or ``--set``
+    switch this way.
+
+    Raises:
+        ConfigError: an unknown world, a step out of its range, or cameras outside the
+            physics world.
+    """
+    return override(config, {"world": world}, source="world")
+
+
+def _with_world_step(config: CosimConfig, values: dict) -> dict:
+    """``values`` with the step of a world they switch to (see :func:`switch_world`),
+    unless they set the step themselves."""
+    world = values.get("world")
+    if "dt" in values or not isinstance(world, str) or world not in DEFAULT_DT:
+        return values
+    if config.dt != DEFAULT_DT[config.world]:
+        return values
+    return {**values, "dt": DEFAULT_DT[world]}
 
 
 # -- TOML ----------------------------------------------------------------------------
@@ -282,6 +318,8 @@ def override(config: Any, values: dict, *, source: str = "override", prefix: str
     """
     names = {f.name: f for f in fields(config)}
     changes = {}
+    if isinstance(config, CosimConfig):
+        values = _with_world_step(config, values)
     for key, value in values.items():
         where = f"{prefix}{key}"
         if key not in names:

@@ -17,9 +17,11 @@ Lifecycle::
     log = sim.log            # every simulated vehicle every step, ghosts at a lower rate
     sim.close()
 
-The cosimulator orchestrates: the world owns the bodies, the manager the drivers, the
-data layer the recording. Vehicles are named by the world's ids; the recorded vehicle
-each one was spawned from is kept beside it (its ``tid``), for the metrics.
+The cosimulator orchestrates: the world owns the bodies (``config.world``: the physics
+world or the kinematic one, reached only through :class:`twin.physics.worlds.World`),
+the manager the drivers, the data layer the recording. Vehicles are named by the
+world's ids; the recorded vehicle each one was spawned from is kept beside it (its
+``tid``), for the metrics.
 """
 
 import math
@@ -36,7 +38,8 @@ from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
 from twin.cosim.windows import Ghosts, ScenarioError, Windows, no_ghosts, road_limits
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
-from twin.physics.world import MAX_SPEED, PhysicsConfig, PhysicsWorld, SpawnStates
+from twin.physics.states import MAX_SPEED, SpawnStates
+from twin.physics.worlds import make_world
 from twin.traffic.controller_api import EgoController, load_controller
 from twin.traffic.manager import TrafficManager
 from twin.traffic.scene import Obstacles
@@ -115,7 +118,7 @@ class Cosimulator:
             config.traffic.car_following,
         )
         self.controller = controller or load_controller(config.ego_controller, config)
-        self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
+        self.world = make_world(config.world, bundle, config.dt)
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
         self.limits = road_limits(bundle, traffic, config.road)
