@@ -52,6 +52,15 @@ def _fail_with(monkeypatch, error: BaseException) -> None:
         (["bench", "env", "--steps", "0"], "--steps, --repeats and --workers must be >= 1"),
         (["bench", "traffic", "--vehicles", "0"], "--vehicles must be > 0, got 0"),
         (
+            ["run", "--world", "kinematic", "--camera", "--quiet"],
+            "command line: cameras need the physics world: the kinematic world has no bodies "
+            'to render (set world = "physics", or turn the camera off)',
+        ),
+        (
+            ["run", "--world", "kinematic", "--dt", "0.2", "--quiet"],
+            "command line: the kinematic world's dt must be in (0, 0.1] s, got 0.2",
+        ),
+        (
             ["map", "build", "--seed", "-1", "--out", "m"],
             "seed must be a non-negative integer, got -1",
         ),

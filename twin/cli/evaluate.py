@@ -9,6 +9,7 @@ from twin.cli.options import (
     add_set,
     add_window,
     add_workers,
+    add_world,
     check_seed,
     listed,
     open_data,
@@ -27,6 +28,16 @@ def register(commands) -> None:
         "episodes.parquet, summary.json, summary.md and fidelity.png. Finished episodes are "
         "kept: rerun the same command to resume.",
     )
+    add_eval_options(p)
+    add_world(p)
+    add_engine(p)
+    p.add_argument("--out", type=Path, required=True, help="evaluation folder")
+    add_quiet(p)
+    p.set_defaults(handler=_eval)
+
+
+def add_eval_options(p) -> None:
+    """The options that say what an evaluation runs (shared with ``twin bench worlds``)."""
     add_data(p)
     p.add_argument("--road", default="westbound", help="eastbound or westbound")
     p.add_argument("--episodes", type=int, required=True, help="episodes to draw")
@@ -63,35 +74,14 @@ def register(commands) -> None:
     )
     p.add_argument("--seed", type=int, default=0)
     add_workers(p, "processes (default: the cores)")
-    add_engine(p)
-    p.add_argument("--out", type=Path, required=True, help="evaluation folder")
-    add_quiet(p)
-    p.set_defaults(handler=_eval)
 
 
 def _eval(args) -> int:
-    from twin.calibration.calibrate import read_calibration
-    from twin.cosim.config import SCENARIO_B, override, parse_assignments
-    from twin.runners.evaluation import EvalConfig, evaluate, summary_lines
+    from twin.runners.evaluation import evaluate, summary_lines
 
-    cosim = override(SCENARIO_B, parse_assignments(args.assignments), source="--set")
-    check_seed(args.seed)
     store = open_data(args.data, progress=not args.quiet)
-    controllers = listed(args.controller)
-    config = EvalConfig(
-        road=args.road,
-        episodes=args.episodes,
-        duration=args.duration,
-        behaviours=_behaviours(args.behaviour, controllers, read_calibration(store) is not None),
-        congested_share=args.congested_share,
-        t_from=unix_time(args.t_from),
-        t_until=unix_time(args.t_until),
-        seed=args.seed,
-        controllers=controllers,
-        av_share=args.av_share,
-        cosim=cosim,
-    )
-    if controllers:  # the wave-dampening benchmark: every controller paired with human
+    config = eval_config(args, store)
+    if config.controllers:  # the wave-dampening benchmark: every controller paired with human
         from twin.control.benchmark import benchmark as evaluate
         from twin.control.benchmark import summary_lines
     result = evaluate(
@@ -105,6 +95,34 @@ def _eval(args) -> int:
     )
     print(summary_lines(result))
     return 0
+
+
+def eval_config(args, store):
+    """The :class:`~twin.runners.evaluation.EvalConfig` of the options of
+    :func:`add_eval_options` over ``store``."""
+    from twin.calibration.calibrate import read_calibration
+    from twin.cosim.config import SCENARIO_B, override, parse_assignments
+    from twin.runners.evaluation import EvalConfig
+
+    values = parse_assignments(args.assignments)
+    if getattr(args, "world", None) is not None:
+        values["world"] = args.world
+    cosim = override(SCENARIO_B, values, source="command line")
+    check_seed(args.seed)
+    controllers = listed(args.controller)
+    return EvalConfig(
+        road=args.road,
+        episodes=args.episodes,
+        duration=args.duration,
+        behaviours=_behaviours(args.behaviour, controllers, read_calibration(store) is not None),
+        congested_share=args.congested_share,
+        t_from=unix_time(args.t_from),
+        t_until=unix_time(args.t_until),
+        seed=args.seed,
+        controllers=controllers,
+        av_share=args.av_share,
+        cosim=cosim,
+    )
 
 
 def _behaviours(asked: str | None, controllers: tuple[str, ...], calibrated: bool):

@@ -52,6 +52,18 @@ def add_car_following(parser: argparse.ArgumentParser, flag: str, default: str, 
     parser.add_argument(flag, choices=_ModelNames(), default=default, metavar="MODEL", help=help)
 
 
+def add_world(parser: argparse.ArgumentParser) -> None:
+    """``--world``: where the vehicles move (``world`` of the run's configuration)."""
+    parser.add_argument(
+        "--world",
+        choices=["physics", "kinematic"],
+        default=None,
+        help="physics: pybullet rigid bodies at 100 Hz, the reference and the only world "
+        "with cameras; kinematic: point masses on kinematic bicycles at 10 Hz, for "
+        "training and sweeps (default: physics, or the configuration's)",
+    )
+
+
 def add_repeats(parser: argparse.ArgumentParser, default: int) -> None:
     """``--repeats``: how often a benchmark is timed (its figures are the medians), >= 1."""
     parser.add_argument("--repeats", type=at_least_one, default=default)

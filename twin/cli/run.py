@@ -2,7 +2,15 @@
 
 from pathlib import Path
 
-from twin.cli.options import add_config, add_data, add_quiet, add_set, open_data, unix_time
+from twin.cli.options import (
+    add_config,
+    add_data,
+    add_quiet,
+    add_set,
+    add_world,
+    open_data,
+    unix_time,
+)
 
 
 def register(commands) -> None:
@@ -27,7 +35,10 @@ def _register_run(commands) -> None:
     p.add_argument("--x", type=float, default=None, help="desired ego x [m] along travel")
     p.add_argument("--time", default=None, help="desired ego time: unix or ISO 8601 with offset")
     p.add_argument("--duration", type=float, default=None, help="episode length t_max [s]")
-    p.add_argument("--dt", type=float, default=None, help="step [s] (default 0.01)")
+    p.add_argument(
+        "--dt", type=float, default=None, help="step [s] (default 0.01 physics, 0.1 kinematic)"
+    )
+    add_world(p)
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
     p.add_argument(
@@ -77,6 +88,7 @@ def _run_config(args):
         "time": unix_time(args.time),
         "t_max": args.duration,
         "dt": args.dt,
+        "world": args.world,
         "seed": args.seed,
         "vel_default": args.vel_default,
         "behaviour": args.behaviour,

@@ -12,7 +12,8 @@ Episodes are drawn from the congested cells of the store (:mod:`twin.runners.epi
 the embedded morning, preset C, by default), split by time: ``train`` episodes lie
 before ``split_time`` (default: the middle of the recording), ``test`` episodes after.
 
-**Action** (10 Hz; the physics runs at 100 Hz under it): ``accel`` (default), a Box
+**Action** (10 Hz; the physics world runs at 100 Hz under it, the kinematic world,
+``world="kinematic"``, one step per action): ``accel`` (default), a Box
 [-3.0, 1.5] m/s^2, the ego's commanded acceleration; or ``speed``, a Box [0, 35] m/s,
 a desired speed the ego tracks with a speed loop (a = 1.0 (v_cmd - v), within the
 same limits).
@@ -44,7 +45,7 @@ import gymnasium as gym
 import numpy as np
 
 from twin.core.i24 import LANES
-from twin.cosim.config import SCENARIO_B, CosimConfig
+from twin.cosim.config import SCENARIO_B, CosimConfig, switch_world
 from twin.metrics.economy import followers
 from twin.physics import energy
 from twin.traffic.controller_api import EgoCommand, Observation
@@ -103,6 +104,9 @@ class WaveDampeningEnv(gym.Env):
         obs_noise: sd of multiplicative observation noise (0: none).
         latency_steps: control steps the observation lags behind.
         cosim: the other settings of each episode's cosimulation.
+        world: ``physics`` or ``kinematic`` (:mod:`twin.physics.worlds`; the step
+            switches with it, see :func:`twin.cosim.config.switch_world`); default:
+            ``cosim``'s (physics).
         seed: the episodes' seed (episode ``i`` is the same for any ``reset`` order).
 
     Raises:
@@ -123,6 +127,7 @@ class WaveDampeningEnv(gym.Env):
         obs_noise: float = 0.0,
         latency_steps: int = 0,
         cosim: CosimConfig = SCENARIO_B,
+        world: str | None = None,
         seed: int = 0,
     ):
         from mapgen.build import default_map
@@ -145,7 +150,16 @@ class WaveDampeningEnv(gym.Env):
         self.store = open_data(data or "embedded:morning", progress=False)
         self.traffic = EmpiricalTraffic(self.store)
         self.bundle = default_map(progress=False)
+        if world is not None:
+            cosim = switch_world(cosim, world)
+        steps = CONTROL_DT / cosim.dt
+        if abs(steps - round(steps)) > 1e-9:
+            raise ValueError(f"the step {cosim.dt} s must divide the control step {CONTROL_DT} s")
         self.cosim = cosim
+        # the reset's first step shows the controller the ego; where that step is a
+        # whole control step (the kinematic world) the episode is that much longer, so
+        # that the agent acts over all of ``duration`` in both worlds
+        self._peek = cosim.dt if round(steps) == 1 else 0.0
         self.road = cosim.road
         self.duration, self.action_kind = float(duration), action
         self.reward_weights = reward or Reward()
@@ -194,7 +208,7 @@ class WaveDampeningEnv(gym.Env):
                 self.cosim,
                 spec,
                 scenario="env",
-                t_max=self.duration,
+                t_max=self.duration + self._peek,
                 ego_controller="",
                 camera=replace(self.cosim.camera, enabled=False),
             )

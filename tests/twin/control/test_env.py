@@ -8,6 +8,7 @@ from gymnasium.utils.env_checker import check_env
 
 import twin.env  # registers the environment
 from twin.control.env import OBSERVATION, WaveDampeningEnv
+from twin.core.errors import TwinError
 
 
 @pytest.fixture(scope="module")
@@ -28,10 +29,11 @@ def test_the_environment_passes_gymnasiums_checker(data):
     env.close()
 
 
-def test_same_seed_same_episode_bit_for_bit(data):
+@pytest.mark.parametrize("world", ["physics", "kinematic"])
+def test_same_seed_same_episode_bit_for_bit(data, world):
     runs = []
     for _ in range(2):
-        env = _env(data)
+        env = _env(data, world=world)
         obs, _ = env.reset(seed=7)
         trace = [obs]
         for k in range(15):
@@ -42,9 +44,11 @@ def test_same_seed_same_episode_bit_for_bit(data):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
-def test_an_episode_ends_truncated_with_the_benchmarks_metrics(data):
-    env = _env(data, split="test")
+@pytest.mark.parametrize("world", ["physics", "kinematic"])
+def test_an_episode_ends_truncated_with_the_benchmarks_metrics(data, world):
+    env = _env(data, split="test", world=world)
     env.reset(seed=1)
+    assert env.unwrapped.sim.config.world == world
     split = 0.5 * sum(env.unwrapped.store.time_range("westbound"))
     assert env.unwrapped.sim.t0 >= split  # test episodes lie after the split
     steps, done = 0, False
@@ -58,8 +62,9 @@ def test_an_episode_ends_truncated_with_the_benchmarks_metrics(data):
     env.close()
 
 
-def test_ramming_the_leader_terminates_the_episode(data):
-    env = _env(data, duration=60.0)
+@pytest.mark.parametrize("world", ["physics", "kinematic"])
+def test_ramming_the_leader_terminates_the_episode(data, world):
+    env = _env(data, duration=60.0, world=world)
     env.reset(seed=2)
     terminated = truncated = False
     while not (terminated or truncated):
@@ -85,6 +90,8 @@ def test_bad_settings_are_named(data):
         WaveDampeningEnv(data, action="steer")
     with pytest.raises(ValueError, match="split_time"):
         WaveDampeningEnv(data, split_time=0.0)
+    with pytest.raises(TwinError, match="world must be one of physics, kinematic"):
+        WaveDampeningEnv(data, world="mujoco")
     env = _env(data)
     env.reset(seed=0)
     with pytest.raises(ValueError, match="one finite number"):

@@ -11,6 +11,7 @@ from twin.cosim.config import (
     load_config,
     override,
     parse_assignments,
+    switch_world,
     to_toml,
 )
 
@@ -72,6 +73,9 @@ def test_the_traffic_manager_runs_at_the_runs_step_and_seed():
         ("seed = 1.5", "seed must be an integer"),
         ('ego_controller = "nocolon"', "module:function"),
         ("x = [", "not valid TOML"),
+        ('world = "mujoco"', "world must be one of physics, kinematic"),
+        ('world = "kinematic"\ndt = 0.5', r"kinematic world's dt must be in \(0, 0.1\]"),
+        ('world = "kinematic"\n[camera]\nenabled = true', "cameras need the physics world"),
     ],
 )
 def test_bad_configurations_name_the_problem(text, message):
@@ -84,3 +88,18 @@ def test_an_unreadable_file_is_a_config_error(tmp_path):
         load_config(tmp_path / "missing.toml")
     with pytest.raises(ConfigError, match="expected KEY=VALUE"):
         parse_assignments(["hov_share"])
+
+
+def test_switching_the_world_carries_its_step_unless_one_was_set():
+    assert (SCENARIO_B.world, SCENARIO_B.dt) == ("physics", 0.01)
+    kinematic = switch_world(SCENARIO_B, "kinematic")
+    assert (kinematic.world, kinematic.dt, kinematic.traffic.dt) == ("kinematic", 0.1, 0.1)
+    assert kinematic.steps == 300 and kinematic.ghost_log_every == 1
+    assert switch_world(kinematic, "physics").dt == 0.01
+    # a step set by hand stays; TOML and --set switch the same way
+    assert switch_world(override(SCENARIO_B, {"dt": 0.005}), "kinematic").dt == 0.005
+    assert from_toml('world = "kinematic"').dt == 0.1
+    assert from_toml('world = "kinematic"\ndt = 0.05').dt == 0.05
+    assert override(SCENARIO_B, parse_assignments(["world=kinematic"])).dt == 0.1
+    # the resolved configuration loads back to itself
+    assert from_toml(to_toml(kinematic)) == kinematic
