@@ -50,6 +50,36 @@ def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_stor
     assert main(["bench", "env", "--steps", "0"]) == 2
 
 
+def test_bench_env_times_the_kinematic_world(wave_store, capsys):
+    argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--workers", "1"]
+    assert main([*argv, "--repeats", "1", "--world", "kinematic"]) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["world"] == "kinematic" and line["env_steps_per_s"] > 0
+
+
+def test_bench_worlds_compares_the_same_evaluation_in_both_worlds(
+    calibrated_wave_store, tmp_path, capsys
+):
+    argv = ["bench", "worlds", "--data", str(calibrated_wave_store.path), "--episodes", "1"]
+    argv += ["--duration", "8", "--controller", "human,pi_saturation", "--workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "w"), "--quiet"]) == 0
+    line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert line["bench"] == "worlds" and set(line["wall_s"]) == {"physics", "kinematic"}
+    assert line["ego_speed_between_worlds"]["runs"] == 2
+    assert line["ego_speed_between_worlds"]["median_mps"] < 0.5
+    human = line["fidelity"]["human"]
+    assert set(human) == {
+        "ego_speed_rmse_mps",
+        "ego_position_error_end_m",
+        "speed_field_rmse_mps",
+        "lane_changes_simulated",
+    }
+    mpg = line["controllers"]["ego_and_followers_mpg"]
+    assert set(mpg["mean_change_pct"]) == {"physics", "kinematic"}
+    for name in ("worlds.json", "worlds.md", "physics/episodes.parquet", "kinematic/summary.md"):
+        assert (tmp_path / "w" / name).is_file()
+
+
 def test_bench_camera_draws_the_recording_around_its_scene(doc, tmp_path, capsys, monkeypatch):
     """The recorded traffic within the far plane is drawn beside the bench's vehicles
     (here one car on each carriageway), and none of it where the bench's own vehicles

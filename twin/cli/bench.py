@@ -2,18 +2,23 @@
 one JSON line of figures with the commit and machine they were taken on."""
 
 import json
+from pathlib import Path
 
+from twin.cli.evaluate import add_eval_options
 from twin.cli.options import (
     UsageError,
     add_data,
     add_repeats,
     add_worker_counts,
     add_workers,
+    add_world,
     checked_data,
     checked_road,
     listed,
+    open_data,
     open_store,
     worker_counts,
+    workers_or_cores,
 )
 
 STORE_HELP = "store (default: the embedded data)"
@@ -88,8 +93,22 @@ def _register_commands(benchmarks) -> None:
     add_data(p, "store (default: the embedded morning)", type=str)
     p.add_argument("--steps", type=int, default=200, help="steps timed per env")
     add_workers(p, "vector env size (default: cores)")
+    add_world(p)
     add_repeats(p, 3)
     p.set_defaults(handler=_env)
+    p = benchmarks.add_parser(
+        "worlds",
+        help="the kinematic world against the physics world: twin eval in both, compared",
+        description="Run the same evaluation (with --controller: the paired benchmark) in "
+        "the physics and the kinematic world, on the same episodes and seeds, into "
+        "OUT/physics and OUT/kinematic, and compare them in OUT/worlds.json and worlds.md: "
+        "the ego's speed between worlds, each fidelity figure, the controllers' signs and "
+        "ranking. Rerun the same command to resume.",
+    )
+    add_eval_options(p)
+    p.add_argument("--out", type=Path, required=True, help="comparison folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_worlds)
     p = benchmarks.add_parser("eval", help="wall time of twin eval, by workers")
     add_data(p, STORE_HELP)
     p.add_argument("--episodes", type=int, default=4)
@@ -210,8 +229,30 @@ def _env(args) -> int:
         raise UsageError("--steps, --repeats and --workers must be >= 1")
     data = checked_data(args.data)
     return _emit(
-        "env", env_bench(data, steps=args.steps, workers=args.workers, repeats=args.repeats)
+        "env",
+        env_bench(
+            data,
+            steps=args.steps,
+            workers=args.workers,
+            repeats=args.repeats,
+            world=args.world or "physics",
+        ),
     )
+
+
+def _worlds(args) -> int:
+    from twin.cli.evaluate import eval_config
+    from twin.perf.worlds import worlds_bench
+
+    store = open_data(args.data, progress=not args.quiet)
+    figures = worlds_bench(
+        store,
+        args.out,
+        eval_config(args, store),
+        workers=workers_or_cores(args.workers),
+        progress=not args.quiet,
+    )
+    return _emit("worlds", figures)
 
 
 def _eval(args) -> int:

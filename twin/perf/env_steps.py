@@ -12,12 +12,18 @@ TAIL = 1.0  # [s] of episode past the last timed step, so that none is truncated
 
 
 def env_bench(
-    data: str | None = None, *, steps: int = 200, workers: int | None = None, repeats: int = 3
+    data: str | None = None,
+    *,
+    steps: int = 200,
+    workers: int | None = None,
+    repeats: int = 3,
+    world: str = "physics",
 ) -> dict:
-    """Env steps per second of ``i24twin/WaveDampening-v0`` (10 Hz control, 0.01 s
-    physics, the default windows, no cameras) on ``data`` (default: the embedded
-    morning): one env, and an ``AsyncVectorEnv`` of ``workers`` envs (default: the
-    cores), each stepping ``steps`` times with a zero action after a reset (not timed).
+    """Env steps per second of ``i24twin/WaveDampening-v0`` (10 Hz control over the
+    ``world``'s default step: 0.01 s physics, 0.1 s kinematic; the default windows, no
+    cameras) on ``data`` (default: the embedded morning): one env, and an
+    ``AsyncVectorEnv`` of ``workers`` envs (default: the cores), each stepping
+    ``steps`` times with a zero action after a reset (not timed).
     Medians over the repeats; scaling is the vector env's steps per second over one's."""
     import gymnasium as gym
 
@@ -26,7 +32,7 @@ def env_bench(
     workers = workers or cores()
 
     def make():
-        return gym.make(ENV_ID, data=data, duration=steps * CONTROL_PERIOD + TAIL)
+        return gym.make(ENV_ID, data=data, duration=steps * CONTROL_PERIOD + TAIL, world=world)
 
     one, vector = [], []
     for k in range(repeats):
@@ -39,6 +45,7 @@ def env_bench(
         envs.close()
     single, many = median(one), median(vector)
     return {
+        "world": world,
         "steps": steps,
         "repeats": repeats,
         "env_steps_per_s": round(single, 2),
