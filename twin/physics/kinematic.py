@@ -80,8 +80,10 @@ class KinematicWorld:
         self._controls = {k: np.empty(0) for k in _FIELDS}
         self._states: VehicleStates | None = None
         self._headings = {r: self.road.heading(r) for r in (1, -1)}
-        s0, s1 = self.road.station_range
-        self._stations = (s0, s1)
+        self._profile = (self.road.profile_s, self.road.profile_z)
+        self._slopes = np.diff(self.road.profile_z) / np.diff(self.road.profile_s)
+        self._pairs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # n -> triu indices
+        self._under: tuple[np.ndarray, np.ndarray] | None = None  # _ground() of now
 
     # -- lifecycle --------------------------------------------------------------------
 
@@ -143,7 +145,7 @@ class KinematicWorld:
         self._drive_power = np.concatenate([self._drive_power, np.zeros(n)])
         for name in _FIELDS:
             self._controls[name] = np.concatenate([self._controls[name], np.zeros(n)])
-        self._states = None
+        self._states = self._under = None
         return ids
 
     def despawn(self, ids) -> None:
@@ -160,7 +162,7 @@ class KinematicWorld:
             setattr(self, name, getattr(self, name)[keep])
         for name in _FIELDS:
             self._controls[name] = self._controls[name][keep]
-        self._states = None
+        self._states = self._under = None
 
     # -- controls ---------------------------------------------------------------------
 
@@ -208,7 +210,7 @@ class KinematicWorld:
             self._lateral(distance, dt)
             self._speed = v1
         self.time += dt
-        self._states = None
+        self._states = self._under = None
 
     def states(self) -> VehicleStates:
         """The active vehicles now (after the last step). Built once per change of the
@@ -250,7 +252,13 @@ class KinematicWorld:
     def vehicle_contacts(self) -> np.ndarray:
         """(m, 2) twin ids of the pairs of vehicles whose footprints overlap now, each
         pair once, smaller id first (ids are sorted, so rows are too)."""
-        return self._ids[footprint_overlaps(self._road, self._x, self._y, self._yaw, self._params)]
+        n = self._ids.size
+        if n not in self._pairs:
+            self._pairs[n] = np.triu_indices(n, 1)
+        pairs = footprint_overlaps(
+            self._road, self._x, self._y, self._yaw, self._params, self._pairs[n]
+        )
+        return self._ids[pairs]
 
     # -- internals --------------------------------------------------------------------
 
@@ -295,13 +303,31 @@ class KinematicWorld:
 
     def _ground(self) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) [m] the pavement under each vehicle's centre and (n,) [rad] its pitch
-        along travel (the map's ends extend flat beyond them)."""
-        s = np.where(self._road > 0, self._x, SEGMENT_LENGTH - self._x)
-        on_map = np.clip(s, *self._stations)
-        x = np.where(self._road > 0, on_map, SEGMENT_LENGTH - on_map)
-        ground, _, pitch = self.road.to_world(self._road, x, self._y)
-        ground[:, :2] += (s - on_map)[:, None] * self.road.direction_vector
-        return ground, pitch
+        along travel (the grade of the profile piece it drives onto, as
+        :meth:`mapgen.road.RoadModel.to_world`; the map's ends extend flat beyond
+        them). Computed once per change of the world."""
+        if self._under is not None:
+            return self._under
+        stations, heights = self._profile
+        eastbound = self._road > 0
+        s = np.where(eastbound, self._x, SEGMENT_LENGTH - self._x)
+        lateral = np.where(eastbound, self._y, -self._y)
+        ground = np.empty((s.size, 3))
+        ground[:, :2] = s[:, None] * self.road.direction_vector + lateral[:, None] * (
+            self.road.right_vector
+        )
+        ground[:, 2] = np.interp(s, stations, heights)
+        # eastbound drives onto the piece after a profile point, westbound the one before
+        piece = np.where(
+            eastbound,
+            np.searchsorted(stations, s, side="right"),
+            np.searchsorted(stations, s, side="left"),
+        )
+        slope = self._slopes[np.clip(piece - 1, 0, self._slopes.size - 1)]
+        inside = (s >= stations[0]) & (s <= stations[-1])
+        pitch = np.where(inside, np.arctan(np.where(eastbound, slope, -slope)), 0.0)
+        self._under = (ground, pitch)
+        return self._under
 
     def _index(self, ids) -> np.ndarray:
         """Positions of ``ids`` in the active arrays (which are sorted by id)."""
@@ -314,11 +340,12 @@ class KinematicWorld:
         return where
 
 
-def footprint_overlaps(road, x, y, yaw, params: VehicleParams) -> np.ndarray:
+def footprint_overlaps(road, x, y, yaw, params: VehicleParams, pairs=None) -> np.ndarray:
     """(m, 2) index pairs (i < j) of the vehicles whose footprints overlap: rectangles
     of the body boxes' length and width centred at road-frame (x, y) [m], turned by
     ``yaw`` [rad] against travel, on the same road. A bounding-box test picks the
-    candidates, the separating-axis test over the four edge directions decides."""
+    candidates, the separating-axis test over the four edge directions decides.
+    ``pairs``: ``np.triu_indices(n, 1)``, if the caller keeps it."""
     n = x.size
     if n < 2:
         return np.empty((0, 2), dtype=np.int64)
@@ -326,7 +353,7 @@ def footprint_overlaps(road, x, y, yaw, params: VehicleParams) -> np.ndarray:
     cos, sin = np.cos(yaw), np.sin(yaw)
     reach_x = half_l * np.abs(cos) + half_w * np.abs(sin)
     reach_y = half_l * np.abs(sin) + half_w * np.abs(cos)
-    i, j = np.triu_indices(n, 1)
+    i, j = np.triu_indices(n, 1) if pairs is None else pairs
     near = (
         (road[i] == road[j])
         & (np.abs(x[i] - x[j]) <= reach_x[i] + reach_x[j])
