@@ -55,6 +55,28 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
                 sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
             ),
         },
+        **control_sections(sim, vehicles, ghosts, lengths),
+        "counts": _counts(sim, store, vehicles, windows, sampled),
+        "physics": _physics(sim),
+        "timing": {
+            "reset_s": round(reset_s, 3),
+            "loop_s": round(loop_s, 3),
+            "real_time_factor": round(sim_s / loop_s, 3) if loop_s > 0 else None,
+            **{k: round(v, 4) for k, v in sim.times.per_step().items()},
+        },
+    }
+    return figures, (vehicles, windows, ghosts, recorded_ego, ego_rows)
+
+
+def control_sections(sim: Cosimulator, vehicles=None, ghosts=None, lengths=None) -> dict:
+    """The ``energy`` and ``control`` sections of a finished episode's metrics (what a
+    controller is judged by; :func:`measure` holds them with the rest). The log's
+    frames and the store's lengths are read from ``sim`` where not given."""
+    cfg = sim.config
+    vehicles = sim.log.vehicles() if vehicles is None else vehicles
+    ghosts = sim.log.ghosts() if ghosts is None else ghosts
+    lengths = sim.traffic.store.trajectory_arrays["length"] if lengths is None else lengths
+    return {
         "energy": economy.run_figures(
             vehicles,
             sim.ego_id,
@@ -76,16 +98,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             # time the baselines' safety layer overrode the ego's controller
             "safety_override_s": round(sim.manager.safety_overrides * cfg.dt, 3),
         },
-        "counts": _counts(sim, store, vehicles, windows, sampled),
-        "physics": _physics(sim),
-        "timing": {
-            "reset_s": round(reset_s, 3),
-            "loop_s": round(loop_s, 3),
-            "real_time_factor": round(sim_s / loop_s, 3) if loop_s > 0 else None,
-            **{k: round(v, 4) for k, v in sim.times.per_step().items()},
-        },
     }
-    return figures, (vehicles, windows, ghosts, recorded_ego, ego_rows)
 
 
 def _ego(sim: Cosimulator, ego_rows, recorded_ego) -> dict:

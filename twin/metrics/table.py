@@ -145,6 +145,8 @@ METRICS: tuple[Metric, ...] = (
     Metric("time_gap_median_s", "s", "median of the AV's gap over its speed (while faster "
            "than 1 m/s)", _control("time_gap_s", "median")),
     Metric("time_gap_p10_s", "s", "10th percentile of the same", _control("time_gap_s", "p10")),
+    Metric("time_gap_p90_s", "s", "90th percentile of the same (large gaps invite cut-ins)",
+           _control("time_gap_s", "p90")),
     Metric("accel_rms_mps2", "m/s^2", "RMS of the AV's acceleration (from its speed at 10 Hz)",
            _control("accel_rms_mps2"), paired="lower"),
     Metric("jerk_rms_mps3", "m/s^3", "RMS of the AV's jerk", _control("jerk_rms_mps3"),
