@@ -13,7 +13,7 @@ import sys
 import traceback
 
 from twin import __version__
-from twin.cli import bench, calibrate, data, dataset, evaluate, export, maps, run
+from twin.cli import bench, calibrate, data, dataset, evaluate, export, maps, run, train
 from twin.core.errors import TwinError
 
 EXIT_USER_ERROR = 2  # as argparse's own errors
@@ -58,6 +58,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"i24-twin {__version__}")
     commands = parser.add_subparsers(title="commands")
-    for group in (run, data, maps, export, dataset, calibrate, evaluate, bench):
+    for group in (run, data, maps, export, dataset, calibrate, evaluate, train, bench):
         group.register(commands)
     return parser
