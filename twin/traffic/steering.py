@@ -124,7 +124,14 @@ def steer(drivers, states, speed, centre_x, road_heading, config) -> tuple[np.nd
         config.lateral_gain,
         max_steer,
     )
-    return angle, path
+    # Held for one step of dt, the angle turns the heading by about v dt tan(angle) / L;
+    # never by more than the heading change Stanley asks for (about the angle itself),
+    # else at 10 Hz a short vehicle (v dt / L near 2) swings from side to side. At
+    # 100 Hz (v dt / L under 1) the limit never binds.
+    step_limit = np.arctan(
+        drivers.wheelbase * np.abs(angle) / (np.maximum(speed, SOFT_SPEED) * config.dt)
+    )
+    return np.clip(angle, -step_limit, step_limit), path
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:

@@ -1,10 +1,12 @@
-"""The lateral controller on the physics world: lane keeping and lane-change paths."""
+"""The lateral controller on the physics world and the kinematic world (10 Hz): lane
+keeping and lane-change paths."""
 
 import numpy as np
 import pytest
 
 from tests.twin.traffic.conftest import make_manager, run, spawn
 from twin.core.i24 import LANE_WIDTH, lane_center
+from twin.physics.kinematic import KinematicWorld
 from twin.traffic.steering import path_shape, stanley_steer
 
 
@@ -86,3 +88,48 @@ def test_forced_lane_change_is_a_smooth_manoeuvre_of_seconds(world, built_map):
     assert y.max() < lane_center(-4) + 0.15  # overshoot well inside the lane
     assert np.all(np.diff(y[moving[0] : arrived[0]]) > -1e-3)  # one way across
     assert abs(y[-1] - y[0]) == pytest.approx(LANE_WIDTH, abs=0.05)
+
+
+@pytest.fixture
+def kinematic(built_map):
+    with KinematicWorld(built_map, 0.1) as world:
+        yield world
+
+
+@pytest.mark.parametrize("road", [1, -1])
+def test_lane_keeping_at_10_hz_in_the_kinematic_world_settles_short_vehicles_too(
+    kinematic, built_map, road
+):
+    """At 10 Hz a 2.2 m vehicle at 35 m/s moves v dt / L = 2.3 wheelbases a step, where
+    Stanley alone would swing from side to side; the per-step limit settles it."""
+    manager = make_manager(built_map, auto_lane_change=False, dt=0.1)
+    speeds = np.array([5.0, 35.0, 25.0, 35.0])
+    lanes = np.array([-1, -2, -3, -4])
+    classes = np.array([0, 6, 0, 0])  # class 6: the shortest wheelbase (1.5 m)
+    offsets = np.array([0.8, -0.8, 0.8, -0.8])
+    spawn(kinematic, manager, road, lanes, -380.0 if road < 0 else 300.0, speeds, classes,
+          y=lane_center(lanes) + offsets, desired_speed=speeds)  # fmt: skip
+    rec = run(kinematic, manager, 40.0)
+    error = rec.y - lane_center(lanes)
+    assert np.abs(error[100:]).max() <= 0.15  # after 10 s
+    assert np.abs(error[-50:]).max() <= 0.02
+    for k in range(lanes.size):
+        e = error[:, k] * np.sign(offsets[k])
+        assert -e.min() < 0.1, k
+        assert np.count_nonzero(np.diff(np.sign(e[np.abs(e) > 0.01])) != 0) <= 1, k
+
+
+def test_a_lane_change_in_the_kinematic_world_follows_the_same_path(kinematic, built_map):
+    manager = make_manager(built_map, auto_lane_change=False, dt=0.1)
+    (vehicle,) = spawn(kinematic, manager, 1, -3, 300.0, 25.0, desired_speed=25.0)
+    run(kinematic, manager, 2.0)
+    manager.force_lane_change(int(vehicle), "right")
+    rec = run(kinematic, manager, 12.0)
+    y = rec.y[:, 0]
+    assert rec.lane[-1, 0] == -4 and not rec.changing[-1, 0]
+    assert y[-1] == pytest.approx(lane_center(-4), abs=0.05)
+    moving = np.flatnonzero(np.abs(y - lane_center(-3)) > 0.05)
+    arrived = np.flatnonzero(np.abs(y - lane_center(-4)) < 0.15)
+    assert 2.5 < (arrived[0] - moving[0]) * kinematic.dt < 7.0
+    assert y.max() < lane_center(-4) + 0.15
+    assert np.all(np.diff(y[moving[0] : arrived[0]]) > -1e-3)
