@@ -224,9 +224,12 @@ class WaveDampeningEnv(gym.Env):
         if self.sim is None:
             raise RuntimeError("no episode could be placed in 20 draws")
         self.episode = k
-        self._command, self._last, self._history = 0.0, None, []
+        # before the agent's first action the ego holds its speed (a speed action of 0
+        # would brake it at the full -3 m/s^2 through the step that shows it the ego)
+        hold = self.sim.ego.speed if self.action_kind == "speed" else 0.0
+        self._command, self._last, self._history = hold, None, []
         self._collisions, self._ego_accel, self._states = 0, 0.0, None
-        self._advance()  # one physics step: the controller sees the ego once
+        self._advance()  # one world step: the controller sees the ego once
         rows = self.sim.log.vehicles()
         self._followers = followers(rows, self.sim.ego_id)
         return self._observation(), {"episode": k, "ego_record_id": self.sim.ego.id}

@@ -105,3 +105,14 @@ def test_the_package_declares_its_environments_entry_point():
     (point,) = [e for e in entry_points(group="gymnasium.envs") if e.name == "i24twin"]
     point.load()()  # registering twice is harmless
     assert twin.env.ENV_ID in gym.registry
+
+
+@pytest.mark.parametrize("world", ["physics", "kinematic"])
+def test_with_the_speed_action_the_ego_holds_its_speed_until_the_agent_acts(data, world):
+    env = _env(data, action="speed", world=world)
+    env.reset(seed=3)
+    spawned = env.unwrapped.sim.ego.speed
+    assert env.unwrapped._last.speed == pytest.approx(spawned, abs=0.02)
+    obs, *_ = env.step(np.array([spawned], np.float32))
+    assert obs[0] == pytest.approx(spawned, abs=0.1)  # not braked at -3 m/s^2 first
+    env.close()
