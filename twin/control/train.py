@@ -21,7 +21,7 @@ One iteration (ARS V1-t, their Algorithm 1):
    their 2 x top objectives).
 
 The objective of a run, :func:`objective`, is the paired change of the AV and its
-followers' economy against ``human`` [%], minus penalties: 50 per collision, 5 per
+followers' economy against ``human`` [%], minus penalties: 50 per collision of the AV, 5 per
 second of time gap p90 over 4 s, 2 per percent of the window's economy below -1 %.
 Every run is a cosimulation of the kinematic world (``world``) with the run's
 behaviour (calibrated drivers where the store is calibrated).
@@ -262,7 +262,8 @@ def _rollout(location, spec, weights, config: TrainConfig) -> dict:
             return {}
         sim.run(progress=False)
         row = flatten(control_sections(sim))
-        collisions = len(sim.counters.collisions)
+        ego = sim.ego_id  # the AV's own collisions: the window's others are not its doing
+        collisions = sum(ego in (a, b) for _, a, b in sim.counters.collisions)
     keep = ("ego_and_followers_mpg", "window_mpg", "time_gap_p90_s")
     return {**{k: row.get(k) for k in keep}, "collisions": collisions}
 

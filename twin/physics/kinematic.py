@@ -82,7 +82,7 @@ class KinematicWorld:
         self._headings = {r: self.road.heading(r) for r in (1, -1)}
         self._profile = (self.road.profile_s, self.road.profile_z)
         self._slopes = np.diff(self.road.profile_z) / np.diff(self.road.profile_s)
-        self._pairs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # n -> triu indices
+        self._pairs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # n -> its triu indices
         self._under: tuple[np.ndarray, np.ndarray] | None = None  # _ground() of now
 
     # -- lifecycle --------------------------------------------------------------------
@@ -254,7 +254,7 @@ class KinematicWorld:
         pair once, smaller id first (ids are sorted, so rows are too)."""
         n = self._ids.size
         if n not in self._pairs:
-            self._pairs[n] = np.triu_indices(n, 1)
+            self._pairs = {n: np.triu_indices(n, 1)}  # the last count's (it changes little)
         pairs = footprint_overlaps(
             self._road, self._x, self._y, self._yaw, self._params, self._pairs[n]
         )

@@ -65,7 +65,10 @@ def check_world(world: str, dt: float) -> None:
     if world not in DEFAULT_DT:
         raise ValueError(f"world must be one of {', '.join(WORLDS)}, got {world!r}")
     if world == "physics":
-        PhysicsConfig(dt=dt)
+        try:
+            PhysicsConfig(dt=dt)
+        except ValueError as error:
+            raise ValueError(f"the physics world's {error}") from None
     elif not 0.0 < dt <= MAX_DT:
         raise ValueError(f"the kinematic world's dt must be in (0, {MAX_DT}] s, got {dt}")
 

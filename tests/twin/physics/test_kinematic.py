@@ -166,8 +166,9 @@ def test_footprints_turned_against_each_other_by_the_separating_axes():
 
 
 def test_the_same_commands_give_the_same_motion_in_both_worlds(built_map):
-    """An acceleration profile (speed up, cruise, brake hard, speed up) with a lane
-    change's steering, fed open-loop to both worlds: speeds and positions agree."""
+    """An acceleration profile (speed up, cruise, brake hard, speed up), fed open-loop
+    to both worlds: speeds and positions agree (steering in closed loop is
+    tests/twin/traffic/test_steering.py's)."""
     profile = np.concatenate([np.full(30, 1.0), np.zeros(20), np.full(20, -3.0), np.full(30, 1.2)])
     records = {}
     for kind in ("kinematic", "physics"):
@@ -186,3 +187,34 @@ def test_the_same_commands_give_the_same_motion_in_both_worlds(built_map):
     speed_rmse = np.sqrt(np.mean((k[:, 0] - p[:, 0]) ** 2))
     assert speed_rmse < 0.3, speed_rmse
     assert abs(k[-1, 1] - p[-1, 1]) < 3.0
+
+
+def test_raw_drive_and_brake_act_as_in_the_physics_world(kinematic):
+    ids = spawn(kinematic, [300.0, 400.0], [20.0, 20.0])
+    kinematic.set_controls(ids, drive=[1.0, 0.0], brake=[0.0, 1.0], steer=[0.0, 0.0])
+    kinematic.step()
+    s, p = kinematic.states(), kinematic.params
+    # full drive: the engine's power at this speed, or the driven wheels' grip (a sedan's
+    # front axle holds half its weight: 6.6 kN, under 140 kW / 20 m/s = 7 kN)
+    grip = p.mu[0] * p.mass[0] * GRAVITY * np.cos(kinematic._ground()[1][0]) / 2
+    assert s.drive_power[0] == pytest.approx(min(p.max_power[0], 20.0 * grip), rel=1e-3)
+    # full brake: the tyres' grip, mu g, give or take the grade
+    decel = (20.0 - s.speed[1]) / 0.1
+    assert p.mu[1] * GRAVITY * 0.9 < decel < p.mu[1] * GRAVITY * 1.1
+    with pytest.raises(ValueError, match=r"drive must be in 0\.\.1"):
+        kinematic.set_controls(ids, drive=[2.0, 0.0])
+
+
+def test_a_vehicle_at_rest_is_held_on_the_grade_and_never_rolls_back(kinematic):
+    ids = spawn(kinematic, np.linspace(100.0, 1400.0, 14), 0.0)
+    _, pitch = kinematic._ground()
+    assert np.abs(pitch).max() > 0.005  # the profile has grades here
+    kinematic.set_controls(ids, accel=np.zeros(ids.size), steer=np.zeros(ids.size))
+    x0 = kinematic.states().x.copy()
+    for _ in range(20):
+        kinematic.step()
+    assert np.all(kinematic.states().speed == 0.0)
+    np.testing.assert_array_equal(kinematic.states().x, x0)
+    kinematic.set_controls(ids, accel=np.full(ids.size, 0.01))  # too little for an upgrade
+    kinematic.step()
+    assert np.all(kinematic.states().speed >= 0.0)
