@@ -165,8 +165,11 @@ class TrajectoryStore:
             )
         return arrays
 
-    def samples(self, road: Road | str, t_min: float, t_max: float) -> dict[str, np.ndarray]:
-        """All samples on ``road`` with ``t_min <= t <= t_max``, sorted by (tid, t).
+    def samples(
+        self, road: Road | str, t_min: float, t_max: float, tids=None
+    ) -> dict[str, np.ndarray]:
+        """All samples on ``road`` with ``t_min <= t <= t_max`` (of the trajectories
+        ``tids`` only, if given), sorted by (tid, t).
 
         Returns:
             dict of (n,) arrays: tid int32, t float64, x float64, y float32,
@@ -183,6 +186,8 @@ class TrajectoryStore:
         table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
         columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
         keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
+        if tids is not None:  # before the sort, which dominates for a few trajectories
+            keep &= np.isin(columns["tid"], np.asarray(tids))
         columns = {name: col[keep] for name, col in columns.items()}
         order = np.lexsort((columns["t"], columns["tid"]))
         return {name: col[order] for name, col in columns.items()}
@@ -193,9 +198,7 @@ class TrajectoryStore:
         if not 0 <= tid < len(arrays["tid"]):
             raise KeyError(f"no trajectory with tid {tid} in {self.path}")
         road = Road(arrays["road"][tid])
-        s = self.samples(road, arrays["t_first"][tid], arrays["t_last"][tid])
-        rows = s["tid"] == tid
-        return {name: col[rows] for name, col in s.items()}
+        return self.samples(road, arrays["t_first"][tid], arrays["t_last"][tid], tids=[tid])
 
     def trajectory_samples(self, tids) -> dict[int, dict[str, np.ndarray]]:
         """All samples of each trajectory in ``tids``, read once per road (not per tid).
@@ -215,7 +218,10 @@ class TrajectoryStore:
         for road in np.unique(arrays["road"][tids]):
             on_road = tids[arrays["road"][tids] == road]
             s = self.samples(
-                road, arrays["t_first"][on_road].min(), arrays["t_last"][on_road].max()
+                road,
+                arrays["t_first"][on_road].min(),
+                arrays["t_last"][on_road].max(),
+                tids=on_road,
             )
             starts = np.searchsorted(s["tid"], on_road, side="left")
             ends = np.searchsorted(s["tid"], on_road, side="right")
