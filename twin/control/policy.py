@@ -119,7 +119,18 @@ class LinearSpeedPolicy:
             raise PolicyError(f"{path}: version {document.get('version')!r} is not {VERSION}")
         if document.get("features") != list(FEATURES):
             raise PolicyError(f"{path}: features {document.get('features')!r} are not {FEATURES}")
-        return cls(tuple(document["weights"]), document.get("about") or {})
+        weights = document.get("weights")
+        if not isinstance(weights, list) or not all(
+            isinstance(w, int | float) and not isinstance(w, bool) for w in weights
+        ):
+            raise PolicyError(f"{path}: weights must be a list of numbers, got {weights!r}")
+        about = document.get("about") or {}
+        if not isinstance(about, dict):
+            raise PolicyError(f"{path}: about must be a table, got {about!r}")
+        try:
+            return cls(tuple(weights), about)
+        except PolicyError as error:
+            raise PolicyError(f"{path}: {error}") from None
 
 
 def policy_features(

@@ -4,10 +4,11 @@ PyTorch).
 
 - :func:`train_ppo` trains PPO (stable-baselines3's, an MLP policy) on the env's
   ``train`` episodes and saves the model, atomically.
-- ``twin.rl:policy`` is a controller factory: any saved stable-baselines3 model drives
-  the ego of ``twin run`` or ``twin eval`` (``--controller human,twin.rl:policy --set
-  controller.policy.model=ppo.zip``), seeing what the env's agent saw
-  (:func:`twin.control.env.features`) and deciding every 0.1 s, as in training.
+- ``twin.rl:policy`` is a controller factory: by default the linear speed policy the
+  twin ships (trained by ``twin train``, :mod:`twin.control.train`; numpy alone), or
+  ``--set controller.policy.model=PATH`` for another: a ``.json`` of ``twin train`` or
+  any saved stable-baselines3 model (``.zip``), which sees what the env's agent saw
+  (:func:`twin.control.env.features`) and decides every 0.1 s, as in training.
 
 :class:`PolicyController` needs only an object with stable-baselines3's
 ``predict(observation, deterministic=True)``, so it runs (and is tested) without the
@@ -28,6 +29,7 @@ from twin.control.env import (
     ahead_speeds,
     features,
 )
+from twin.control.policy import SHIPPED, LinearSpeedPolicy, PolicyDriver
 from twin.core.errors import TwinError
 from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
 
@@ -164,9 +166,16 @@ def load_policy(path: str | Path):
 
 
 @controller_factory
-def policy(config) -> PolicyController:
-    """The policy of ``[controller.policy] model`` driving the ego."""
+def policy(config):
+    """The policy of ``[controller.policy] model`` driving the ego: a linear speed
+    policy file (``.json``, :mod:`twin.control.policy`, numpy alone) or a
+    stable-baselines3 model (``.zip``, the ``rl`` extra); by default the policy the
+    twin ships (:data:`twin.control.policy.SHIPPED`)."""
     settings = config.controller.policy
-    if not settings.model:
-        raise RLError("set the policy's model: --set controller.policy.model=PATH.zip")
-    return PolicyController(load_policy(settings.model), settings.action)
+    model = settings.model or str(SHIPPED)
+    if model.endswith(".json"):
+        key = str(Path(model).resolve())
+        if key not in _MODELS:  # one read per process (av_share builds one per AV)
+            _MODELS[key] = LinearSpeedPolicy.load(model)
+        return PolicyDriver(_MODELS[key])
+    return PolicyController(load_policy(model), settings.action)

@@ -279,9 +279,10 @@ class PolicySettings:
     """A trained policy driving the ego (``twin.rl:policy``, the ``rl`` extra).
 
     Attributes:
-        model: path of a stable-baselines3 model (``.zip``) trained on
-            ``i24twin/WaveDampening-v0``.
-        action: the env's action it was trained with: ``accel`` or ``speed``.
+        model: path of a policy: a linear speed policy of ``twin train`` (``.json``)
+            or a stable-baselines3 model (``.zip``) trained on
+            ``i24twin/WaveDampening-v0``; empty: the policy the twin ships.
+        action: a stable-baselines3 model's action in the env: ``accel`` or ``speed``.
     """
 
     model: str = ""

@@ -60,16 +60,19 @@ def test_a_policy_in_the_twin_sees_what_the_envs_agent_saw(data):
     np.testing.assert_allclose(ctl_obs[:, columns], env_obs[:, columns], atol=0.3)
 
 
-def test_a_policy_without_a_model_is_a_named_error(data, tmp_path, capsys):
+def test_without_a_model_the_shipped_policy_drives_and_missing_models_are_named(
+    data, tmp_path, capsys
+):
     args = ["run", "--data", data, "--road", "westbound", "--duration", "2", "--out",
             str(tmp_path / "run"), "--quiet", "--ego-controller", "twin.rl:policy"]  # fmt: skip
-    assert main(args) == 2
-    assert "set the policy's model: --set controller.policy.model=PATH.zip" in (
-        capsys.readouterr().err
-    )
+    assert main(args) == 0
+    capsys.readouterr()
     missing = [*args, "--set", f"controller.policy.model={tmp_path / 'none.zip'}"]
     assert main(missing) == 2
     assert "no policy model at" in capsys.readouterr().err
+    missing = [*args, "--set", f"controller.policy.model={tmp_path / 'none.json'}"]
+    assert main(missing) == 2
+    assert "no policy file at" in capsys.readouterr().err
 
 
 def test_a_policy_that_returns_nan_stops_the_run(data):
