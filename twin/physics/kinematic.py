@@ -33,7 +33,13 @@ import numpy as np
 from mapgen.build import MapBundle
 from twin.core.i24 import SEGMENT_LENGTH, lane_of
 from twin.core.vehicle_classes import vehicle_classes
-from twin.physics.states import SpawnStates, VehicleStates, quaternion_of
+from twin.physics.states import (
+    SpawnStates,
+    VehicleStates,
+    index_of,
+    quaternion_of,
+    write_controls,
+)
 from twin.physics.vehicle import (
     GRAVITY,
     POWER_SPEED_MIN,
@@ -43,7 +49,6 @@ from twin.physics.vehicle import (
 )
 
 MAX_DT = 0.1  # [s] the longest step (the control step)
-MAX_STEER = 0.7  # [rad] steer beyond this is refused, as the physics world refuses it
 _FIELDS = ("accel", "drive", "brake", "steer")
 
 
@@ -177,23 +182,7 @@ class KinematicWorld:
             KeyError: an id is not active. ValueError: a value is out of range.
         """
         index = slice(None) if ids is None else self._index(ids)
-        if accel is not None:
-            accel = np.asarray(accel, dtype=np.float64)
-            if not np.all(np.isfinite(accel)):
-                raise ValueError("accel must be finite")
-            self._controls["accel"][index] = accel
-        for name, value in (("drive", drive), ("brake", brake)):
-            if value is not None:
-                value = np.asarray(value, dtype=np.float64)
-                if np.any((value < 0) | (value > 1)) or not np.all(np.isfinite(value)):
-                    raise ValueError(f"{name} must be in 0..1")
-                self._controls[name][index] = value
-                self._controls["accel"][index] = np.nan
-        if steer is not None:
-            steer = np.asarray(steer, dtype=np.float64)
-            if not np.all(np.isfinite(steer)) or np.any(np.abs(steer) > MAX_STEER):
-                raise ValueError(f"steer must be finite and within +/- {MAX_STEER} rad")
-            self._controls["steer"][index] = steer
+        write_controls(self._controls, index, accel=accel, steer=steer, drive=drive, brake=brake)
 
     # -- stepping ---------------------------------------------------------------------
 
@@ -331,13 +320,7 @@ class KinematicWorld:
 
     def _index(self, ids) -> np.ndarray:
         """Positions of ``ids`` in the active arrays (which are sorted by id)."""
-        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
-        where = np.searchsorted(self._ids, ids)
-        found = where < self._ids.size
-        found[found] = self._ids[where[found]] == ids[found]
-        if not found.all():
-            raise KeyError(f"not an active vehicle: {ids[~found].tolist()}")
-        return where
+        return index_of(self._ids, ids)
 
 
 def footprint_overlaps(road, x, y, yaw, params: VehicleParams, pairs=None) -> np.ndarray:

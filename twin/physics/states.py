@@ -13,6 +13,7 @@ import numpy as np
 from twin.core.i24 import Road
 
 MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
+MAX_STEER = 0.7  # [rad] front-wheel angles beyond this are refused
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,3 +126,47 @@ def rotation_matrices(q: np.ndarray) -> np.ndarray:
         ],
         axis=1,
     )
+
+
+def write_controls(controls: dict, index, *, accel=None, steer=None, drive=None, brake=None):
+    """Check inputs and write them into ``controls`` (arrays ``accel``, ``drive``,
+    ``brake``, ``steer``) at ``index``: a world's ``set_controls``. ``accel`` [m/s^2]
+    selects acceleration tracking; ``drive``/``brake`` (0..1) select raw control
+    (``accel`` is then cleared, NaN, for those vehicles); ``steer`` [rad] is the front
+    wheels' angle.
+
+    Raises:
+        ValueError: a value is out of range (named).
+    """
+    if accel is not None:
+        accel = np.asarray(accel, dtype=np.float64)
+        if not np.all(np.isfinite(accel)):
+            raise ValueError("accel must be finite")
+        controls["accel"][index] = accel
+    for name, value in (("drive", drive), ("brake", brake)):
+        if value is not None:
+            value = np.asarray(value, dtype=np.float64)
+            if np.any((value < 0) | (value > 1)) or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} must be in 0..1")
+            controls[name][index] = value
+            controls["accel"][index] = np.nan
+    if steer is not None:
+        steer = np.asarray(steer, dtype=np.float64)
+        if not np.all(np.isfinite(steer)) or np.any(np.abs(steer) > MAX_STEER):
+            raise ValueError(f"steer must be finite and within +/- {MAX_STEER} rad")
+        controls["steer"][index] = steer
+
+
+def index_of(active: np.ndarray, ids) -> np.ndarray:
+    """Positions of ``ids`` in a world's sorted array of ``active`` ids.
+
+    Raises:
+        KeyError: an id is not active.
+    """
+    ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
+    where = np.searchsorted(active, ids)
+    found = where < active.size
+    found[found] = active[where[found]] == ids[found]
+    if not found.all():
+        raise KeyError(f"not an active vehicle: {ids[~found].tolist()}")
+    return where

@@ -21,8 +21,10 @@ from twin.physics.map_bodies import load_map_bodies
 from twin.physics.states import (
     SpawnStates,
     VehicleStates,
+    index_of,
     quaternion_of,
     rotation_matrices,
+    write_controls,
 )
 from twin.physics.vehicle import Controls, VehicleParams, ray_ends, vehicle_forces
 
@@ -258,23 +260,7 @@ class PhysicsWorld:
             KeyError: an id is not active. ValueError: a value is out of range.
         """
         index = slice(None) if ids is None else self._index(ids)
-        if accel is not None:
-            accel = np.asarray(accel, dtype=np.float64)
-            if not np.all(np.isfinite(accel)):
-                raise ValueError("accel must be finite")
-            self._controls["accel"][index] = accel
-        for name, value in (("drive", drive), ("brake", brake)):
-            if value is not None:
-                value = np.asarray(value, dtype=np.float64)
-                if np.any((value < 0) | (value > 1)) or not np.all(np.isfinite(value)):
-                    raise ValueError(f"{name} must be in 0..1")
-                self._controls[name][index] = value
-                self._controls["accel"][index] = np.nan
-        if steer is not None:
-            steer = np.asarray(steer, dtype=np.float64)
-            if not np.all(np.isfinite(steer)) or np.any(np.abs(steer) > 0.7):
-                raise ValueError("steer must be finite and within +/- 0.7 rad")
-            self._controls["steer"][index] = steer
+        write_controls(self._controls, index, accel=accel, steer=steer, drive=drive, brake=brake)
 
     # -- stepping ---------------------------------------------------------------------
 
@@ -385,13 +371,7 @@ class PhysicsWorld:
 
     def _index(self, ids) -> np.ndarray:
         """Positions of ``ids`` in the active arrays (which are sorted by id)."""
-        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
-        where = np.searchsorted(self._ids, ids)
-        found = where < self._ids.size
-        found[found] = self._ids[where[found]] == ids[found]
-        if not found.all():
-            raise KeyError(f"not an active vehicle: {ids[~found].tolist()}")
-        return where
+        return index_of(self._ids, ids)
 
     def _group(self, body: int, group: int, mask: int) -> None:
         p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=self.client)
