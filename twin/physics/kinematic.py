@@ -34,9 +34,9 @@ from mapgen.build import MapBundle
 from twin.core.i24 import SEGMENT_LENGTH, lane_of
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.states import (
+    ActiveVehicles,
     SpawnStates,
     VehicleStates,
-    index_of,
     quaternion_of,
     write_controls,
 )
@@ -52,7 +52,7 @@ MAX_DT = 0.1  # [s] the longest step (the control step)
 _FIELDS = ("accel", "drive", "brake", "steer")
 
 
-class KinematicWorld:
+class KinematicWorld(ActiveVehicles):
     """Vehicles as point masses on kinematic bicycles along the map's road (see the
     module doc). Same interface as :class:`twin.physics.world.PhysicsWorld`
     (:class:`twin.physics.worlds.World`).
@@ -89,35 +89,6 @@ class KinematicWorld:
         self._slopes = np.diff(self.road.profile_z) / np.diff(self.road.profile_s)
         self._pairs: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # n -> its triu indices
         self._under: tuple[np.ndarray, np.ndarray] | None = None  # _ground() of now
-
-    # -- lifecycle --------------------------------------------------------------------
-
-    def close(self) -> None:
-        """Nothing to release (for the interface)."""
-
-    def __enter__(self) -> "KinematicWorld":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    @property
-    def ids(self) -> np.ndarray:
-        """(n,) twin ids of the active vehicles, in the order of :meth:`states`."""
-        return self._ids.copy()
-
-    @property
-    def params(self) -> VehicleParams:
-        """Physical parameters of the active vehicles, in the order of :meth:`states`."""
-        return self._params
-
-    def params_of(self, ids) -> VehicleParams:
-        """Physical parameters of vehicles ``ids``.
-
-        Raises:
-            KeyError: an id is not an active vehicle.
-        """
-        return self._params.take(self._index(ids))
 
     # -- spawn and despawn ------------------------------------------------------------
 
@@ -317,10 +288,6 @@ class KinematicWorld:
         pitch = np.where(inside, np.arctan(np.where(eastbound, slope, -slope)), 0.0)
         self._under = (ground, pitch)
         return self._under
-
-    def _index(self, ids) -> np.ndarray:
-        """Positions of ``ids`` in the active arrays (which are sorted by id)."""
-        return index_of(self._ids, ids)
 
 
 def footprint_overlaps(road, x, y, yaw, params: VehicleParams, pairs=None) -> np.ndarray:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.i24 import Road
+from twin.physics.vehicle import VehicleParams
 
 MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 MAX_STEER = 0.7  # [rad] front-wheel angles beyond this are refused
@@ -155,6 +156,46 @@ def write_controls(controls: dict, index, *, accel=None, steer=None, drive=None,
         if not np.all(np.isfinite(steer)) or np.any(np.abs(steer) > MAX_STEER):
             raise ValueError(f"steer must be finite and within +/- {MAX_STEER} rad")
         controls["steer"][index] = steer
+
+
+class ActiveVehicles:
+    """What every world keeps of its active vehicles and answers alike: their twin ids
+    (sorted) in ``_ids`` and their physical parameters in ``_params``, in that order;
+    a world is a context manager that ``close()``s."""
+
+    _ids: np.ndarray
+    _params: VehicleParams
+
+    def close(self) -> None:
+        """Release what the world holds (nothing by default)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def ids(self) -> np.ndarray:
+        """(n,) twin ids of the active vehicles, in the order of ``states()``."""
+        return self._ids.copy()
+
+    @property
+    def params(self) -> VehicleParams:
+        """Physical parameters of the active vehicles, in the order of ``states()``."""
+        return self._params
+
+    def params_of(self, ids) -> VehicleParams:
+        """Physical parameters of vehicles ``ids``.
+
+        Raises:
+            KeyError: an id is not an active vehicle.
+        """
+        return self._params.take(self._index(ids))
+
+    def _index(self, ids) -> np.ndarray:
+        """Positions of ``ids`` in the active arrays (which are sorted by id)."""
+        return index_of(self._ids, ids)
 
 
 def index_of(active: np.ndarray, ids) -> np.ndarray:

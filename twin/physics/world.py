@@ -19,9 +19,9 @@ from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
 from twin.physics.states import (
+    ActiveVehicles,
     SpawnStates,
     VehicleStates,
-    index_of,
     quaternion_of,
     rotation_matrices,
     write_controls,
@@ -61,7 +61,7 @@ class PhysicsConfig:
             raise ValueError("ray_threads must be >= 0 and solver_iterations >= 1")
 
 
-class PhysicsWorld:
+class PhysicsWorld(ActiveVehicles):
     """A pybullet world (DIRECT) with the map's road and a pool of vehicle bodies.
 
     Raises:
@@ -109,34 +109,10 @@ class PhysicsWorld:
             p.disconnect(self.client)
             self.client = None
 
-    def __enter__(self) -> "PhysicsWorld":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     @property
     def dt(self) -> float:
         """[s] the fixed step."""
         return self.config.dt
-
-    @property
-    def ids(self) -> np.ndarray:
-        """(n,) twin ids of the active vehicles, in the order of :meth:`states`."""
-        return self._ids.copy()
-
-    @property
-    def params(self) -> VehicleParams:
-        """Physical parameters of the active vehicles, in the order of :meth:`states`."""
-        return self._params
-
-    def params_of(self, ids) -> VehicleParams:
-        """Physical parameters of vehicles ``ids``.
-
-        Raises:
-            KeyError: an id is not an active vehicle.
-        """
-        return self._params.take(self._index(ids))
 
     def vehicle_contacts(self) -> np.ndarray:
         """(m, 2) twin ids of the pairs of vehicles whose bodies touch now (after the
@@ -368,10 +344,6 @@ class PhysicsWorld:
                 rotation_matrices(quaternion),
             )
         return self._read
-
-    def _index(self, ids) -> np.ndarray:
-        """Positions of ``ids`` in the active arrays (which are sorted by id)."""
-        return index_of(self._ids, ids)
 
     def _group(self, body: int, group: int, mask: int) -> None:
         p.setCollisionFilterGroupMask(body, -1, group, mask, physicsClientId=self.client)
