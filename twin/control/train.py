@@ -131,8 +131,9 @@ def train(
         TrainingError: a bad setting or no training episodes.
     """
     from mapgen.build import default_map
-    from twin.control.env import ENV_ID
+    from twin.control.env import CONTROL_DT, ENV_ID
     from twin.runners.engines import run_jobs, where
+    from twin.runners.episodes import draw_episode
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -143,11 +144,11 @@ def train(
     weights = np.array(config.start, dtype=np.float64)
     scales = np.array(SCALES)
     rows, start = [], time.perf_counter()
-    steps_per_run = config.duration / 0.1
+    steps_per_run = config.duration / CONTROL_DT
     for iteration in range(1, config.iterations + 1):
         tick = time.perf_counter()
         specs = [
-            _episode(cells, sampling, config, (iteration - 1) * config.episodes + e)
+            draw_episode(cells, sampling, config.seed, (iteration - 1) * config.episodes + e)
             for e in range(config.episodes)
         ]
         deltas = rng.standard_normal((config.directions, weights.size)) * scales
@@ -233,12 +234,6 @@ def _training_cells(store, bundle, config: TrainConfig):
         room_speed=CONGESTED_TRAVEL,
     )  # fmt: skip
     return cells, sampling
-
-
-def _episode(cells, sampling, config: TrainConfig, index: int):
-    from twin.runners.episodes import draw_episode
-
-    return draw_episode(cells, sampling, config.seed, index)
 
 
 def _rollout(location, spec, weights, config: TrainConfig) -> dict:
