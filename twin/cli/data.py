@@ -96,12 +96,14 @@ def _register_synth(commands) -> None:
     p = commands.add_parser("synth", help="write a synthetic I-24 MOTION day (JSON)")
     p.add_argument(
         "--preset",
-        choices=["A", "B", "C", "S"],
+        choices=["A", "B", "C", "S", "D", "E"],
         required=True,
         help="A: eastbound light traffic; B: westbound, a wave in the HOV lane; C: a "
         "westbound morning with waves like the real ones (twin data waves); S (test "
         "data): westbound, 20 minutes of stop-and-go in three lanes started by drivers "
-        "braking, HOV lane closed",
+        "braking, HOV lane closed; D (test data): C's morning with lanes -3 and -4 "
+        "ending 300 m past the segment (drivers leave them inside it); E (test data): "
+        "C's morning with the Old Hickory on-ramp merging into lane -4 by MM 61.51",
     )
     p.add_argument(
         "--drivers",

@@ -37,18 +37,23 @@ class Occupancy:
     same_lane_ahead: np.ndarray
 
     @classmethod
-    def build(cls, road: np.ndarray, x: np.ndarray, lanes: list[np.ndarray]) -> "Occupancy":
+    def build(
+        cls, road: np.ndarray | list[np.ndarray], x: np.ndarray, lanes: list[np.ndarray]
+    ) -> "Occupancy":
         """Entries of vehicles ``0..n-1`` in each of the lane arrays in ``lanes``.
 
         Args:
-            road: (n,) directions +1 / -1.
+            road: (n,) directions +1 / -1; or one such array per lane array (a lane
+                array's entries on the road its own array names: the synthesiser keeps
+                an on-ramp's lane apart this way).
             x: (n,) [m] back centres.
             lanes: arrays (n,) of lane ids; a vehicle gets one entry per distinct lane id
                 in -1..-4 across them (0 or a repeated id adds nothing).
         """
         n = x.size
+        roads = road if isinstance(road, (list, tuple)) else [road] * len(lanes)
         owners, groups = [], []
-        for k, lane in enumerate(lanes):
+        for k, (lane, road) in enumerate(zip(lanes, roads, strict=True)):
             new = (lane <= -1) & (lane >= -N_LANES)
             for earlier in lanes[:k]:
                 new &= lane != earlier

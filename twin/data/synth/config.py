@@ -68,6 +68,44 @@ class Bottleneck:
 
 
 @dataclass(frozen=True)
+class LaneDrop:
+    """Lanes that end: the outermost ``lanes`` (e.g. (-3, -4): four lanes become two)
+    end at ``x``. Their drivers must leave them before it, whatever their gain: a
+    driver starts to seek a gap its own look-ahead distance per lane still to cross
+    before the end, accepts harsher gaps as the end nears, and stops at the end if it
+    finds none (see :mod:`twin.data.synth.lane_ends`).
+
+    Attributes:
+        x: [m] road-frame position where the lanes end.
+        lanes: the lanes that end: (-4,) or (-3, -4) (their drivers move toward the
+            HOV lane, which the synthesiser's drivers never enter, so two lanes
+            continue).
+    """
+
+    x: float
+    lanes: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class OnRamp:
+    """An on-ramp's acceleration lane beside lane -4, from ``x_start`` to ``x_end``
+    (where the merge ends): vehicles arrive on it at ``flow`` and merge into lane -4.
+    The recording sees them outside the lane bands until they are in lane -4, as
+    I-24 MOTION's cameras do.
+
+    Attributes:
+        x_start, x_end: [m] road-frame ends of the acceleration lane.
+        flow: [veh/h] demand arriving on the ramp.
+        speed: [m/s] speed at which they arrive.
+    """
+
+    x_start: float
+    x_end: float
+    flow: float
+    speed: float = 20.0
+
+
+@dataclass(frozen=True)
 class SynthConfig:
     """A synthetic recording of one road.
 
@@ -101,6 +139,12 @@ class SynthConfig:
         politeness, change_threshold, keep_right, safe_decel: MOBIL parameters
             ([-], [m/s^2], [m/s^2], [m/s^2]).
         decision_interval: [s] mean time between a driver's lane-change decisions.
+        lane_drop: lanes that end inside the simulated road, or None.
+        on_ramp: an on-ramp merging into lane -4, or None.
+        merge_lookahead: [m] range (uniform) of the drivers' look-ahead: how far before
+            their lane's end, per lane still to cross, they start to leave it.
+        courtesy: [-] share of drivers who open a gap for a driver who must merge in
+            front of them (decelerating no harder than their comfortable deceleration).
         seed: random seed.
     """
 
@@ -128,6 +172,10 @@ class SynthConfig:
     keep_right: float = 0.1
     safe_decel: float = 3.0
     decision_interval: float = 2.0
+    lane_drop: LaneDrop | None = None
+    on_ramp: OnRamp | None = None
+    merge_lookahead: tuple[float, float] = (150.0, 600.0)
+    courtesy: float = 0.5
     seed: int = 0
 
     def __post_init__(self):
@@ -150,6 +198,8 @@ class SynthConfig:
             "politeness": 0 <= self.politeness <= 10,
             "change_threshold": 0 <= self.change_threshold <= 10,
             "decision_interval": 0 < self.decision_interval <= 600,
+            "merge_lookahead": 0 < self.merge_lookahead[0] <= self.merge_lookahead[1],
+            "courtesy": 0 <= self.courtesy <= 1,
         }
         for name, ok in checks.items():
             if not ok:
@@ -168,11 +218,40 @@ class SynthConfig:
                 f"invalid bottleneck {b!r}: it must lie downstream of the recorded range, "
                 f"within the {self.downstream:g} m simulated beyond it"
             )
+        self._check_lane_ends()
         for s in self.slowdowns:
             if not (
                 set(s.lanes) <= set(i24.LANES) and s.speed >= 0 and s.duration >= 0 and s.decel > 0
             ):
                 raise ValueError(f"invalid slowdown {s!r}")
+
+    def _check_lane_ends(self) -> None:
+        x_in = self.x_record[0] - self.upstream
+        x_out = self.x_record[1] + self.downstream
+        d = self.lane_drop
+        if d is not None:
+            lanes = sorted(d.lanes, reverse=True)
+            if not (
+                lanes and set(lanes) <= {-3, -4} and -4 in lanes and x_in + 300.0 <= d.x < x_out
+            ):
+                raise ValueError(
+                    f"invalid lane_drop {d!r}: its lanes must be the outermost, (-4,) or "
+                    "(-3, -4), ending inside the simulated road "
+                    "at least 300 m past its start"
+                )
+        r = self.on_ramp
+        if r is not None and not (
+            x_in <= r.x_start < r.x_end <= x_out
+            and r.x_end - r.x_start >= 50.0
+            and 0 <= r.flow <= 2000
+            and 0 < r.speed <= 40
+        ):
+            raise ValueError(
+                f"invalid on_ramp {r!r}: it must lie inside the simulated road, at least "
+                "50 m long, with a flow of 0 to 2000 veh/h and a speed of 0 to 40 m/s"
+            )
+        if d is not None and r is not None and d.x < r.x_end:
+            raise ValueError("the on-ramp must end before the lane drop")
 
     @property
     def end(self) -> float:

@@ -1,12 +1,13 @@
 """The synthetic days the twin ships and tests with: presets A and B (the paper's
-scenarios), C (a westbound morning like the real one) and S (test data for the
-calibration), and drivers unlike the class table's."""
+scenarios), C (a westbound morning like the real one), S (test data for the
+calibration), D and E (test data with lane changes made for reasons beyond the
+segment: a lane drop, an on-ramp), and drivers unlike the class table's."""
 
 from dataclasses import replace
 
 from twin.core import i24
 from twin.core.i24 import SCENARIO_TIME, Road
-from twin.data.synth.config import Bottleneck, Slowdown, SynthConfig
+from twin.data.synth.config import Bottleneck, LaneDrop, OnRamp, Slowdown, SynthConfig
 from twin.traffic.drivers import DriverDistribution
 
 #: Scenario A of the paper: eastbound, light free-flowing traffic (I-24 eastbound is
@@ -112,5 +113,33 @@ PRESET_C = SynthConfig(
     safe_decel=1.0,
 )
 
+#: Preset D, test data with strategic lane changes (issue 30): preset C's morning without
+#: its bottleneck, but with lanes -3 and -4 ending 300 m past the segment's downstream
+#: end (MM 60.6 westbound), inside the recorded range: four lanes become two (the HOV
+#: lane and lane -2). Their drivers leave them inside the segment, those of lane -4
+#: twice; lane -2 takes more than it discharges through the merge (its drivers make
+#: room for the mergers), so a queue grows upstream of the drop in lanes -2 to -4 and
+#: the HOV lane flows.
+PRESET_D = replace(
+    PRESET_C,
+    flow=(1700.0, 850.0, 550.0, 400.0),
+    bottleneck=None,
+    lane_drop=LaneDrop(x=i24.SEGMENT_LENGTH + 300.0, lanes=(-3, -4)),
+)
+
+#: Preset E, test data with strategic lane changes (issue 30): preset C's morning with
+#: the westbound Old Hickory Blvd on-ramp, whose acceleration lane beside lane -4 ends
+#: at MM 61.51 (145 m into the segment) and carries 600 veh/h. The ramp's vehicles are
+#: recorded outside the lane bands until they are in lane -4, as the real data show them
+#: (``twin data ingest`` counts those samples as ``outside_lane_bands``).
+PRESET_E = replace(
+    PRESET_C,
+    on_ramp=OnRamp(
+        x_start=-250.0,
+        x_end=(i24.SEGMENT_END_MM - 61.51) * i24.MILE,
+        flow=600.0,
+    ),
+)
+
 #: Every preset ``twin data synth`` offers.
-ALL_PRESETS = {**PRESETS, "C": PRESET_C, "S": PRESET_S}
+ALL_PRESETS = {**PRESETS, "C": PRESET_C, "S": PRESET_S, "D": PRESET_D, "E": PRESET_E}

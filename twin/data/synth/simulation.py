@@ -1,6 +1,6 @@
 """The synthesiser's microsimulation: four lanes of drivers of any car-following
 model, MOBIL lane changes that take several seconds, drivers braking for slowdowns
-and a bottleneck."""
+and a bottleneck, and lanes that end (a lane drop, an on-ramp; :mod:`lane_ends`)."""
 
 import math
 from dataclasses import dataclass
@@ -9,7 +9,9 @@ import numpy as np
 
 from twin.core import i24
 from twin.core.vehicle_classes import vehicle_classes
+from twin.data.synth import lane_ends
 from twin.data.synth.config import HOUR, MAX_DECEL, MIN_GAP, Slowdown, SynthConfig
+from twin.data.synth.lane_ends import MERGE_ROOM, RAMP_LANE
 from twin.traffic.drivers import DriverTraits
 from twin.traffic.lanes import Occupancy
 from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
@@ -43,6 +45,8 @@ class _Vehicles:
     forced_until: np.ndarray  # [s]
     forced_decel: np.ndarray  # [m/s^2]
     bottleneck_speed: np.ndarray  # [m/s] the driver's speed through the bottleneck
+    lookahead: np.ndarray  # [m] per lane to cross, before a lane's end (lane_ends)
+    courteous: np.ndarray  # bool: opens a gap for a driver who must merge
 
     def __len__(self) -> int:
         return len(self.vid)
@@ -86,6 +90,10 @@ class Simulation:
         self.waiting: list[_Vehicles | None] = [None] * 4
         self.next_arrival = np.full(4, np.inf)
         self.until_slow: list[int] | None = None  # drivers to each lane's next hesitant one
+        self.lane_ends = lane_ends.any_lane_ends(config)
+        self.ramp_pending = 0
+        self.ramp_next = np.inf
+        self.ramp_waiting: _Vehicles | None = None
         self.registry_class: list[np.ndarray] = []  # vehicle class by vid, per creation batch
         self.registry_dims: list[np.ndarray] = []  # (n, 3) [m] by vid
         self.registry_drivers: list[DriverTraits] = []  # by vid
@@ -95,6 +103,7 @@ class Simulation:
     def _class_weights(self, lane: int) -> np.ndarray:
         share = self.classes.column("share").astype(float).copy()
         heavy = self.classes.column("hov_allowed") == 0
+        lane = max(lane, -i24.N_LANES)  # the on-ramp's traffic: lane -4's
         if lane == i24.HOV_LANE:
             share[heavy] = 0.0
         else:
@@ -116,6 +125,13 @@ class Simulation:
         self.registry_dims.append(dims)
         self.registry_drivers.append(drivers)
         lanes = np.asarray(lanes, dtype=np.int8)
+        next_decision = self.t + rng.uniform(0, self.cfg.decision_interval, n)
+        bottleneck_speed = self._bottleneck_speeds(lanes)
+        if self.lane_ends:  # drawn only then: the days without keep their data
+            lookahead = rng.uniform(*self.cfg.merge_lookahead, n)
+            courteous = rng.random(n) < self.cfg.courtesy
+        else:
+            lookahead, courteous = np.zeros(n), np.zeros(n, dtype=bool)
         return _Vehicles(
             vid=vid,
             x=np.asarray(x, float),
@@ -124,7 +140,7 @@ class Simulation:
             lane_from=lanes.copy(),
             change_start=np.zeros(n),
             change_duration=np.ones(n),
-            next_decision=self.t + rng.uniform(0, self.cfg.decision_interval, n),
+            next_decision=next_decision,
             length=dims[:, 0],
             width=dims[:, 1],
             height=dims[:, 2],
@@ -138,7 +154,9 @@ class Simulation:
             forced_speed=np.full(n, np.nan),
             forced_until=np.zeros(n),
             forced_decel=np.zeros(n),
-            bottleneck_speed=self._bottleneck_speeds(lanes),
+            bottleneck_speed=bottleneck_speed,
+            lookahead=lookahead,
+            courteous=courteous,
         )
 
     def _bottleneck_speeds(self, lanes: np.ndarray) -> np.ndarray:
@@ -154,7 +172,7 @@ class Simulation:
                     math.ceil(self.rng.uniform(0.0, 1.0) * self._slow_gap()) for _ in i24.LANES
                 ]
             for i, lane in enumerate(lanes):
-                k = i24.LANES.index(int(lane))
+                k = i24.LANES.index(max(int(lane), -i24.N_LANES))  # the ramp's: lane -4's
                 self.until_slow[k] -= 1
                 if self.until_slow[k] <= 0:
                     slow[i] = True
@@ -190,8 +208,13 @@ class Simulation:
             step = np.maximum(spacing, new.length[:-1] + 30.0)
             new.x = self.x_in + self.rng.uniform(0, spacing) + np.r_[0.0, np.cumsum(step)]
             new.keep(new.x < self.x_out - 25.0)
+            if self.lane_ends:  # room to stop before a lane's end, at 30 m/s
+                new.keep(new.x + new.length < lane_ends.lane_end(self.cfg, new.lane) - 250.0)
             lanes.append(new)
             self.next_arrival[k] = self.t + self._headway(q)
+        ramp = self.cfg.on_ramp
+        if ramp is not None and ramp.flow > 0:
+            self.ramp_next = self.t + self._headway(ramp.flow / HOUR)
         self.vehicles = lanes[0]
         for new in lanes[1:]:
             self.vehicles.extend(new)
@@ -234,12 +257,42 @@ class Simulation:
             self.waiting[k] = None
             self.pending[k] -= 1
             veh.extend(new)
+        if self.cfg.on_ramp is not None:
+            self._insert_ramp()
+
+    def _insert_ramp(self) -> None:
+        """Let the on-ramp's waiting arrival enter its lane where the gap allows."""
+        ramp, veh = self.cfg.on_ramp, self.vehicles
+        q = ramp.flow / HOUR
+        while q > 0 and self.t >= self.ramp_next:
+            self.ramp_pending += 1
+            self.ramp_next += self._headway(q)
+        if self.ramp_pending == 0:
+            return
+        on_ramp = (veh.lane == RAMP_LANE) | (veh.lane_from == RAMP_LANE)
+        if on_ramp.any():
+            last = np.flatnonzero(on_ramp)[np.argmin(veh.x[on_ramp])]
+            gap, v_last = veh.x[last] - ramp.x_start, veh.v[last]
+        else:
+            gap, v_last = np.inf, ramp.speed
+        if self.ramp_waiting is None:
+            self.ramp_waiting = self._new_vehicles(
+                np.array([RAMP_LANE]), np.array([ramp.x_start]), np.array([ramp.speed])
+            )
+        new = self.ramp_waiting
+        v_in = min(v_last, ramp.speed, new.v0[0])
+        if gap < new.length[0] + MIN_GAP + v_in * new.T[0]:
+            return
+        new.v[:] = v_in
+        self.ramp_waiting = None
+        self.ramp_pending -= 1
+        veh.extend(new)
 
     # -- one step ---------------------------------------------------------------------
     def _occupancy(self) -> Occupancy:
         """Lane occupancy: each vehicle in its lane, and a changing vehicle in its origin lane."""
         veh = self.vehicles
-        return Occupancy.build(np.ones(len(veh)), veh.x, [veh.lane, veh.lane_from])
+        return lane_ends.occupancy(veh.x, veh.lane, veh.lane_from)
 
     def step(self) -> None:
         cfg, veh, dt = self.cfg, self.vehicles, self.cfg.dt
@@ -251,6 +304,12 @@ class Simulation:
         acc = np.full(len(veh), np.inf)
         np.minimum.at(acc, owner, acc_entry)
         self.collisions += int(np.count_nonzero(gap < 0))
+        seeking = None
+        if self.lane_ends:
+            seeking = lane_ends.seeking(
+                cfg, veh.lane, veh.lane_from, veh.x, veh.length, veh.lookahead
+            )
+            acc = self._lane_end_accel(occupancy, acc, seeking)
 
         forced = ~np.isnan(veh.forced_speed)
         if forced.any():
@@ -262,7 +321,9 @@ class Simulation:
 
         acc += cfg.accel_noise * self.rng.standard_normal(len(veh))
         acc = np.clip(acc, -MAX_DECEL, veh.a * 1.5)
-        self._change_lanes(occupancy, acc)
+        self._change_lanes(occupancy, acc, seeking)
+        if seeking is not None and seeking.any():
+            self._merge(occupancy, acc, seeking)
 
         v_new = veh.v + acc * dt
         stopping = v_new < 0
@@ -277,18 +338,65 @@ class Simulation:
         veh.keep(veh.x < self.x_out)
         self._insert()
 
-    def _change_lanes(self, occupancy: Occupancy, acc: np.ndarray) -> None:
+    def _lane_end_accel(self, occupancy: Occupancy, acc, seeking) -> np.ndarray:
+        """Accelerations with the lanes' ends: a driver brakes for its lane's end as for
+        a standing vehicle; a courteous driver with a seeking driver ahead of it in the
+        next lane opens a gap for it (:mod:`lane_ends`)."""
+        cfg, veh = self.cfg, self.vehicles
+        drivers = self.model.from_traits(veh.traits)
+        end = lane_ends.lane_end(cfg, veh.lane)
+        ending = np.flatnonzero(np.isfinite(end))
+        if ending.size:
+            gap = end[ending] - veh.x[ending] - veh.length[ending]
+            wall = self.model.accel(
+                veh.v[ending], np.zeros(ending.size), gap, take(drivers, ending)
+            )
+            acc[ending] = np.minimum(acc[ending], wall)
+        # the courteous open gaps for mergers past half their seek, with room ahead
+        merger = np.flatnonzero(seeking)
+        distance = end[merger] - veh.x[merger] - veh.length[merger]
+        seek = lane_ends.seek_distance(cfg, veh.lane[merger], veh.lookahead[merger])
+        merger = merger[distance < 0.5 * seek]
+        if merger.size:
+            target = (veh.lane[merger] + 1).astype(np.int64)
+            _, fol = occupancy.around(np.ones(merger.size), target, veh.x[merger])
+            ok = fol >= 0
+            merger, fol = merger[ok], fol[ok]
+            ahead, _ = occupancy.around(np.ones(merger.size), target[ok], veh.x[merger])
+            room = np.where(ahead >= 0, veh.x[ahead] - veh.x[merger] - veh.length[merger], np.inf)
+            ok = (
+                veh.courteous[fol]
+                & (veh.x[merger] > veh.x[fol] + veh.length[fol])
+                & (room > MERGE_ROOM)
+            )
+            merger, fol = merger[ok], fol[ok]
+            if fol.size:
+                gap = veh.x[merger] - veh.x[fol] - veh.length[fol]
+                # only one who can still stop behind it braking comfortably drops back
+                can = lane_ends.needed_decel(veh.v[fol], veh.v[merger], gap) <= veh.b[fol]
+                merger, fol, gap = merger[can], fol[can], gap[can]
+                yield_acc = self.model.accel(veh.v[fol], veh.v[merger], gap, take(drivers, fol))
+                np.minimum.at(acc, fol, np.maximum(yield_acc, -veh.b[fol]))
+        return acc
+
+    def _change_lanes(self, occupancy: Occupancy, acc: np.ndarray, seeking=None) -> None:
         """MOBIL decisions for the drivers due to decide; start the chosen manoeuvres.
 
         The drivers judge the change by their own model's accelerations and weigh the
-        new follower's loss only (their old follower's gain counts for nothing)."""
+        new follower's loss only (their old follower's gain counts for nothing). Those
+        seeking to leave a lane that ends (``seeking``) and the on-ramp's drivers do not
+        decide by MOBIL (:meth:`_merge`), and nobody moves by choice into a lane that
+        ends within its look-ahead."""
         cfg, veh = self.cfg, self.vehicles
-        due = np.flatnonzero(
+        free = (
             (veh.next_decision <= self.t)
             & (veh.lane == veh.lane_from)
             & (veh.lane != i24.HOV_LANE)
             & np.isnan(veh.forced_speed)
         )
+        if seeking is not None:
+            free &= ~seeking & (veh.lane != RAMP_LANE)
+        due = np.flatnonzero(free)
         if len(due) == 0:
             return
         veh.next_decision[due] = self.t + self.rng.exponential(cfg.decision_interval, len(due))
@@ -298,6 +406,8 @@ class Simulation:
         for step_dir in (+1, -1):
             target = veh.lane[due] + step_dir
             allowed = (target <= -2) & (target >= -4)
+            if seeking is not None:
+                allowed &= ~lane_ends.ends_within(cfg, target, veh.x[due], veh.lookahead[due])
             cand = due[allowed]
             if len(cand) == 0:
                 continue
@@ -321,15 +431,44 @@ class Simulation:
             best_incentive[idx] = incentive[better]
             best_lane[idx] = tgt[better]
         chosen = best_lane != veh.lane[due]
-        movers = due[chosen]
+        self._start(due[chosen], best_lane[chosen])
+
+    def _start(self, movers: np.ndarray, target: np.ndarray) -> None:
+        """Start the lane changes of drivers ``movers`` into lanes ``target``."""
         if len(movers) == 0:
             return
-        low, high = cfg.lane_change_duration
+        veh = self.vehicles
+        low, high = self.cfg.lane_change_duration
         veh.lane_from[movers] = veh.lane[movers]
-        veh.lane[movers] = best_lane[chosen]
+        veh.lane[movers] = target
         veh.change_start[movers] = self.t
         veh.change_duration[movers] = self.rng.uniform(low, high, len(movers))
         self.lane_changes += len(movers)
+
+    def _merge(self, occupancy: Occupancy, acc: np.ndarray, seeking: np.ndarray) -> None:
+        """The drivers seeking to leave a lane that ends take the first gap to their left
+        in which neither they nor their new follower must brake harder than they
+        accept to keep 1 m apart, a deceleration that grows as the end nears
+        (:mod:`lane_ends`); they judge every step, not at MOBIL's decision times, by
+        kinematics, not by a car-following model."""
+        cfg, veh = self.cfg, self.vehicles
+        cand = np.flatnonzero(seeking & (veh.lane == veh.lane_from))
+        if cand.size == 0:
+            return
+        target = (veh.lane[cand] + 1).astype(np.int64)
+        lead, fol = occupancy.around(np.ones(cand.size), target, veh.x[cand])
+        has_lead, has_fol = lead >= 0, fol >= 0
+        gap_lead = np.where(has_lead, veh.x[lead] - veh.x[cand] - veh.length[cand], np.inf)
+        gap_fol = np.where(has_fol, veh.x[cand] - veh.x[fol] - veh.length[fol], np.inf)
+        own = lane_ends.needed_decel(veh.v[cand], np.where(has_lead, veh.v[lead], 0.0), gap_lead)
+        new_follower = np.where(
+            has_fol, lane_ends.needed_decel(veh.v[fol], veh.v[cand], gap_fol), 0.0
+        )
+        end = lane_ends.lane_end(cfg, veh.lane[cand])
+        seek = lane_ends.seek_distance(cfg, veh.lane[cand], veh.lookahead[cand])
+        accept = lane_ends.accept_decel(cfg, end - veh.x[cand] - veh.length[cand], seek)
+        take_gap = (gap_lead > 1.0) & (gap_fol > 1.0) & (new_follower <= accept) & (own <= accept)
+        self._start(cand[take_gap], target[take_gap])
 
     def trigger(self, slowdown: Slowdown) -> None:
         """Make the nearest driver upstream of ``slowdown.x`` brake, in each of its lanes."""
@@ -349,8 +488,8 @@ class Simulation:
     def lateral(self) -> np.ndarray:
         """[m] road-frame y of every vehicle: lane centre, or a smooth path while changing."""
         veh = self.vehicles
-        y_to = i24.lane_center(veh.lane)
-        y_from = i24.lane_center(veh.lane_from)
+        y_to = lane_ends.lane_y(veh.lane)
+        y_from = lane_ends.lane_y(veh.lane_from)
         progress = np.clip((self.t - veh.change_start) / veh.change_duration, 0.0, 1.0)
         blend = 0.5 - 0.5 * np.cos(np.pi * progress)
         return np.where(veh.lane_from == veh.lane, y_to, y_from + (y_to - y_from) * blend)
