@@ -2,16 +2,20 @@
 :mod:`~twin.calibration.distributions` and :mod:`~twin.calibration.lane_changes`, run
 over a store's recording and kept beside it.
 
-``twin calibrate STORE`` writes two files into the store folder and changes nothing
+``twin calibrate STORE`` writes these files into the store folder and changes nothing
 else in it (the recorded data are never touched)::
 
     STORE/
       calibration.json            the car-following model fitted; per road: the window
                                   used, its distributions per class group with fit counts and
-                                  errors, desired speeds per lane, lane-change rates
-                                  and the fitted MOBIL threshold
+                                  errors, desired speeds per lane, lane-change rates,
+                                  the lane-change flows by lane pair, position and time
+                                  (discretionary and strategic) and the fitted MOBIL
+                                  threshold
       calibration_fits.parquet    one row per fitted follower: its parameters, errors,
                                   at-bound flags and whether the fit was accepted
+      lane_flows_ROAD.png         the lane-change flows by position and lane pair
+                                  (``twin calibrate`` draws it; :func:`draw_lane_flows`)
 
 Each is written to a temporary file and renamed; the JSON last, so a reader never
 sees a calibration whose fits are missing.
@@ -32,6 +36,7 @@ from twin.calibration.car_following import FitSettings, fit_followers
 from twin.calibration.distributions import desired_speeds, group_distributions
 from twin.calibration.following import CalibrationDataError
 from twin.calibration.lane_changes import fit_threshold, lane_change_rates, recorded_incentives
+from twin.calibration.lane_flows import describe_flows, explained_by_mobil, lane_change_flows
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
@@ -170,7 +175,7 @@ def _calibrate_road(store, road, window, settings, model, progress):
     incentives = recorded_incentives(
         grid, model, driver, settings.mobil, every=settings.decision_every
     )
-    mobil = fit_threshold(incentives, len(changes))
+    mobil, flows = _lane_change_flows(grid, changes, incentives, settings)
     mobil.update(
         politeness=settings.mobil.politeness,
         safe_decel=settings.mobil.safe_decel,
@@ -188,9 +193,27 @@ def _calibrate_road(store, road, window, settings, model, progress):
         "car_following": car,
         "desired_speed": desired_speeds(following.free_flow_speeds(grid)),
         "lane_changes": lane_change_rates(changes),
+        "lane_flows": flows,
         "mobil": mobil,
     }
     return section, fits
+
+
+def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]:
+    """The MOBIL threshold and the lane-change flows (:mod:`lane_flows`). The threshold
+    is fitted to every recorded change, then, where the flows show strategic changes,
+    again to the others: MOBIL models the discretionary ones only."""
+    every = max(1, round(settings.decision_every / grid.dt)) * grid.dt
+    mobil = fit_threshold(incentives, len(changes))
+    explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
+    flows = lane_change_flows(changes, grid, explained)
+    if flows["identified"]:
+        discretionary = len(changes) - flows["strategic_count"]
+        mobil = fit_threshold(incentives, discretionary)
+        mobil["strategic_excluded"] = flows["strategic_count"]
+        explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
+        flows = lane_change_flows(changes, grid, explained)
+    return mobil, flows
 
 
 def _median_driver(model: CarFollowingModel, distribution):
@@ -225,6 +248,24 @@ def write_calibration(store: TrajectoryStore, doc: dict, fits: dict) -> Path:
     with atomic_file(store.path / CALIBRATION) as tmp:
         tmp.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return store.path / CALIBRATION
+
+
+def draw_lane_flows(store: TrajectoryStore, doc: dict) -> list[Path]:
+    """Draw each road's lane-change flows beside the calibration
+    (``STORE/lane_flows_ROAD.png``); returns the pictures' paths."""
+    from twin.calibration.flow_plot import plot_lane_flows
+
+    paths = []
+    for road, section in doc["roads"].items():
+        flows, window = section.get("lane_flows"), section["window"]
+        if not flows:
+            continue
+        title = (
+            f"Lane-change flows recorded on {road}, {window['from_local']} to "
+            f"{window['until_local'][11:]}"
+        )
+        paths.append(plot_lane_flows(flows, store.path / f"lane_flows_{road}.png", title=title))
+    return paths
 
 
 def _fits_table(fits: dict) -> pa.Table:
@@ -342,4 +383,5 @@ def describe_calibration(doc: dict | None) -> str:
             f" ({rate if rate is not None else 0:.3f} per km); MOBIL threshold "
             f"{mobil['threshold']:.2f} m/s^2"
         )
+        lines += describe_flows(section.get("lane_flows", {}))
     return "\n".join(lines)

@@ -20,9 +20,12 @@ def register(commands) -> None:
         description="Fit the visible traffic's behaviour to the recording: car following "
         "(IDM, or --model) per follower (replaying its recorded leader, fitted on spacing), "
         "its distribution per "
-        "class group, desired speeds per lane from free flow, the lane-change rates and the "
-        "MOBIL threshold that matches them. Writes calibration.json and "
-        "calibration_fits.parquet into the store; the recorded data are not changed.",
+        "class group, desired speeds per lane from free flow, the lane-change rates, their "
+        "flows by lane pair, position and time (discretionary, or strategic: one way and "
+        "unexplained by MOBIL) and the MOBIL threshold that matches the discretionary ones. "
+        "Writes calibration.json and "
+        "calibration_fits.parquet into the store, with a picture of its lane-change flows "
+        "(lane_flows_ROAD.png); the recorded data are not changed.",
     )
     add_store(p)
     p.add_argument(
@@ -44,7 +47,12 @@ def register(commands) -> None:
 
 
 def _calibrate(args) -> int:
-    from twin.calibration.calibrate import calibrate, describe_calibration, write_calibration
+    from twin.calibration.calibrate import (
+        calibrate,
+        describe_calibration,
+        draw_lane_flows,
+        write_calibration,
+    )
 
     roads = [checked_road(road) for road in args.road] if args.road is not None else None
     store = open_store(args.store)
@@ -56,6 +64,7 @@ def _calibrate(args) -> int:
     model = car_following_model(args.model)
     doc, fits = calibrate(store, roads, t_from, t_until, model=model, progress=not args.quiet)
     path = write_calibration(store, doc, fits)
+    pictures = draw_lane_flows(store, doc)
     print(describe_calibration(doc))
-    print(f"written: {path}")
+    print(f"written: {', '.join(map(str, [path, *pictures]))}")
     return 0

@@ -33,7 +33,7 @@ def test_calibrate_writes_beside_the_data_and_never_changes_them(store, capsys):
     assert "car following:" in out and "accepted of" in out and "MOBIL threshold" in out
     after = _digests(store.path)
     assert {name: after[name] for name in before} == before
-    assert set(after) - set(before) == {CALIBRATION, FITS}
+    assert set(after) - set(before) == {CALIBRATION, FITS, "lane_flows_westbound.png"}
 
     doc = read_calibration(store)
     section = doc["roads"]["westbound"]

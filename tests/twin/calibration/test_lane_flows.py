@@ -1,0 +1,118 @@
+"""Lane-change flows of a recording: by lane pair and position, discretionary and strategic."""
+
+import numpy as np
+
+from twin.calibration.following import GridTraffic, lane_changes
+from twin.calibration.lane_changes import Incentives
+from twin.calibration.lane_flows import (
+    describe_flows,
+    explained_by_mobil,
+    lane_change_flows,
+)
+from twin.core.i24 import Road, lane_center
+
+DT = 0.1
+
+
+def _grid(tracks):
+    """A recording on the grid: each track (first step, lane before, change x or None,
+    lane after) driven at 20 m/s from x = 0 to 1000 m."""
+    cols = {name: [] for name in ("tid", "k", "x", "lane")}
+    for tid, (k0, lane, x_change, lane_after) in enumerate(tracks):
+        x = np.arange(0.0, 1000.0, 20.0 * DT)
+        lanes = np.full(x.size, lane, dtype=np.int8)
+        if x_change is not None:
+            lanes[x >= x_change] = lane_after
+        cols["tid"].append(np.full(x.size, tid))
+        cols["k"].append(k0 + np.arange(x.size))
+        cols["x"].append(x)
+        cols["lane"].append(lanes)
+    c = {name: np.concatenate(v) for name, v in cols.items()}
+    n = c["tid"].size
+    return GridTraffic(
+        road=Road.WESTBOUND, dt=DT, t0=1.0e9, tid=c["tid"], k=c["k"], x=c["x"],
+        speed=np.full(n, 20.0), y=lane_center(c["lane"]), lane=c["lane"],
+        length=np.full(n, 4.5), vehicle_class=np.zeros(n, dtype=np.int8),
+        leader=np.full(n, -1), gap=np.full(n, np.inf),
+    )  # fmt: skip
+
+
+def _recording(strategic: int, seed: int = 0):
+    """Vehicles in lanes -3 and -2; ``strategic`` of lane -3's leave it between x = 600
+    and 700 m; 20 each way change between the two lanes anywhere (no direction)."""
+    rng = np.random.default_rng(seed)
+    tracks = []
+    for i in range(200):
+        k0 = 15 * i
+        if i < strategic:
+            tracks.append((k0, -3, rng.uniform(600.0, 700.0), -2))
+        elif i < strategic + 20:
+            tracks.append((k0, -3, rng.uniform(50.0, 900.0), -2))
+        elif i < strategic + 40:
+            tracks.append((k0, -2, rng.uniform(50.0, 900.0), -3))
+        else:
+            tracks.append((k0, -3 if i % 2 else -2, None, None))
+    return _grid(tracks)
+
+
+def test_a_directional_unexplained_flow_is_found_where_and_between_which_lanes_it_is():
+    grid = _recording(60)
+    changes = lane_changes(grid)
+    assert len(changes) == 100
+    flows = lane_change_flows(changes, grid, np.zeros(len(changes), dtype=bool))
+    assert flows["identified"] and flows["changes"] == 100
+    edges = np.array(flows["x_edges"])
+    strategic = flows["strategic"]
+    assert list(strategic) == ["-3>-2"]  # the way back is no flow of its own
+    by_position = np.array(strategic["-3>-2"]["by_position"])
+    assert set(edges[np.flatnonzero(by_position)]) == {600.0}  # the bin where they leave
+    assert 55 <= strategic["-3>-2"]["count"] <= 62  # the 60, less the noise's chance excess
+    # the share of lane -3's vehicles passing that bin who leave it there
+    bin_600 = int(np.flatnonzero(edges == 600.0)[0])
+    passing = flows["passing"]["-3"][bin_600]
+    p = strategic["-3>-2"]["probability"][bin_600]
+    assert p == round(by_position[bin_600] / passing, 4) and 0.4 < p < 0.8
+    # changes by pair and position, and the net flow out of lane -3 there
+    assert flows["pairs"]["-3>-2"]["count"] == 80 and flows["pairs"]["-2>-3"]["count"] == 20
+    net = np.array(flows["net_out"]["-3"])
+    assert net[bin_600] >= 55 and net.sum() == 60
+    assert sum(flows["pairs"]["-3>-2"]["by_time"]) == 80
+    lines = describe_flows(flows)
+    assert "strategic" in lines[0] and "-3>-2" in lines[1] and "600 to 700 m" in lines[1]
+
+
+def test_changes_mobil_explains_or_too_few_to_tell_leave_mobil_alone():
+    grid = _recording(60)
+    changes = lane_changes(grid)
+    explained = np.ones(len(changes), dtype=bool)
+    flows = lane_change_flows(changes, grid, explained)
+    assert not flows["identified"] and flows["strategic"] == {}
+    assert "MOBIL alone" in flows["note"] and flows["explained"] == 100
+    few = _recording(6)
+    changes = lane_changes(few)
+    flows = lane_change_flows(changes, few, np.zeros(len(changes), dtype=bool))
+    assert not flows["identified"] and "need 10" in flows["note"]
+    assert "MOBIL alone" in describe_flows(flows)[1]
+
+
+def test_a_change_is_explained_by_mobil_wanting_it_in_the_seconds_before():
+    grid = _recording(0)
+    changes = lane_changes(grid)
+    order = np.argsort(changes.tid)
+    tid, time = changes.tid[order][:3], changes.time[order][:3]
+    direction = np.sign(changes.lane_to[order][:3].astype(int) - changes.lane_from[order][:3])
+    decision = np.floor((time - grid.t0) / 1.0).astype(int)
+    # change 0: wanted 2 s before; change 1: wanted 10 s before only; change 2: wanted
+    # the other way
+    incentives = Incentives(
+        tid=np.array([tid[0], tid[1], tid[2]]),
+        decision=np.array([decision[0] - 2, decision[1] - 10, decision[2]]),
+        direction=np.array([direction[0], direction[1], -direction[2]], dtype=np.int8),
+        gain=np.array([1.0, 1.0, 1.0]),
+        possible=np.ones(3, dtype=bool),
+    )
+    lex = np.lexsort((incentives.decision, incentives.direction, incentives.tid))
+    incentives = Incentives(*(getattr(incentives, f)[lex] for f in Incentives.__dataclass_fields__))
+    explained = explained_by_mobil(changes, incentives, 0.5, grid.t0, 1.0)
+    assert explained[order][:3].tolist() == [True, False, False]
+    assert not explained_by_mobil(changes, incentives, 1.5, grid.t0, 1.0).any()  # below it

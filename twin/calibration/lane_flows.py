@@ -1,0 +1,208 @@
+"""Lane-change flows of a recording: between which lanes, where along the road and when
+its drivers change lanes, the net flow out of each lane by position, and how much of
+it MOBIL's incentive explains (discretionary) or leaves unexplained in one direction
+(strategic: a lane that ends, a merge, an exit beyond the window).
+
+A recorded change is *explained* where MOBIL, judging the recorded scene with the
+calibrated median driver, wanted that move at one of its decisions in the
+:data:`EXPLAIN_BEFORE` seconds before the vehicle crossed the line. Of the changes it
+does not explain, those of one lane pair and position bin are *strategic* where they
+go one way more than chance allows: the excess of one direction over the other beyond
+:data:`Z_DIRECTIONAL` standard deviations of a fair split (``|a - b| > z sqrt(a + b)``)
+is the strategic flow of that bin. Divided by the vehicles passing the bin in the lane
+left, it is the probability that a vehicle there leaves that lane for that reason,
+which the calibrated behaviour reproduces.
+"""
+
+import math
+
+import numpy as np
+
+from twin.calibration.following import GridTraffic, LaneChanges
+from twin.calibration.lane_changes import Incentives
+from twin.core.i24 import LANES
+
+POSITION_BIN = 100.0  # [m] bins along the road
+TIME_BIN = 60.0  # [s] bins over the window
+EXPLAIN_BEFORE = 4.0  # [s] MOBIL decisions this long before a crossing count as its cause
+Z_DIRECTIONAL = 2.0  # standard deviations of a fair split a directional flow must exceed
+#: strategic changes a recording needs before its strategic flow is used (fewer: MOBIL alone)
+MIN_STRATEGIC = 10
+
+
+def pair_name(lane_from: int, lane_to: int) -> str:
+    """``"-3>-2"``: the key of a lane pair."""
+    return f"{int(lane_from)}>{int(lane_to)}"
+
+
+def explained_by_mobil(
+    changes: LaneChanges, incentives: Incentives, threshold: float, t0: float, every: float
+) -> np.ndarray:
+    """(c,) bool: MOBIL wanted each recorded change at a decision in the
+    :data:`EXPLAIN_BEFORE` s before it (its incentive beat ``threshold``).
+
+    ``incentives`` are MOBIL's decisions every ``every`` seconds from ``t0`` (the grid's
+    start), sorted by (tid, direction, decision) as
+    :func:`~twin.calibration.lane_changes.recorded_incentives` returns them.
+    """
+    out = np.zeros(len(changes), dtype=bool)
+    if len(changes) == 0 or incentives.tid.size == 0:
+        return out
+    # one integer per (tid, direction) in the incentives' order, then the decisions
+    key = incentives.tid.astype(np.int64) * 2 + (incentives.direction > 0)
+    direction = np.sign(changes.lane_to.astype(np.int64) - changes.lane_from)
+    wanted = incentives.gain > threshold
+    first = np.ceil((changes.time - EXPLAIN_BEFORE - t0) / every - 1e-9).astype(np.int64)
+    last = np.floor((changes.time - t0) / every + 1e-9).astype(np.int64)
+    for i in range(len(changes)):
+        k = int(changes.tid[i]) * 2 + int(direction[i] > 0)
+        a, b = np.searchsorted(key, [k, k + 1])
+        if a == b:
+            continue
+        decision = incentives.decision[a:b]
+        lo, hi = np.searchsorted(decision, [first[i], last[i] + 1])
+        out[i] = bool(wanted[a:b][lo:hi].any())
+    return out
+
+
+def passages(grid: GridTraffic, x_edges: np.ndarray) -> np.ndarray:
+    """(4 lanes, bins) vehicles passing each position bin in each lane (vehicle-km
+    driven there over the bin's length)."""
+    distance = np.zeros(len(grid))
+    if len(grid) > 1:
+        same = (grid.tid[1:] == grid.tid[:-1]) & (grid.k[1:] == grid.k[:-1] + 1)
+        distance[1:] = np.where(same, np.maximum(np.diff(grid.x), 0.0), 0.0)
+    on = grid.lane != 0
+    at = np.searchsorted(x_edges, grid.x[on], side="right") - 1
+    inside = (at >= 0) & (at < x_edges.size - 1)
+    out = np.zeros((len(LANES), x_edges.size - 1))
+    np.add.at(out, (-grid.lane[on][inside].astype(np.int64) - 1, at[inside]), distance[on][inside])
+    return out / np.diff(x_edges)
+
+
+def flow_edges(x_min: float, x_max: float) -> np.ndarray:
+    """[m] position bin edges of :data:`POSITION_BIN` covering ``[x_min, x_max]``."""
+    lo = math.floor(x_min / POSITION_BIN) * POSITION_BIN
+    hi = max(math.ceil(x_max / POSITION_BIN) * POSITION_BIN, lo + POSITION_BIN)
+    return np.arange(lo, hi + 0.5 * POSITION_BIN, POSITION_BIN)
+
+
+def by_position(changes: LaneChanges, x_edges: np.ndarray) -> dict:
+    """``{pair: counts per position bin}`` and ``{lane: net flow out per bin}`` (changes
+    leaving the lane less those entering it)."""
+    at = np.clip(np.searchsorted(x_edges, changes.x, side="right") - 1, 0, x_edges.size - 2)
+    pairs, net = {}, {str(lane): np.zeros(x_edges.size - 1, dtype=np.int64) for lane in LANES}
+    for a, b in sorted(set(zip(changes.lane_from.tolist(), changes.lane_to.tolist(), strict=True))):
+        rows = (changes.lane_from == a) & (changes.lane_to == b)
+        counts = np.bincount(at[rows], minlength=x_edges.size - 1)
+        pairs[pair_name(a, b)] = counts
+        net[str(a)] += counts
+        net[str(b)] -= counts
+    return {"pairs": pairs, "net_out": net}
+
+
+def lane_change_flows(
+    changes: LaneChanges,
+    grid: GridTraffic,
+    explained: np.ndarray,
+    *,
+    min_strategic: int = MIN_STRATEGIC,
+) -> dict:
+    """The recording's lane-change flows (module doc) as a JSON-ready dict.
+
+    Args:
+        changes: the recorded lane changes; grid: the recording they come from.
+        explained: (c,) bool, :func:`explained_by_mobil` of each change.
+        min_strategic: fewer strategic changes than this identify no strategic flow
+            (``identified`` false, with the reason in ``note``).
+    """
+    x_edges = (
+        flow_edges(float(grid.x.min()), float(grid.x.max())) if len(grid) else flow_edges(0, 0)
+    )
+    t0 = float(grid.t0)
+    t1 = t0 + float(grid.k.max()) * grid.dt if len(grid) else t0
+    t_edges = np.arange(0.0, max(t1 - t0, 0.0) + TIME_BIN, TIME_BIN)
+    n_bins = x_edges.size - 1
+    at_x = np.clip(np.searchsorted(x_edges, changes.x, side="right") - 1, 0, n_bins - 1)
+    at_t = np.clip(
+        np.searchsorted(t_edges, changes.time - t0, side="right") - 1, 0, max(t_edges.size - 2, 0)
+    )
+    passing = passages(grid, x_edges)
+    pairs, strategic = {}, {}
+    position = by_position(changes, x_edges)
+    for name, counts in position["pairs"].items():
+        a, b = (int(v) for v in name.split(">"))
+        rows = (changes.lane_from == a) & (changes.lane_to == b)
+        pairs[name] = {
+            "count": int(rows.sum()),
+            "explained": int((rows & explained).sum()),
+            "by_position": counts.tolist(),
+            "by_time": np.bincount(at_t[rows], minlength=max(t_edges.size - 1, 1)).tolist(),
+        }
+        # the unexplained, one way more than a fair split allows
+        mine = np.bincount(at_x[rows & ~explained], minlength=n_bins)
+        back = (changes.lane_from == b) & (changes.lane_to == a) & ~explained
+        theirs = np.bincount(at_x[back], minlength=n_bins)
+        excess = mine - theirs
+        excess = np.where(excess > Z_DIRECTIONAL * np.sqrt(mine + theirs), excess, 0)
+        if excess.any():
+            lane_index = -a - 1
+            with np.errstate(divide="ignore", invalid="ignore"):
+                p = np.where(passing[lane_index] > 0, excess / passing[lane_index], 0.0)
+            strategic[name] = {
+                "count": int(excess.sum()),
+                "by_position": excess.tolist(),
+                "probability": np.round(np.minimum(p, 1.0), 4).tolist(),
+            }
+    total = len(changes)
+    n_strategic = sum(s["count"] for s in strategic.values())
+    identified = n_strategic >= min_strategic
+    note = (
+        ""
+        if identified
+        else (
+            f"{n_strategic} strategic changes (need {min_strategic}) to identify a strategic "
+            "flow: MOBIL alone"
+        )
+    )
+    return {
+        "position_bin_m": POSITION_BIN,
+        "x_edges": x_edges.tolist(),
+        "time_bin_s": TIME_BIN,
+        "t_edges": t_edges.tolist(),
+        "changes": total,
+        "explained": int(explained.sum()),
+        "unexplained": int(total - explained.sum()),
+        "strategic_count": n_strategic,
+        "strategic_share": round(n_strategic / total, 4) if total else 0.0,
+        "identified": identified,
+        "note": note,
+        "pairs": pairs,
+        "net_out": {lane: v.tolist() for lane, v in position["net_out"].items()},
+        "passing": {str(lane): np.round(passing[k], 2).tolist() for k, lane in enumerate(LANES)},
+        "strategic": strategic if identified else {},
+    }
+
+
+def describe_flows(flows: dict) -> list[str]:
+    """Lines for ``twin data info``: what the recording's lane-change flows hold."""
+    if not flows:
+        return []
+    total = flows["changes"]
+    lines = [
+        f"    lane-change flows: {total} changes in {flows['position_bin_m']:.0f} m bins; "
+        f"MOBIL explains {flows['explained']}, {flows['strategic_count']} strategic "
+        f"({100 * flows['strategic_share']:.0f} %)"
+    ]
+    if not flows["identified"]:
+        lines.append(f"      {flows['note']}")
+        return lines
+    edges = flows["x_edges"]
+    for name, s in sorted(flows["strategic"].items()):
+        bins = np.flatnonzero(np.asarray(s["by_position"]) > 0)
+        span = f"x {edges[bins[0]]:.0f} to {edges[bins[-1] + 1]:.0f} m" if bins.size else ""
+        lines.append(
+            f"      {name}: {s['count']} strategic, {span}, up to "
+            f"{100 * max(s['probability']):.0f} % of the lane's vehicles per bin"
+        )
+    return lines
