@@ -38,6 +38,9 @@ class DriverState:
     path_length: np.ndarray  # [m]
     next_decision: np.ndarray  # [s]
     requested: np.ndarray  # pending forced lane change: LEFT, RIGHT or 0
+    strategic: np.ndarray  # strategic target's direction: LEFT, RIGHT or 0 (strategic.py)
+    strategic_from: np.ndarray  # [m] centre x where its urgency starts (nan: none)
+    strategic_by: np.ndarray  # [m] centre x by which it must have changed (nan: none)
     accel: np.ndarray  # [m/s^2] last command
 
     @classmethod
@@ -90,7 +93,7 @@ class DriverState:
 def _dtype(name: str):
     if name in ("id", "vehicle_class"):
         return np.int64
-    if name in ("road", "lane", "lane_from", "requested"):
+    if name in ("road", "lane", "lane_from", "requested", "strategic"):
         return np.int8
     if name in ("hov_eligible", "auto_lane_change"):
         return bool

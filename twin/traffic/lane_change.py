@@ -1,5 +1,6 @@
 """Lane-change decisions of the traffic manager: MOBIL for the drivers due to decide,
-the changes asked for (by a controller, or a recorded change), and the HOV rule.
+the changes asked for (by a controller), the strategic targets (a lane to leave by a
+place: :mod:`twin.traffic.strategic`), and the HOV rule.
 
 A driver decides on a grid of ``decision_period`` at random intervals around
 ``decision_interval``; a change it starts lasts a drawn manoeuvre time, along a path
@@ -7,7 +8,7 @@ A driver decides on a grid of ``decision_period`` at random intervals around
 model's; obstacles (the ghosts) are judged as the class table's mean driver.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from twin.traffic.controller_api import LEFT, RIGHT
 from twin.traffic.longitudinal import MIN_SPEED_PATH
 from twin.traffic.mobil import mobil_incentive, mobil_safe
 from twin.traffic.models.base import take
+from twin.traffic.strategic import urgency
 
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
 
@@ -51,14 +53,16 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
         excluded: ids whose controller decides their lane changes (no MOBIL).
     """
     auto = drivers.auto_lane_change
+    strategic = (drivers.strategic != 0) & (centre_x >= drivers.strategic_from)
     if excluded:
-        auto = auto & ~np.isin(drivers.id, list(excluded))
-    due = (drivers.lane_from == drivers.lane) & (
-        ((drivers.next_decision <= time) & auto) | (drivers.requested != 0)
-    )
+        free = ~np.isin(drivers.id, list(excluded))
+        auto, strategic = auto & free, strategic & free
+    wants = (drivers.requested != 0) | strategic
+    due = (drivers.lane_from == drivers.lane) & (((drivers.next_decision <= time) & auto) | wants)
     cand = np.flatnonzero(due)
     if cand.size == 0:
         return 0
+    urge = urgency(drivers, cand, centre_x[cand])
     timed = drivers.next_decision[cand] <= time
     drivers.next_decision[cand[timed]] = time + config.decision_interval * rng.uniform(
         0.5, 1.5, int(timed.sum())
@@ -66,15 +70,21 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
     c = _candidates(drivers, scene, cand, model, params, config)
     best = np.zeros(cand.size)
     choice = np.zeros(cand.size, dtype=np.int8)
-    requested = drivers.requested[cand]
+    # a change asked for, or a strategic target's once its urgency has started
+    requested = np.where(
+        drivers.requested[cand] != 0,
+        drivers.requested[cand],
+        np.where(urge >= 0, drivers.strategic[cand], 0),
+    )
     for step in (LEFT, RIGHT):
         target = c.lane + step
         allowed = (target <= -1) & (target >= -N_LANES)
         allowed &= hov_allows(drivers, cand, c.lane, target, c.x, config.hov_openings)
         allowed &= (requested == 0) | (requested == step)
+        allowed &= drivers.strategic[cand] != -step  # never away from a strategic target
         if not allowed.any():
             continue
-        gain, safe = _judge(drivers, scene, c, target, step, model, params)
+        gain, safe = _judge(drivers, scene, c, target, step, model, params, urge)
         gain = np.where(requested == step, np.inf, gain)
         better = allowed & safe & (gain > best)
         best[better] = gain[better]
@@ -82,6 +92,10 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
     movers = choice != 0
     if movers.any():
         _start(drivers, scene, centre_x, cand[movers], choice[movers], rng, config)
+        done = cand[movers & (choice == drivers.strategic[cand])]
+        drivers.strategic[done] = 0
+        drivers.strategic_from[done] = np.nan
+        drivers.strategic_by[done] = np.nan
     return int(np.count_nonzero(movers))
 
 
@@ -118,9 +132,10 @@ def _candidates(drivers, scene, cand, model, params, config) -> _Candidates:
     )
 
 
-def _judge(drivers, scene, c: _Candidates, target, step, model, params):
+def _judge(drivers, scene, c: _Candidates, target, step, model, params, urge):
     """MOBIL's incentive (k,) [m/s^2] of moving ``step`` into ``target``, and whether
-    the move is safe (k,) bool."""
+    the move is safe (k,) bool; a driver with a strategic urgency ``urge`` (k,) >= 0
+    accepts a new follower's braking up to ``safe_decel * (1 + urge)``."""
     ahead, behind = scene.occupancy.around(c.road, target, c.x)
     gap_ahead = np.where(ahead >= 0, scene.x[ahead] - c.x - scene.length[c.index], np.inf)
     gap_behind = np.where(behind >= 0, c.x - scene.x[behind] - scene.length[behind], np.inf)
@@ -133,9 +148,12 @@ def _judge(drivers, scene, c: _Candidates, target, step, model, params):
     )
     follower_now = np.where(behind >= 0, scene.accel[behind], 0.0)
     mobil = drivers.mobil(c.index)
+    accepted = mobil
+    if np.any(urge > 0):
+        accepted = replace(mobil, safe_decel=mobil.safe_decel * (1.0 + np.maximum(urge, 0.0)))
     safe = (
         c.room
-        & mobil_safe(follower_after, mobil)
+        & mobil_safe(follower_after, accepted)
         & (own_after >= -mobil.safe_decel)
         & (gap_ahead >= MIN_LANE_CHANGE_GAP)
         & (gap_behind >= MIN_LANE_CHANGE_GAP)

@@ -28,7 +28,7 @@ import numpy as np
 from twin.core.i24 import HOV_LANE, N_LANES, lane_center
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.vehicle import GRAVITY, VehicleParams
-from twin.traffic import lane_change, longitudinal, steering
+from twin.traffic import lane_change, longitudinal, steering, strategic
 from twin.traffic.config import TrafficConfig
 from twin.traffic.controlled import Controllers
 from twin.traffic.controller_api import EgoController, lane_change_direction
@@ -151,6 +151,9 @@ class TrafficManager:
             path_length=np.ones(n),
             next_decision=self.time + self.rng.uniform(0.0, cfg.decision_interval, n),
             requested=np.zeros(n, dtype=np.int8),
+            strategic=np.zeros(n, dtype=np.int8),
+            strategic_from=np.full(n, np.nan),
+            strategic_by=np.full(n, np.nan),
             accel=np.zeros(n),
         )
         self._d = DriverState.concatenate(self._d, new)
@@ -194,6 +197,11 @@ class TrafficManager:
         """(k,) the lanes vehicles ``ids`` drive in or are changing to."""
         return self._d.lane[self._index(ids)].copy()
 
+    def changing(self, ids) -> np.ndarray:
+        """(k,) bool: vehicles ``ids`` are changing lanes now."""
+        index = self._index(ids)
+        return self._d.lane_from[index] != self._d.lane[index]
+
     def set_auto_lane_change(self, ids, on) -> None:
         """Switch MOBIL lane changes on or off for vehicles ``ids``."""
         self._d.auto_lane_change[self._index(ids)] = np.asarray(on, dtype=bool)
@@ -225,6 +233,35 @@ class TrafficManager:
                     f"vehicle {vehicle_id}: the HOV line cannot be crossed (no hov_openings)"
                 )
         self._d.requested[i] = step
+
+    def set_strategic(self, ids, direction, x_from, x_by) -> None:
+        """Give vehicles ``ids`` a strategic target (:mod:`twin.traffic.strategic`): change
+        one lane ``direction`` (+1 left, toward lane -1; -1 right; 0 clears the
+        target), wanted from road-frame ``x_from`` [m] with an urgency that grows to
+        ``x_by`` [m] (vehicle centres). Each (k,) or a scalar.
+
+        Raises:
+            KeyError: an id is not managed.
+            ValueError: a direction other than -1, 0, +1, or ``x_by`` not past ``x_from``.
+        """
+        index = self._index(ids)
+        k = index.size
+        direction = np.broadcast_to(np.asarray(direction, dtype=np.int64), (k,))
+        x_from = np.broadcast_to(np.asarray(x_from, dtype=np.float64), (k,))
+        x_by = np.broadcast_to(np.asarray(x_by, dtype=np.float64), (k,))
+        if not np.all(np.isin(direction, (-1, 0, 1))):
+            raise ValueError(f"strategic directions must be -1, 0 or +1, got {direction!r}")
+        on = direction != 0
+        if not np.all(np.isfinite(x_from[on]) & (x_by[on] > x_from[on])):
+            raise ValueError("a strategic target needs finite x_from < x_by")
+        d = self._d
+        d.strategic[index] = direction
+        d.strategic_from[index] = np.where(on, x_from, np.nan)
+        d.strategic_by[index] = np.where(on, x_by, np.nan)
+
+    def strategic(self, ids) -> np.ndarray:
+        """(k,) the strategic directions of vehicles ``ids`` (0: none)."""
+        return self._d.strategic[self._index(ids)].copy()
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -314,11 +351,13 @@ class TrafficManager:
         steering.finish_changes(d, centre_x, states.y)
         scene = Scene.build(d, states, speed, obstacles)
         accel, need = longitudinal.follow(scene, d, states.lane, speed, self.model, cfg)
+        accel = strategic.cooperate(scene, d, accel, centre_x, self.model)
         emergency = need > cfg.emergency_decel
         command = np.where(emergency, np.minimum(accel, -need), accel)
         self.emergency_steps += int(np.count_nonzero(emergency))
         scene.accel[:n] = accel
         if self._steps % self._decision_every == 0:
+            strategic.expire(d, centre_x)
             self.lane_changes += lane_change.decide(
                 d, scene, centre_x, time=self.time, rng=self.rng, model=self.model,
                 params=self._with_obstacles(len(obstacles)), config=cfg,

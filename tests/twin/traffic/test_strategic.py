@@ -1,0 +1,83 @@
+"""Strategic lane changes and cooperation (twin.traffic.strategic)."""
+
+import numpy as np
+import pytest
+
+from tests.twin.traffic.conftest import make_manager, point_mass_manager, run, spawn
+from tests.twin.traffic.test_manager import point_states
+from twin.physics.kinematic import KinematicWorld
+from twin.traffic import strategic
+
+SPEED = 15.0  # [m/s]
+
+
+@pytest.fixture
+def kinematic(built_map):
+    with KinematicWorld(built_map, 0.1) as world:
+        yield world
+
+
+def _dense_lane_beside_a_merger(world, built_map):
+    """Lane -2 a platoon at 15 m/s with 16 m from back to back (no gap a car can take
+    without its new follower braking hard); one car beside it in lane -3, alone there,
+    whose target is to move left within 250 m."""
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1)
+    platoon = spawn(world, manager, 1, -2, 100.0 + 16.0 * np.arange(10), SPEED)
+    merger = spawn(world, manager, 1, -3, 172.0, SPEED)
+    everyone = np.r_[platoon, merger]
+    manager.set_desired_speed(everyone, np.full(everyone.size, SPEED))
+    centre = 172.0 + 0.5 * world.params_of(merger).length[0]
+    manager.set_strategic(merger, 1, centre, centre + 250.0)
+    return manager, int(merger[0]), centre
+
+
+def test_a_strategic_driver_changes_by_its_place_because_a_follower_makes_room(
+    kinematic, built_map
+):
+    manager, merger, centre = _dense_lane_beside_a_merger(kinematic, built_map)
+    record = run(kinematic, manager, 18.0)
+    column = int(np.flatnonzero(kinematic.states().id == merger)[0])
+    into_lane_2 = np.flatnonzero(record.lane[:, column] == -2)
+    assert into_lane_2.size, "the merger never changed lane"
+    x_then = record.x[into_lane_2[0], column]
+    assert x_then < centre + 250.0  # before its place
+    assert record.contacts == 0
+    assert manager.strategic([merger])[0] == 0  # the target is cleared once it starts
+    assert record.speed.min() > 5.0  # room made by dropping back, nobody stopped
+
+
+def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map, monkeypatch):
+    monkeypatch.setattr(strategic, "COOPERATE_FROM", 2.0)  # urgency never reaches it
+    manager, merger, _ = _dense_lane_beside_a_merger(kinematic, built_map)
+    record = run(kinematic, manager, 18.0)
+    column = int(np.flatnonzero(kinematic.states().id == merger)[0])
+    assert np.all(record.lane[:, column] == -3)
+
+
+def test_urgency_grows_from_its_start_to_its_place_and_targets_expire():
+    manager, params = point_mass_manager(np.full(2, -3), 0)
+    manager.add([0, 1], 1, -3, params)
+    manager.set_strategic([0, 1], [1, -1], [100.0, 100.0], [300.0, 300.0])
+    d = manager._d
+    u = strategic.urgency(d, np.array([0, 0, 0, 1]), np.array([50.0, 200.0, 400.0, 300.0]))
+    assert u.tolist() == [-1.0, 0.5, 1.0, 1.0]
+    # a driver GIVE_UP past its place stops trying; one yet to reach its start keeps
+    # its target
+    length = params.length[0]
+    x = np.array([300.0 + strategic.GIVE_UP + 1.0, 50.0]) - 0.5 * length
+    manager.step(point_states([0, 1], x, [-3, -3], [0.0, 0.0]))
+    assert manager.strategic([0, 1]).tolist() == [0, -1]
+
+
+def test_strategic_targets_are_checked():
+    manager, params = point_mass_manager(np.full(1, -3), 0)
+    manager.add([0], 1, -3, params)
+    with pytest.raises(ValueError, match="directions must be"):
+        manager.set_strategic([0], 2, 0.0, 10.0)
+    with pytest.raises(ValueError, match="x_from < x_by"):
+        manager.set_strategic([0], 1, 10.0, 10.0)
+    with pytest.raises(KeyError):
+        manager.set_strategic([7], 1, 0.0, 10.0)
+    manager.set_strategic([0], 1, 0.0, 10.0)
+    manager.set_strategic([0], 0, np.nan, np.nan)  # cleared
+    assert manager.strategic([0]).tolist() == [0]
