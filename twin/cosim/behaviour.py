@@ -8,11 +8,14 @@ recording (``twin calibrate``).
   car-following model's parameters from the class group's fitted (correlated,
   log-normal) distribution,
   desired speeds from the calibrated desired speeds of the vehicle's lane, MOBIL with
-  the calibrated threshold.
+  the calibrated threshold for discretionary changes, and the strategic changes the
+  recording's lane-change flows show (a lane left near a place for a reason beyond
+  the window), drawn per vehicle (:mod:`twin.cosim.strategic_targets`).
 - ``recorded``: each vehicle gets the parameters fitted to its own recording (a
   calibrated draw where its fit is missing or was rejected), and makes the lane
   changes its recording makes, where its recording makes them (target lane and place),
-  when they are safe; it makes no others.
+  as strategic targets: wanted from the place with a growing urgency, the target
+  lane's drivers making room, retried until well past it; it makes no others.
 
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
@@ -110,6 +113,7 @@ class Behaviour:
         self.politeness: float | None = None
         self._fits = None
         self.planned: PlannedChanges | None = None
+        self.strategic_flows: dict | None = None
         if self.name == "paper":
             return
         doc = read_calibration(store)
@@ -142,6 +146,9 @@ class Behaviour:
             if free_count >= fitted_count and free_count
             else ("car_following" if fitted_count else "paper")
         )
+        flows = section.get("lane_flows")
+        if self.name == "calibrated" and flows and flows.get("identified"):
+            self.strategic_flows = flows
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])
         if self.name == "recorded":

@@ -33,9 +33,10 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from twin.core.i24 import LANES, lane_of
-from twin.cosim.behaviour import PLANNED_LATE, Behaviour, resolve
+from twin.cosim.behaviour import Behaviour, resolve
 from twin.cosim.config import CosimConfig
 from twin.cosim.log import TrajectoryLog
+from twin.cosim.strategic_targets import StrategicTargets
 from twin.cosim.windows import Ghosts, ScenarioError, Windows, no_ghosts, road_limits
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
 from twin.physics.states import MAX_SPEED, SpawnStates
@@ -121,6 +122,7 @@ class Cosimulator:
         self.world = make_world(config.world, bundle, config.dt)
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
+        self.targets = StrategicTargets(self.behaviour, self.manager, config.seed)
         self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()
@@ -132,8 +134,6 @@ class Cosimulator:
         self.windows: Windows | None = None
         self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
         self._base_speed = np.empty(0)  # [m/s] each body's own desired speed, by world id
-        self._planned: dict[int, list] = {}  # world id -> recorded lane changes ahead
-        self._requested: dict[int, tuple] = {}  # world id -> the change asked for
         self._ghosts = no_ghosts()
         self._obstacles_now: Obstacles | None = None
         # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
@@ -222,6 +222,7 @@ class Cosimulator:
         self.av_ids.discard(self.ego_id)  # the ego's controller is set next
         if self.controller is not None:
             self.manager.set_controller(self.ego_id, self.controller)
+            self.targets.removed([self.ego_id])
             _bind(self.controller, self)
         self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
         snap = self._snapshot()
@@ -243,8 +244,8 @@ class Cosimulator:
         # 3. desired speeds (and the recorded lane changes due); 4. one step of
         # manager and physics
         self._set_desired_speeds(states)
-        if self._planned and self.step_index % self.manager.decision_steps == 0:
-            self._request_recorded_changes(states)
+        if self.targets.on and self.step_index % self.manager.decision_steps == 0:
+            self.targets.update(states)
         tick = time.perf_counter()
         commands = self.manager.step(states, self._obstacles_now)
         self.world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
@@ -277,9 +278,7 @@ class Cosimulator:
             self._is_sim[self._tids[~keep]] = False
             self._tids = self._tids[keep]
             self._base_speed = self._base_speed[keep]
-            for i in gone.tolist():
-                self._planned.pop(i, None)
-                self._requested.pop(i, None)
+            self.targets.removed(gone)
             self.counters.despawned += gone.size
 
         # 6. ghosts now inside the visible window are spawned; 7. the ghost set reloaded
@@ -389,38 +388,6 @@ class Cosimulator:
         self._lead_speed[lane] = target
         return target
 
-    def _request_recorded_changes(self, states) -> None:
-        """``recorded`` behaviour: ask each vehicle for the lane change its recording
-        makes once it reaches the place (the manager starts it when it is safe); drop a
-        request not started ``PLANNED_LATE`` past its place."""
-        ids = np.array(sorted(self._planned), dtype=np.int64)
-        at = np.searchsorted(states.id, ids)
-        lanes = self.manager.lanes(ids)
-        for i, k, lane in zip(ids.tolist(), at.tolist(), lanes.tolist(), strict=True):
-            x = float(states.x[k])
-            asked = self._requested.get(i)
-            if asked is not None:
-                if lane == asked[2]:
-                    self._requested.pop(i)
-                elif x > asked[0] + PLANNED_LATE:
-                    self.manager.force_lane_change(i, 0)
-                    self._requested.pop(i)
-                else:
-                    continue
-            plan = self._planned[i]
-            while plan and x >= plan[0][0]:
-                x_change, lane_from, lane_to = plan.pop(0)
-                if lane != lane_from or x > x_change + PLANNED_LATE:
-                    continue
-                try:
-                    self.manager.force_lane_change(i, 1 if lane_to > lane_from else -1)
-                except ValueError:  # the HOV rule, or no such lane: the twin keeps its rules
-                    continue
-                self._requested[i] = (x_change, lane_from, lane_to)
-                break
-            if not plan:
-                self._planned.pop(i)
-
     def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray) -> int:
         """Step 6 (and 2): spawn the recorded vehicles ``rows`` of ``snap`` where they
         fit; count the ones skipped. Returns how many were spawned."""
@@ -490,15 +457,14 @@ class Cosimulator:
             self.manager.set_params(ids, **drivers)
         if not self.behaviour.auto_lane_change:
             self.manager.set_auto_lane_change(ids, False)
-        for i, tid, x in zip(ids.tolist(), new.tid.tolist(), new.spawn.x.tolist(), strict=True):
-            planned = self.behaviour.changes_of(tid, x)
-            if planned:
-                self._planned[i] = planned
+        self.targets.added(ids, new.tid, lanes, new.spawn.x)
+        for i, tid in zip(ids.tolist(), new.tid.tolist(), strict=True):
             if self._is_av(tid):
                 av = load_controller(self.config.ego_controller, self.config)
                 self.manager.set_controller(i, av)
                 _bind(av, self)
                 self.av_ids.add(i)
+                self.targets.removed([i])  # its controller decides its lane changes
         self._base_speed = np.concatenate([self._base_speed, base])
         self._tids = np.concatenate([self._tids, new.tid])
         self._is_sim[new.tid] = True
