@@ -116,15 +116,17 @@ PRESET_C = SynthConfig(
 #: Preset D, test data with strategic lane changes (issue 30): preset C's morning without
 #: its bottleneck, but with lanes -3 and -4 ending 300 m past the segment's downstream
 #: end (MM 60.6 westbound), inside the recorded range: four lanes become two (the HOV
-#: lane and lane -2). Their drivers leave them inside the segment, those of lane -4
-#: twice; lane -2 takes more than it discharges through the merge (its drivers make
-#: room for the mergers), so a queue grows upstream of the drop in lanes -2 to -4 and
-#: the HOV lane flows.
+#: lane and lane -2). Signed well ahead, their drivers start to leave them 400 to 1200 m
+#: before the end per lane to cross, inside the segment; those of lane -4 twice. Lane -2
+#: takes more than it discharges through the merge (its drivers make room for the
+#: mergers), so a queue grows upstream of the drop in lanes -2 to -4 and the HOV lane
+#: flows.
 PRESET_D = replace(
     PRESET_C,
     flow=(1700.0, 850.0, 550.0, 400.0),
     bottleneck=None,
     lane_drop=LaneDrop(x=i24.SEGMENT_LENGTH + 300.0, lanes=(-3, -4)),
+    merge_lookahead=(400.0, 1200.0),
 )
 
 #: Preset E, test data with strategic lane changes (issue 30): preset C's morning with
