@@ -238,19 +238,16 @@ class Simulation:
                 self.next_arrival[k] += self._headway(q)
             if self.pending[k] == 0:
                 continue
-            in_lane = (veh.lane == lane) | (veh.lane_from == lane)
-            if in_lane.any():
-                last = np.flatnonzero(in_lane)[np.argmin(veh.x[in_lane])]
-                gap, v_last = veh.x[last] - self.x_in, veh.v[last]
-            else:
-                gap, v_last = np.inf, 30.0
+            gap, v_last = self._behind_last(
+                (veh.lane == lane) | (veh.lane_from == lane), self.x_in, 30.0
+            )
             if self.waiting[k] is None:
                 self.waiting[k] = self._new_vehicles(
                     np.array([lane]), np.array([self.x_in]), np.array([30.0])
                 )
             new = self.waiting[k]
             v_in = min(v_last, new.v0[0])
-            if gap < new.length[0] + MIN_GAP + v_in * new.T[0]:
+            if not _fits(new, gap, v_in):
                 continue
             new.v[:] = v_in
             new.next_decision[:] = self.t + self.rng.uniform(0, self.cfg.decision_interval)
@@ -270,23 +267,28 @@ class Simulation:
         if self.ramp_pending == 0:
             return
         on_ramp = (veh.lane == RAMP_LANE) | (veh.lane_from == RAMP_LANE)
-        if on_ramp.any():
-            last = np.flatnonzero(on_ramp)[np.argmin(veh.x[on_ramp])]
-            gap, v_last = veh.x[last] - ramp.x_start, veh.v[last]
-        else:
-            gap, v_last = np.inf, ramp.speed
+        gap, v_last = self._behind_last(on_ramp, ramp.x_start, ramp.speed)
         if self.ramp_waiting is None:
             self.ramp_waiting = self._new_vehicles(
                 np.array([RAMP_LANE]), np.array([ramp.x_start]), np.array([ramp.speed])
             )
         new = self.ramp_waiting
         v_in = min(v_last, ramp.speed, new.v0[0])
-        if gap < new.length[0] + MIN_GAP + v_in * new.T[0]:
+        if not _fits(new, gap, v_in):
             return
         new.v[:] = v_in
         self.ramp_waiting = None
         self.ramp_pending -= 1
         veh.extend(new)
+
+    def _behind_last(self, occupied: np.ndarray, x_entry: float, v_free: float):
+        """[m] the gap from ``x_entry`` to the last of the vehicles ``occupied`` (bool),
+        and its speed [m/s] (``inf`` and ``v_free`` where there is none)."""
+        veh = self.vehicles
+        if not occupied.any():
+            return np.inf, v_free
+        last = np.flatnonzero(occupied)[np.argmin(veh.x[occupied])]
+        return veh.x[last] - x_entry, veh.v[last]
 
     # -- one step ---------------------------------------------------------------------
     def _occupancy(self) -> Occupancy:
@@ -493,3 +495,8 @@ class Simulation:
         progress = np.clip((self.t - veh.change_start) / veh.change_duration, 0.0, 1.0)
         blend = 0.5 - 0.5 * np.cos(np.pi * progress)
         return np.where(veh.lane_from == veh.lane, y_to, y_from + (y_to - y_from) * blend)
+
+
+def _fits(new: _Vehicles, gap: float, v_in: float) -> bool:
+    """Whether an arrival entering at ``v_in`` fits ``gap`` [m] behind the last vehicle."""
+    return gap >= new.length[0] + MIN_GAP + v_in * new.T[0]
