@@ -48,6 +48,7 @@ from twin.traffic.models.base import CarFollowingModel
 from twin.traffic.models.idm import IDM
 
 CALIBRATION = "calibration.json"
+FLOW_ROUNDS = 5  # refits of the MOBIL threshold against the strategic changes, at most
 FITS = "calibration_fits.parquet"
 FORMAT = "i24-twin-calibration"
 VERSION = 2  # 2 names the car-following model fitted (car_following_model)
@@ -207,12 +208,19 @@ def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]
     mobil = fit_threshold(incentives, len(changes))
     explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
     flows = lane_change_flows(changes, grid, explained)
-    if flows["identified"]:
-        discretionary = len(changes) - flows["strategic_count"]
-        mobil = fit_threshold(incentives, discretionary)
-        mobil["strategic_excluded"] = flows["strategic_count"]
+    excluded = 0
+    # a higher threshold explains fewer changes, leaving more strategic: refit until
+    # the threshold's changes and the strategic ones add up to the recording's
+    for _ in range(FLOW_ROUNDS):
+        if not flows["identified"] or flows["strategic_count"] == excluded:
+            break
+        excluded = flows["strategic_count"]
+        mobil = fit_threshold(incentives, len(changes) - excluded)
         explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
         flows = lane_change_flows(changes, grid, explained)
+    if excluded:
+        mobil["strategic_excluded"] = excluded
+        mobil["strategic_final"] = flows["strategic_count"]
     return mobil, flows
 
 

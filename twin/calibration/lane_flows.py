@@ -39,7 +39,8 @@ def explained_by_mobil(
     changes: LaneChanges, incentives: Incentives, threshold: float, t0: float, every: float
 ) -> np.ndarray:
     """(c,) bool: MOBIL wanted each recorded change at a decision in the
-    :data:`EXPLAIN_BEFORE` s before it (its incentive beat ``threshold``).
+    :data:`EXPLAIN_BEFORE` s before it (its incentive beat ``threshold`` where the move
+    was possible, as :meth:`Incentives.changes` counts them).
 
     ``incentives`` are MOBIL's decisions every ``every`` seconds from ``t0`` (the grid's
     start), sorted by (tid, direction, decision) as
@@ -51,7 +52,7 @@ def explained_by_mobil(
     # one integer per (tid, direction) in the incentives' order, then the decisions
     key = incentives.tid.astype(np.int64) * 2 + (incentives.direction > 0)
     direction = np.sign(changes.lane_to.astype(np.int64) - changes.lane_from)
-    wanted = incentives.gain > threshold
+    wanted = incentives.possible & (incentives.gain > threshold)  # as fit_threshold counts
     first = np.ceil((changes.time - EXPLAIN_BEFORE - t0) / every - 1e-9).astype(np.int64)
     last = np.floor((changes.time - t0) / every + 1e-9).astype(np.int64)
     for i in range(len(changes)):

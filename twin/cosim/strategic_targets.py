@@ -18,6 +18,8 @@ The draws use a random stream of their own per vehicle (the run's seed and the
 vehicle's record), so they do not depend on the order vehicles are spawned in.
 """
 
+import contextlib
+
 import numpy as np
 
 STREAM = 0x737472  # the draws' own random stream
@@ -93,7 +95,9 @@ class StrategicTargets:
             target = self._draw(i, lane, x)
         self._lane[i] = lane
         if target is not None:
-            self.manager.set_strategic([i], *target)
+            # a change off the road or against the HOV rule is not made: the twin's rules stay
+            with contextlib.suppress(ValueError):
+                self.manager.set_strategic([i], *target)
 
     def _draw(self, i: int, lane: int, x: float):
         """(direction, x_from, x_by) drawn from the flows for vehicle ``i`` in ``lane``

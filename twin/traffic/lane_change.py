@@ -81,10 +81,12 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
         allowed = (target <= -1) & (target >= -N_LANES)
         allowed &= hov_allows(drivers, cand, c.lane, target, c.x, config.hov_openings)
         allowed &= (requested == 0) | (requested == step)
-        allowed &= drivers.strategic[cand] != -step  # never away from a strategic target
+        allowed &= ~((urge >= 0) & (drivers.strategic[cand] == -step))  # not away from it
         if not allowed.any():
             continue
-        gain, safe = _judge(drivers, scene, c, target, step, model, params, urge)
+        gain, safe = _judge(
+            drivers, scene, c, target, step, model, params, urge, config.emergency_decel
+        )
         gain = np.where(requested == step, np.inf, gain)
         better = allowed & safe & (gain > best)
         best[better] = gain[better]
@@ -132,10 +134,11 @@ def _candidates(drivers, scene, cand, model, params, config) -> _Candidates:
     )
 
 
-def _judge(drivers, scene, c: _Candidates, target, step, model, params, urge):
+def _judge(drivers, scene, c: _Candidates, target, step, model, params, urge, emergency_decel):
     """MOBIL's incentive (k,) [m/s^2] of moving ``step`` into ``target``, and whether
     the move is safe (k,) bool; a driver with a strategic urgency ``urge`` (k,) >= 0
-    accepts a new follower's braking up to ``safe_decel * (1 + urge)``."""
+    accepts a new follower's braking up to ``safe_decel * (1 + urge)``, at most
+    ``emergency_decel`` (never less than ``safe_decel``)."""
     ahead, behind = scene.occupancy.around(c.road, target, c.x)
     gap_ahead = np.where(ahead >= 0, scene.x[ahead] - c.x - scene.length[c.index], np.inf)
     gap_behind = np.where(behind >= 0, c.x - scene.x[behind] - scene.length[behind], np.inf)
@@ -149,8 +152,9 @@ def _judge(drivers, scene, c: _Candidates, target, step, model, params, urge):
     follower_now = np.where(behind >= 0, scene.accel[behind], 0.0)
     mobil = drivers.mobil(c.index)
     accepted = mobil
-    if np.any(urge > 0):
-        accepted = replace(mobil, safe_decel=mobil.safe_decel * (1.0 + np.maximum(urge, 0.0)))
+    if np.any(urge > 0):  # never past what emergency braking is for
+        relaxed = np.minimum(mobil.safe_decel * (1.0 + np.maximum(urge, 0.0)), emergency_decel)
+        accepted = replace(mobil, safe_decel=np.maximum(relaxed, mobil.safe_decel))
     safe = (
         c.room
         & mobil_safe(follower_after, accepted)

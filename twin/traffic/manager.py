@@ -222,17 +222,22 @@ class TrafficManager:
         step = lane_change_direction(direction)
         (i,) = self._index([vehicle_id])
         if step:
-            d = self._d
-            target = int(d.lane[i]) + step
-            if not -N_LANES <= target <= -1:
-                raise ValueError(f"vehicle {vehicle_id} in lane {d.lane[i]}: no lane {target}")
-            if target == HOV_LANE and not d.hov_eligible[i]:
-                raise ValueError(f"vehicle {vehicle_id} is not HOV-eligible: lane -1 is HOV")
-            if HOV_LANE in (target, int(d.lane[i])) and not self.config.hov_openings:
-                raise ValueError(
-                    f"vehicle {vehicle_id}: the HOV line cannot be crossed (no hov_openings)"
-                )
+            self._check_change(i, vehicle_id, step)
         self._d.requested[i] = step
+
+    def _check_change(self, i: int, vehicle_id: int, step: int) -> None:
+        """Raise ValueError where vehicle ``i`` (index) may never change one lane
+        ``step``: off the road, or against the HOV rule."""
+        d = self._d
+        target = int(d.lane[i]) + step
+        if not -N_LANES <= target <= -1:
+            raise ValueError(f"vehicle {vehicle_id} in lane {d.lane[i]}: no lane {target}")
+        if target == HOV_LANE and not d.hov_eligible[i]:
+            raise ValueError(f"vehicle {vehicle_id} is not HOV-eligible: lane -1 is HOV")
+        if HOV_LANE in (target, int(d.lane[i])) and not self.config.hov_openings:
+            raise ValueError(
+                f"vehicle {vehicle_id}: the HOV line cannot be crossed (no hov_openings)"
+            )
 
     def set_strategic(self, ids, direction, x_from, x_by) -> None:
         """Give vehicles ``ids`` a strategic target (:mod:`twin.traffic.strategic`): change
@@ -242,18 +247,23 @@ class TrafficManager:
 
         Raises:
             KeyError: an id is not managed.
-            ValueError: a direction other than -1, 0, +1, or ``x_by`` not past ``x_from``.
+            ValueError: a direction other than -1, 0, +1; ``x_by`` not past ``x_from``;
+                or a change the vehicle may never make (off the road, or against the
+                HOV rule: :meth:`force_lane_change`'s checks).
         """
         index = self._index(ids)
         k = index.size
-        direction = np.broadcast_to(np.asarray(direction, dtype=np.int64), (k,))
+        asked = np.broadcast_to(np.asarray(direction), (k,))
+        if not np.all(np.isin(asked, (-1, 0, 1))):
+            raise ValueError(f"strategic directions must be -1, 0 or +1, got {asked!r}")
+        direction = asked.astype(np.int64)
         x_from = np.broadcast_to(np.asarray(x_from, dtype=np.float64), (k,))
         x_by = np.broadcast_to(np.asarray(x_by, dtype=np.float64), (k,))
-        if not np.all(np.isin(direction, (-1, 0, 1))):
-            raise ValueError(f"strategic directions must be -1, 0 or +1, got {direction!r}")
         on = direction != 0
         if not np.all(np.isfinite(x_from[on]) & (x_by[on] > x_from[on])):
             raise ValueError("a strategic target needs finite x_from < x_by")
+        for i, step in zip(index[on].tolist(), direction[on].tolist(), strict=True):
+            self._check_change(i, int(self._d.id[i]), step)
         d = self._d
         d.strategic[index] = direction
         d.strategic_from[index] = np.where(on, x_from, np.nan)

@@ -10,7 +10,8 @@ twin's own form:
   grows from 0 at ``x_from`` to 1 at ``x_by`` (:func:`urgency`);
 - from ``x_from`` it wants that change whatever MOBIL's incentive, judges it at every
   decision step (not at its random decision interval), makes no change the other way,
-  and takes a gap whose new follower must brake up to ``safe_decel * (1 + urgency)``;
+  and takes a gap whose new follower must brake up to ``safe_decel * (1 + urgency)``
+  (at most the manager's ``emergency_decel``);
 - past ``x_by`` it keeps trying, at full urgency, until :data:`GIVE_UP` metres past
   it (the retries the recorded behaviour needs: a change not safe when due is made at
   the next gap, as drivers do);
@@ -26,6 +27,7 @@ calibrated flows or the recording; a target is cleared once its change starts.
 
 import numpy as np
 
+from twin.core.i24 import N_LANES
 from twin.traffic.models.base import take
 
 GIVE_UP = 150.0  # [m] past x_by a strategic change is no longer tried
@@ -65,9 +67,11 @@ def cooperate(scene, drivers, accel, centre_x, model) -> np.ndarray:
         return accel
     u = urgency(drivers, np.arange(n), centre_x)
     urgent = np.flatnonzero((u >= COOPERATE_FROM) & (drivers.lane == drivers.lane_from))
+    target = drivers.lane[urgent].astype(np.int64) + drivers.strategic[urgent]
+    on_road = (target <= -1) & (target >= -N_LANES)  # set_strategic checks it; kept safe
+    urgent, target = urgent[on_road], target[on_road]
     if urgent.size == 0:
         return accel
-    target = drivers.lane[urgent].astype(np.int64) + drivers.strategic[urgent]
     road = drivers.road[urgent]
     x = scene.x[urgent]
     ahead, behind = scene.occupancy.around(road, target, x)

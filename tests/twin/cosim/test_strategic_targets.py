@@ -108,3 +108,24 @@ def test_paper_and_stores_without_strategic_flows_give_no_targets():
     targets, manager = _targets(None)
     targets.added([0], [5], [-3], [0.0])
     assert not targets.on and manager.targets == {}
+
+
+def test_a_target_the_manager_refuses_is_skipped_and_removal_clears_targets():
+    class Refusing(FakeManager):
+        def set_strategic(self, ids, direction, x_from, x_by):
+            if direction == 1:
+                raise ValueError("the HOV line cannot be crossed")
+            super().set_strategic(ids, direction, x_from, x_by)
+
+    flows = {"x_edges": EDGES, "strategic": {"-2>-1": {"probability": [1.0] * 8}}}
+    behaviour = SimpleNamespace(name="calibrated", strategic_flows=flows, changes_of=None)
+    manager = Refusing()
+    targets = StrategicTargets(behaviour, manager, 0)
+    targets.added([0], [5], [-2], [0.0])  # its draw is refused: no target, no error
+    assert manager.targets == {}
+    plain, fake = _targets(_flows(1.0))
+    fake.ids = {3}
+    plain.added([3], [9], [-3], [0.0])
+    assert fake.targets[3] is not None
+    plain.removed([3])  # a despawned vehicle, or one given a controller
+    assert fake.targets[3] is None and 3 not in plain._tid

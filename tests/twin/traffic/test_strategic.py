@@ -81,3 +81,34 @@ def test_strategic_targets_are_checked():
     manager.set_strategic([0], 1, 0.0, 10.0)
     manager.set_strategic([0], 0, np.nan, np.nan)  # cleared
     assert manager.strategic([0]).tolist() == [0]
+
+
+def _overtaker(x_from):
+    """A fast car in lane -3 behind a slow one, lanes -2 and -4 free: MOBIL moves it
+    left (checked without a target); its target is right from ``x_from``."""
+    manager, params = point_mass_manager(np.full(2, -3), 0)
+    manager.add([0, 1], 1, -3, params, desired_speed=[30.0, 10.0])
+    if x_from is not None:
+        manager.set_strategic([0], -1, x_from, x_from + 200.0)
+    for _ in range(300):  # 3 s: every driver has decided at least once
+        commands = manager.step(point_states([0, 1], [100.0, 190.0], [-3, -3], [25.0, 10.0]))
+        if commands.changing[0]:
+            break
+    return int(commands.lane[0])
+
+
+def test_a_target_ahead_does_not_stop_discretionary_changes_until_it_starts():
+    assert _overtaker(x_from=None) == -2  # MOBIL's choice
+    assert _overtaker(x_from=5000.0) == -2  # still MOBIL's, the target far ahead
+    assert _overtaker(x_from=0.0) == -4  # the target's way once it has started
+
+
+def test_a_target_the_vehicle_may_never_reach_is_refused():
+    manager, params = point_mass_manager(np.full(2, -2), 0)
+    manager.add([0, 1], 1, [-2, -4], params)
+    with pytest.raises(ValueError, match="HOV"):
+        manager.set_strategic([0], 1, 0.0, 100.0)  # across the closed HOV line
+    with pytest.raises(ValueError, match="no lane -5"):
+        manager.set_strategic([1], -1, 0.0, 100.0)
+    with pytest.raises(ValueError, match="directions must be"):
+        manager.set_strategic([1], 0.5, 0.0, 100.0)  # not silently truncated to 0
