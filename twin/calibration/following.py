@@ -385,6 +385,16 @@ class LaneChanges:
         return speed_bin(self.speed_from)
 
 
+def distance_driven(grid: GridTraffic) -> np.ndarray:
+    """(n,) [m] the distance each row's vehicle drove since its previous grid step (0 for
+    a trajectory's first row, or after a gap in it; never negative)."""
+    distance = np.zeros(len(grid))
+    if len(grid) > 1:
+        same = (grid.tid[1:] == grid.tid[:-1]) & (grid.k[1:] == grid.k[:-1] + 1)
+        distance[1:] = np.where(same, np.maximum(np.diff(grid.x), 0.0), 0.0)
+    return distance
+
+
 def speed_bin(speed: np.ndarray) -> np.ndarray:
     """Index into ``SPEED_BINS`` of each speed [m/s]."""
     return np.clip(np.searchsorted(SPEED_BINS, speed, side="right") - 1, 0, len(SPEED_BINS) - 2)
@@ -441,10 +451,7 @@ def lane_changes(grid: GridTraffic) -> LaneChanges:
     row = np.array(changes["row"], dtype=np.int64)
     lane_from = np.array(changes["lane_from"], dtype=np.int8)
     lane_to = np.array(changes["lane_to"], dtype=np.int8)
-    distance = np.zeros(len(grid))
-    if len(grid) > 1:
-        same = (tid[1:] == tid[:-1]) & (grid.k[1:] == grid.k[:-1] + 1)
-        distance[1:] = np.where(same, np.maximum(np.diff(grid.x), 0.0), 0.0)
+    distance = distance_driven(grid)
     on = grid.lane != 0
     exposure = np.zeros((4, len(SPEED_BINS) - 1))
     np.add.at(

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from twin.calibration.following import GridTraffic, LaneChanges
+from twin.calibration.following import GridTraffic, LaneChanges, distance_driven
 from twin.calibration.lane_changes import Incentives
 from twin.core.i24 import LANES
 
@@ -69,10 +69,7 @@ def explained_by_mobil(
 def passages(grid: GridTraffic, x_edges: np.ndarray) -> np.ndarray:
     """(4 lanes, bins) vehicles passing each position bin in each lane (vehicle-km
     driven there over the bin's length)."""
-    distance = np.zeros(len(grid))
-    if len(grid) > 1:
-        same = (grid.tid[1:] == grid.tid[:-1]) & (grid.k[1:] == grid.k[:-1] + 1)
-        distance[1:] = np.where(same, np.maximum(np.diff(grid.x), 0.0), 0.0)
+    distance = distance_driven(grid)
     on = grid.lane != 0
     at = np.searchsorted(x_edges, grid.x[on], side="right") - 1
     inside = (at >= 0) & (at < x_edges.size - 1)

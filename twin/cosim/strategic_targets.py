@@ -82,10 +82,14 @@ class StrategicTargets:
             return
         ids = ids[free]
         lanes = self.manager.lanes(ids)
+        if self.behaviour.name == "recorded":  # those with recorded changes left
+            due = np.array([bool(self._plan.get(i)) for i in ids.tolist()], dtype=bool)
+        else:  # those in a lane not drawn for yet (they changed lanes)
+            drawn = np.array([self._lane[i] for i in ids.tolist()], dtype=lanes.dtype)
+            due = lanes != drawn
+        ids, lanes = ids[due], lanes[due]
         x = states.x[np.searchsorted(states.id, ids)]
         for i, lane, xi in zip(ids.tolist(), lanes.tolist(), x.tolist(), strict=True):
-            if self._lane.get(i) == lane and self.behaviour.name != "recorded":
-                continue  # drawn in this lane already: nothing more there
             self._next(i, int(lane), float(xi))
 
     def _next(self, i: int, lane: int, x: float) -> None:

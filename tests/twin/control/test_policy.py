@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from tests.twin.traffic.conftest import observation
 from twin.control.policy import (
     FEATURES,
     FOLLOW_LEADER,
@@ -19,20 +20,11 @@ from twin.control.policy import (
 from twin.cosim.config import SCENARIO_B, switch_world
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
-from twin.traffic.controller_api import LaneView, Observation
+from twin.traffic.controller_api import Observation
 
 
 def _obs(speed=20.0, gap=30.0, leader=18.0, lane=-2) -> Observation:
-    lanes = (-1, -2, -3, -4)
-    k = lanes.index(lane)
-    leader_gap = np.full(4, np.inf)
-    leader_speed = np.full(4, np.nan)
-    leader_gap[k], leader_speed[k] = gap, leader
-    view = LaneView(lanes, leader_gap, leader_speed, np.full(4, np.inf), np.full(4, np.nan))
-    return Observation(
-        time=0.0, id=0, road=-1, lane=lane, changing=False, x=500.0, y=5.5, speed=speed,
-        desired_speed=30.0, default_accel=0.0, lanes=view, neighbours=None,
-    )  # fmt: skip
+    return observation(speed, gap, leader, lane, x=500.0, y=5.5)
 
 
 def test_features_read_the_own_lane_and_cap_the_time_gap():

@@ -12,6 +12,7 @@ from twin.physics.states import SpawnStates
 from twin.physics.vehicle import VehicleParams
 from twin.physics.world import PhysicsWorld
 from twin.traffic.config import TrafficConfig
+from twin.traffic.controller_api import LaneView, Observation
 from twin.traffic.manager import TrafficManager
 
 
@@ -107,3 +108,20 @@ def point_mass_manager(lane, vehicle_class, heading=0.0, **settings):
         vehicle_classes(), vehicle_class, *class_sizes(vehicle_class)
     )
     return manager, params
+
+
+def observation(
+    speed, gap=np.inf, leader_speed=np.nan, lane=-2, *, time=0.0, x=0.0, y=0.0, neighbours=None
+) -> Observation:
+    """What a controller sees: its own ``lane``'s leader ``gap`` [m] ahead at
+    ``leader_speed`` [m/s] (none in the other lanes), at ``speed`` [m/s]."""
+    lanes = (-1, -2, -3, -4)
+    k = lanes.index(lane)
+    leader_gap = np.full(4, np.inf)
+    leader = np.full(4, np.nan)
+    leader_gap[k], leader[k] = gap, leader_speed
+    view = LaneView(lanes, leader_gap, leader, np.full(4, np.inf), np.full(4, np.nan))
+    return Observation(
+        time=time, id=0, road=-1, lane=lane, changing=False, x=x, y=y, speed=speed,
+        desired_speed=30.0, default_accel=0.0, lanes=view, neighbours=neighbours,
+    )  # fmt: skip

@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, make_store, vehicle
+from tests.twin.traffic.conftest import observation
 from twin.cli import main
 from twin.cosim.config import ConfigError, CosimConfig, from_toml, load_config, to_toml
 from twin.traffic import baselines as c
-from twin.traffic.controller_api import LaneView, Observation
 
 FS = c.FollowerStopperParams()
 
@@ -160,16 +160,7 @@ def gives_nan(obs):
 
 
 def _observation(time, speed, gap, leader_speed=math.nan, lane=-2):
-    lanes = (-1, -2, -3, -4)
-    k = lanes.index(lane)
-    leader_gap = np.full(4, math.inf)
-    leader = np.full(4, math.nan)
-    leader_gap[k], leader[k] = gap, leader_speed
-    view = LaneView(lanes, leader_gap, leader, np.full(4, math.inf), np.full(4, math.nan))
-    return Observation(
-        time=time, id=0, road=-1, lane=lane, changing=False, x=0.0, y=0.0, speed=speed,
-        desired_speed=30.0, default_accel=0.0, lanes=view, neighbours={},
-    )  # fmt: skip
+    return observation(speed, gap, leader_speed, lane, time=time, neighbours={})
 
 
 def test_configuration_defaults_are_control_md_values():
