@@ -20,6 +20,11 @@ from twin.traffic.models.base import take
 from twin.traffic.strategic import urgency
 
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
+# [m] the shortest path of an urgent (strategic) change: a driver who must leave its
+# lane noses across a queue in about two car lengths (peak slope about 25 degrees, a
+# radius of about 11 m), where a discretionary change keeps a path made for
+# MIN_SPEED_PATH; without it no change in a standing queue finds room
+URGENT_PATH = 15.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,6 +38,7 @@ class _Candidates:
     lane: np.ndarray
     road: np.ndarray
     room: np.ndarray  # bool: the change can get across behind the current leader
+    urgent: np.ndarray  # bool: a strategic change under way (the short path)
     old_follower_now: np.ndarray
     old_follower_after: np.ndarray
 
@@ -67,7 +73,7 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
     drivers.next_decision[cand[timed]] = time + config.decision_interval * rng.uniform(
         0.5, 1.5, int(timed.sum())
     )
-    c = _candidates(drivers, scene, cand, model, params, config)
+    c = _candidates(drivers, scene, cand, model, params, config, urge >= 0)
     best = np.zeros(cand.size)
     choice = np.zeros(cand.size, dtype=np.int8)
     # a change asked for, or a strategic target's once its urgency has started
@@ -93,7 +99,9 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
         choice[better] = step
     movers = choice != 0
     if movers.any():
-        _start(drivers, scene, centre_x, cand[movers], choice[movers], rng, config)
+        _start(
+            drivers, scene, centre_x, cand[movers], choice[movers], c.urgent[movers], rng, config
+        )
         done = cand[movers & (choice == drivers.strategic[cand])]
         drivers.strategic[done] = 0
         drivers.strategic_from[done] = np.nan
@@ -101,16 +109,28 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
     return int(np.count_nonzero(movers))
 
 
-def _candidates(drivers, scene, cand, model, params, config) -> _Candidates:
+def path_length(speed, duration, urgent) -> np.ndarray:
+    """[m] the length of a lane-change path at ``speed`` [m/s] lasting ``duration`` [s]:
+    made for at least MIN_SPEED_PATH, or, for an ``urgent`` (bool) change, at least
+    :data:`URGENT_PATH` long."""
+    return np.where(
+        urgent,
+        np.maximum(speed * duration, URGENT_PATH),
+        np.maximum(speed, MIN_SPEED_PATH) * duration,
+    )
+
+
+def _candidates(drivers, scene, cand, model, params, config, urgent) -> _Candidates:
     """Where the deciding drivers are, whether they have room to get across, and their
-    old follower's acceleration now and after they have left its lane."""
+    old follower's acceleration now and after they have left its lane; ``urgent``
+    (k,) bool: their changes are strategic (the short path)."""
     x, speed = scene.x[cand], scene.speed[cand]
     lane, road = drivers.lane[cand].astype(np.int64), drivers.road[cand]
     ahead_now, behind_now = scene.occupancy.around(road, lane, x)
     # room to reach the middle of the change behind the leader it still follows
     # until then (a vehicle in a standing queue cannot get across)
     high = config.lane_change_time[1]
-    half_path = 0.5 * np.maximum(speed, MIN_SPEED_PATH) * high
+    half_path = 0.5 * path_length(speed, high, urgent)
     gap_now = np.where(ahead_now >= 0, scene.x[ahead_now] - x - scene.length[cand], np.inf)
     lead_now = np.where(ahead_now >= 0, scene.speed[ahead_now], 0.0)
     room = gap_now + lead_now * 0.5 * high >= half_path + MIN_LANE_CHANGE_GAP
@@ -129,6 +149,7 @@ def _candidates(drivers, scene, cand, model, params, config) -> _Candidates:
         lane=lane,
         road=road,
         room=room,
+        urgent=urgent,
         old_follower_now=np.where(behind_now >= 0, scene.accel[behind_now], 0.0),
         old_follower_after=np.where(behind_now >= 0, old_after, 0.0),
     )
@@ -175,15 +196,16 @@ def _judge(drivers, scene, c: _Candidates, target, step, model, params, urge, em
     return gain, safe
 
 
-def _start(drivers, scene, centre_x, index, choice, rng, config) -> None:
-    """Start the changes of drivers ``index`` one lane ``choice`` (LEFT or RIGHT)."""
+def _start(drivers, scene, centre_x, index, choice, urgent, rng, config) -> None:
+    """Start the changes of drivers ``index`` one lane ``choice`` (LEFT or RIGHT);
+    ``urgent`` (k,) bool: strategic changes, on the short path."""
     low, high = config.lane_change_time
     duration = rng.uniform(low, high, index.size)
     drivers.lane_from[index] = drivers.lane[index]
     drivers.lane[index] = drivers.lane[index] + choice
     drivers.start_x[index] = centre_x[index]
     drivers.start_y[index] = scene.y[index]
-    drivers.path_length[index] = np.maximum(scene.speed[index], MIN_SPEED_PATH) * duration
+    drivers.path_length[index] = path_length(scene.speed[index], duration, urgent)
     drivers.requested[index] = 0
 
 

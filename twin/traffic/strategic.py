@@ -17,9 +17,13 @@ twin's own form:
   the next gap, as drivers do);
 - cooperation (:func:`cooperate`): once its urgency is at least
   :data:`COOPERATE_FROM`, the urgent driver settles behind the target lane's vehicle
-  alongside or ahead of it, and the driver behind it in the target lane drops back for
-  it: each follows the other's as if the change were made, braking no harder than
-  :data:`COOPERATIVE_DECEL`, until the gap is safe.
+  ahead of it (or alongside it, when that one is more than half a length past its
+  back), and the driver behind that one in the target lane drops back for it: each
+  follows the other as if the change were made, braking no harder than
+  :data:`COOPERATIVE_DECEL`, until the gap is safe;
+- an urgent change takes a shorter path than a discretionary one
+  (:data:`twin.traffic.lane_change.URGENT_PATH`), so that a driver can get across a
+  crawling queue as real drivers do.
 
 The targets are set by the cosimulator (:meth:`TrafficManager.set_strategic`) from the
 calibrated flows or the recording; a target is cleared once its change starts.
@@ -33,6 +37,7 @@ from twin.traffic.models.base import take
 GIVE_UP = 150.0  # [m] past x_by a strategic change is no longer tried
 COOPERATE_FROM = 0.3  # urgency from which followers in the target lane make room
 COOPERATIVE_DECEL = 1.5  # [m/s^2] the most a cooperating driver brakes to make room
+MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
 
 
 def urgency(drivers, index, centre_x) -> np.ndarray:
@@ -75,6 +80,17 @@ def cooperate(scene, drivers, accel, centre_x, model) -> np.ndarray:
     road = drivers.road[urgent]
     x = scene.x[urgent]
     ahead, behind = scene.occupancy.around(road, target, x)
+    # a vehicle alongside (more than half the urgent driver's length past its back) is
+    # the one to go behind: it cannot drop back far enough in time; the one behind it
+    # drops back instead
+    gap = np.where(behind >= 0, x - scene.x[behind] - scene.length[behind], np.inf)
+    alongside = gap < -0.5 * scene.length[urgent]
+    if alongside.any():
+        ahead, behind = ahead.copy(), behind.copy()
+        ahead[alongside] = behind[alongside]
+        _, behind[alongside] = scene.occupancy.around(
+            road[alongside], target[alongside], scene.x[behind[alongside]]
+        )
     # the urgent driver settles behind the target lane's vehicle alongside or ahead
     aligns = ahead >= 0
     if aligns.any():
@@ -82,12 +98,14 @@ def cooperate(scene, drivers, accel, centre_x, model) -> np.ndarray:
         room = scene.x[a] - x[aligns] - scene.length[i]
         behind_it = model.accel(scene.speed[i], scene.speed[a], room, take(drivers.model, i))
         accel[i] = np.minimum(accel[i], np.maximum(behind_it, -COOPERATIVE_DECEL))
-    # and the driver behind it there drops back for it
+    # and the driver behind it there drops back for it (one overlapping its back by
+    # less than half its length too)
     gap = np.where(behind >= 0, x - scene.x[behind] - scene.length[behind], -np.inf)
-    helps = (behind >= 0) & (behind < n) & (gap > 0)
+    helps = (behind >= 0) & (behind < n) & (gap >= -0.5 * scene.length[urgent])
     if not helps.any():
         return accel
     i, f = urgent[helps], behind[helps]
-    drop_back = model.accel(scene.speed[f], scene.speed[i], gap[helps], take(drivers.model, f))
+    room = np.maximum(gap[helps], MIN_ROOM)
+    drop_back = model.accel(scene.speed[f], scene.speed[i], room, take(drivers.model, f))
     np.minimum.at(accel, f, np.maximum(drop_back, -COOPERATIVE_DECEL))
     return accel

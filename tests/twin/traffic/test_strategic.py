@@ -6,7 +6,7 @@ import pytest
 from tests.twin.traffic.conftest import make_manager, point_mass_manager, run, spawn
 from tests.twin.traffic.test_manager import point_states
 from twin.physics.kinematic import KinematicWorld
-from twin.traffic import strategic
+from twin.traffic import lane_change, strategic
 
 SPEED = 15.0  # [m/s]
 
@@ -112,3 +112,37 @@ def test_a_target_the_vehicle_may_never_reach_is_refused():
         manager.set_strategic([1], -1, 0.0, 100.0)
     with pytest.raises(ValueError, match="directions must be"):
         manager.set_strategic([1], 0.5, 0.0, 100.0)  # not silently truncated to 0
+
+
+def _queues_side_by_side(world, built_map):
+    """Lanes -2 and -3 two queues crawling at 2 m/s, 4 m bumper to bumper; one car in
+    lane -3 must move left within 60 m."""
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=2)
+    spacing = 4.0 + 4.6  # gap plus about a car's length
+    left = spawn(world, manager, 1, -2, 100.0 + spacing * np.arange(8), 2.0)
+    right = spawn(world, manager, 1, -3, 104.0 + spacing * np.arange(8), 2.0)
+    everyone = np.r_[left, right]
+    manager.set_desired_speed(everyone, np.full(everyone.size, 2.0))
+    merger = int(right[3])
+    centre = 104.0 + spacing * 3 + 0.5 * world.params_of([merger]).length[0]
+    manager.set_strategic([merger], 1, centre, centre + 60.0)
+    return manager, merger
+
+
+def _merges_in_the_queue(world, built_map) -> bool:
+    manager, merger = _queues_side_by_side(world, built_map)
+    record = run(world, manager, 40.0)
+    column = int(np.flatnonzero(world.states().id == merger)[0])
+    assert record.contacts == 0
+    return bool(np.any(record.lane[:, column] == -2))
+
+
+def test_an_urgent_change_gets_across_a_crawling_queue(kinematic, built_map):
+    assert _merges_in_the_queue(kinematic, built_map)
+
+
+def test_with_a_path_made_for_5_m_s_the_same_change_finds_no_room(
+    kinematic, built_map, monkeypatch
+):
+    monkeypatch.setattr(lane_change, "URGENT_PATH", 30.0)  # 5 m/s x 6 s, as discretionary
+    assert not _merges_in_the_queue(kinematic, built_map)
