@@ -54,7 +54,7 @@ CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs
 class Counters:
     """What happened in a run (the summary and ``metrics.json``)."""
 
-    spawned: int = 0  # visible vehicles spawned after t0 (ghosts entering)
+    spawned: int = 0  # visible vehicles spawned after t0 (ghosts entering, new tracks)
     spawned_initially: int = 0  # the visible set at t0, ego excluded
     despawned: int = 0
     skipped_overlap: int = 0  # spawns refused: a body was in the way
@@ -140,6 +140,7 @@ class Cosimulator:
         n_tids = len(traffic.store.trajectory_arrays["id"])
         self._is_sim = np.zeros(n_tids, dtype=bool)
         self._is_ghost = np.zeros(n_tids, dtype=bool)
+        self._seen = np.zeros(n_tids, dtype=bool)  # in the windows at some step before
         self._lead_speed = dict.fromkeys(LANES, math.nan)  # smoothed ghost speed per lane
         self._just_spawned = (np.empty(0, np.int64), np.empty(0))  # ids, spawn speeds
         self._touching: set = set()
@@ -230,6 +231,7 @@ class Cosimulator:
         visible = np.arange(bounds[1], bounds[2])
         visible = visible[snap.tid[visible] != ego.tid]
         self.counters.spawned_initially = self._spawn_recorded(snap, visible)
+        self._seen[snap.tid] = True
         self._load_ghosts(snap, bounds)
         states = self.world.states()
         self._record(states, np.zeros(len(states.id)))
@@ -285,7 +287,12 @@ class Cosimulator:
         tick = time.perf_counter()
         snap = self._snapshot()
         bounds = self.windows.bounds(snap.x)
-        entering = self._is_ghost[snap.tid[bounds[1] : bounds[2]]].nonzero()[0] + bounds[1]
+        # (and the recorded vehicles that first appear inside it: an on-ramp's merges,
+        # tracks that begin there)
+        inside = snap.tid[bounds[1] : bounds[2]]
+        new = self._is_ghost[inside] | ~(self._seen[inside] | self._is_sim[inside])
+        entering = new.nonzero()[0] + bounds[1]
+        self._seen[snap.tid] = True
         self.times.ghosts += time.perf_counter() - tick
         if entering.size:
             self.counters.spawned += self._spawn_recorded(snap, entering)

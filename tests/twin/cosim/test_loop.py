@@ -163,6 +163,19 @@ def test_step6_a_ghost_entering_the_visible_window_is_spawned_at_its_recorded_sp
     assert sim.counters.spawned == 1
 
 
+def test_step6_a_vehicle_first_recorded_inside_the_visible_window_is_spawned(cosim):
+    # an on-ramp merge as the data show it: the track begins in lane -4, 60 m ahead
+    # of the ego, 2 s into the episode (before, it was neither simulated nor a ghost)
+    sim = cosim([ego_doc(), vehicle(5, -4, EGO_X + 20.0, 20.0, start=2.0)])
+    tid = tid_of(sim, 5)
+    assert tid not in sim._tids and tid not in sim._ghosts.tid
+    step_until(sim, lambda: tid in sim._tids)
+    row = rows_of(sim, tid).iloc[0]
+    assert row["time"] == pytest.approx(2.0, abs=0.011)
+    assert row["x"] == pytest.approx(EGO_X + 20.0 + 20.0 * row["time"], abs=0.05)
+    assert sim.counters.spawned == 1
+
+
 def test_step6_a_ghost_is_not_spawned_where_a_body_is_in_the_way(cosim):
     docs = [
         ego_doc(),
