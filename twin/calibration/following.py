@@ -417,24 +417,22 @@ def lane_speeds(grid: GridTraffic) -> np.ndarray:
     return mean[key[:, None] + np.arange(4)[None, :]]
 
 
-def lane_changes(grid: GridTraffic) -> LaneChanges:
-    """The lane changes of ``grid``: a vehicle's lane changing to one it then holds for
-    ``LANE_HOLD`` (flicker on a line is not a change), and the exposure."""
-    hold = round(LANE_HOLD / grid.dt)
-    speeds = lane_speeds(grid)
-    own = np.take_along_axis(speeds, np.maximum(-grid.lane.astype(np.int64) - 1, 0)[:, None], 1)[
-        :, 0
-    ]
+def held_changes(vehicle, lane, hold: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lane changes in rows of vehicles ``vehicle`` (n,), grouped and in time order,
+    in ``lane`` (n,) (0: outside the lanes, skipped): a vehicle's lane changing to one
+    it then holds for ``hold`` rows (flicker on a line is not a change).
+
+    Returns:
+        row: (c,) the first row in the new lane; lane_from, lane_to: (c,) int8.
+    """
     changes = {name: [] for name in ("row", "lane_from", "lane_to")}
-    tid = grid.tid
-    starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if tid.size else np.zeros(0, int)
-    ends = np.r_[starts[1:], tid.size].astype(int)
+    starts = np.flatnonzero(np.r_[True, vehicle[1:] != vehicle[:-1]]) if vehicle.size else []
+    ends = np.r_[starts[1:], vehicle.size].astype(int) if vehicle.size else []
     for a, b in zip(starts, ends, strict=True):
-        lane = grid.lane[a:b]
-        rows = np.flatnonzero(lane != 0)
+        rows = np.flatnonzero(lane[a:b] != 0)
         if rows.size < 2:
             continue
-        seq = lane[rows]
+        seq = lane[a:b][rows]
         switch = np.flatnonzero(seq[1:] != seq[:-1]) + 1  # first row in a new lane
         bounds = np.r_[0, switch, seq.size]
         held = np.diff(bounds) >= hold  # each constant stretch
@@ -448,9 +446,21 @@ def lane_changes(grid: GridTraffic) -> LaneChanges:
                 changes["lane_from"].append(current)
                 changes["lane_to"].append(stretch_lane[j])
             current = stretch_lane[j]
-    row = np.array(changes["row"], dtype=np.int64)
-    lane_from = np.array(changes["lane_from"], dtype=np.int8)
-    lane_to = np.array(changes["lane_to"], dtype=np.int8)
+    return (
+        np.array(changes["row"], dtype=np.int64),
+        np.array(changes["lane_from"], dtype=np.int8),
+        np.array(changes["lane_to"], dtype=np.int8),
+    )
+
+
+def lane_changes(grid: GridTraffic) -> LaneChanges:
+    """The lane changes of ``grid``: a vehicle's lane changing to one it then holds for
+    ``LANE_HOLD`` (flicker on a line is not a change), and the exposure."""
+    speeds = lane_speeds(grid)
+    own = np.take_along_axis(speeds, np.maximum(-grid.lane.astype(np.int64) - 1, 0)[:, None], 1)[
+        :, 0
+    ]
+    row, lane_from, lane_to = held_changes(grid.tid, grid.lane, round(LANE_HOLD / grid.dt))
     distance = distance_driven(grid)
     on = grid.lane != 0
     exposure = np.zeros((4, len(SPEED_BINS) - 1))
@@ -460,7 +470,7 @@ def lane_changes(grid: GridTraffic) -> LaneChanges:
         distance[on] / 1000.0,
     )
     return LaneChanges(
-        tid=tid[row],
+        tid=grid.tid[row],
         time=grid.t0 + grid.k[row] * grid.dt,
         x=grid.x[row],
         lane_from=lane_from,

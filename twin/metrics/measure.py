@@ -4,7 +4,8 @@
 
 Sections: ``ego`` (the simulated ego against its recording), ``traffic`` (speeds and
 the speed field against the recording), ``energy`` (:mod:`twin.metrics.economy`),
-``control`` (:mod:`twin.metrics.wave_dampening`), ``counts``, ``physics`` and ``timing``.
+``control`` (:mod:`twin.metrics.wave_dampening`), ``counts``, ``lane_flows``
+(:mod:`twin.metrics.lane_flow_fidelity`), ``physics`` and ``timing``.
 """
 
 import math
@@ -15,7 +16,7 @@ from twin import __version__
 from twin.calibration import following
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
-from twin.metrics import economy, fidelity, wave_dampening
+from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
 
 RUN_FORMAT = "i24-twin-run"
 COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
@@ -39,6 +40,9 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
     sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
     sim_s = sim.sim_time
     lengths = store.trajectory_arrays["length"]
+    recorded_changes = following.lane_changes(
+        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim_s)
+    )
     figures = {
         "format": RUN_FORMAT,
         "version": __version__,
@@ -56,7 +60,12 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             ),
         },
         **control_sections(sim, vehicles, ghosts, lengths),
-        "counts": _counts(sim, store, vehicles, windows, sampled),
+        "counts": _counts(sim, recorded_changes, vehicles, windows, sampled),
+        "lane_flows": lane_flow_fidelity.episode_section(
+            lane_flow_fidelity.simulated_changes(vehicles, cfg.dt),
+            lane_flow_fidelity.recorded_changes_in_window(recorded_changes, windows, sim.t0),
+            windows,
+        ),
         "physics": _physics(sim),
         "timing": {
             "reset_s": round(reset_s, 3),
@@ -121,12 +130,9 @@ def _ego(sim: Cosimulator, ego_rows, recorded_ego) -> dict:
     }
 
 
-def _counts(sim: Cosimulator, store, vehicles, windows, sampled) -> dict:
+def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> dict:
     """Vehicles spawned and removed, and lane changes simulated against recorded."""
-    cfg, counters = sim.config, sim.counters
-    recorded_changes = following.lane_changes(
-        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim.sim_time)
-    )
+    counters = sim.counters
     return {
         "visible_at_start": counters.spawned_initially,
         "spawned": counters.spawned,

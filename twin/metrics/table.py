@@ -184,7 +184,11 @@ def document() -> str:
         "it, the paired benchmark compares it and the Gymnasium env reports it in\n"
         '`info["metrics"]`. The path in brackets is where the run\'s `metrics.json` holds it.\n'
         "Generated from `twin/metrics/table.py` by `python -m twin.metrics.table`; do not edit.\n\n"
-        + markdown_table()
+        "Beside these, `metrics.json` holds a nested `lane_flows` section: the lane changes\n"
+        "by lane pair and the net flow out of each lane by 200 m bin, simulated and\n"
+        "recorded in the same moving window (`twin/metrics/lane_flow_fidelity.py`);\n"
+        "`twin eval` sums it over the episodes into `summary.json`, `summary.md` and\n"
+        "`fidelity.png`.\n\n" + markdown_table()
     )
 
 

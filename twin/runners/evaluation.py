@@ -37,6 +37,7 @@ from twin.core.i24 import Road
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.store import TrajectoryStore
+from twin.metrics import lane_flow_fidelity
 from twin.metrics.table import SUMMARISED, flatten
 from twin.runners.engines import run_jobs, where, worker_data
 from twin.runners.episodes import (
@@ -313,7 +314,13 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
         loop_s = time.perf_counter() - begin
         figures, frames = measure(sim, store, loop_s, begin - setup)
     traces = speed_traces(frames[0], sim.ego_id, figures["control"]["followers"], cosim.dt)
-    return {**row, "skipped": None, **flatten(figures), **traces}
+    return {
+        **row,
+        "skipped": None,
+        **flatten(figures),
+        **traces,
+        "lane_flows": figures["lane_flows"],
+    }
 
 
 def speed_traces(vehicles, ego_id: int, followers: list[int], dt: float) -> dict:
@@ -384,10 +391,12 @@ def assemble(
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    rows = []
+    rows, flows = [], {label: [] for label, _, _ in config.arms}
     for spec in specs:
         for label, _, _ in config.arms:
-            rows.append(json.loads(_result_path(out, spec.index, label).read_text()))
+            row = json.loads(_result_path(out, spec.index, label).read_text())
+            flows[label].append(row.pop("lane_flows", None))  # nested: summed, not a column
+            rows.append(row)
     frame = pd.DataFrame(rows)
     for name in SUMMARISED:
         if name not in frame:
@@ -396,13 +405,16 @@ def assemble(
     with atomic_file(out / "episodes.parquet") as tmp:
         pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
     summary = summarise(frame, config)
+    lane_flows = {label: lane_flow_fidelity.sum_episodes(f) for label, f in flows.items()}
+    for label, summed in lane_flows.items():
+        summary[config.arms_key][label]["lane_flows"] = summed
     more = extension(out, frame, config, summary) if extension is not None else ""
     with atomic_file(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     with atomic_file(out / "summary.md") as tmp:
-        tmp.write_text(markdown(summary) + more)
+        tmp.write_text(markdown(summary) + lane_flow_fidelity.markdown(lane_flows) + more)
     with atomic_file(out / "fidelity.png") as tmp:
-        _plot(frame, config, tmp)
+        _plot(frame, config, tmp, lane_flows)
     return summary
 
 
@@ -482,29 +494,35 @@ def markdown(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plot(frame, config: EvalConfig, path: Path) -> None:
+def _plot(frame, config: EvalConfig, path: Path, lane_flows: dict | None = None) -> None:
+    """``fidelity.png``: each fidelity metric's distribution per arm (top row); the lane
+    changes by lane pair and the net flow out of each lane by position, summed over the
+    episodes, simulated against recorded (bottom row)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     shown = [
-        ("ego_speed_rmse_mps", "ego speed RMSE [m/s]"),
-        ("ego_position_error_end_m", "ego position error at the end [m]"),
-        ("speed_field_rmse_mps", "speed-field RMSE, all lanes [m/s]"),
-        ("slow_spell_end_difference_s", "slow spell end, sim - recorded [s]"),
+        ("ego_speed_rmse_mps", "ego speed RMSE", "m/s"),
+        ("ego_position_error_end_m", "ego position error at the end", "m"),
+        ("speed_field_rmse_mps", "speed-field RMSE, all lanes", "m/s"),
+        ("slow_spell_end_difference_s", "slow spell end, simulated - recorded", "s"),
+        ("lane_changes_simulated", "lane changes simulated per episode", "count"),
     ]
-    fig, axes = plt.subplots(1, len(shown), figsize=(4.2 * len(shown), 4.0))
-    for ax, (name, label) in zip(axes, shown, strict=True):
+    fig, axes = plt.subplots(2, len(shown), figsize=(4.2 * len(shown), 8.4))
+    arms = [label for label, _, _ in config.arms]
+    for ax, (name, title, unit) in zip(axes[0], shown, strict=True):
         data = []
-        labels = [label for label, _, _ in config.arms]
-        for label in labels:
-            values = frame.loc[frame["arm"] == label, name].to_numpy(dtype=float)
+        for arm in arms:
+            values = frame.loc[frame["arm"] == arm, name].to_numpy(dtype=float)
             data.append(values[np.isfinite(values)])
         ax.boxplot(data, showfliers=True)
-        ax.set_xticks(range(1, len(labels) + 1), labels)
-        ax.set_title(label, fontsize=10)
+        ax.set_xticks(range(1, len(arms) + 1), arms)
+        ax.set_title(title, fontsize=10)
+        ax.set_ylabel(f"{title} [{unit}]", fontsize=9)
         ax.grid(axis="y", alpha=0.3)
+    lane_flow_fidelity.draw(axes[1][0], axes[1][1:], lane_flows or {})
     fig.suptitle(f"twin eval: {config.road}, {config.episodes} x {config.duration:g} s episodes")
     fig.tight_layout()
     fig.savefig(path, dpi=110, format="png")
@@ -533,8 +551,19 @@ def summary_lines(result: EvalResult) -> str:
             f"{m['lane_changes_simulated']['sum']:g} vs {m['lane_changes_recorded']['sum']:g} "
             f"recorded ({'-' if ratio is None else f'{ratio:.2f}'}); collisions "
             f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
+            + _flow_words(entry.get("lane_flows"))
         )
     return "\n".join(lines)
+
+
+def _flow_words(flows: dict | None) -> str:
+    if not flows or flows["net_flow_error"] is None:
+        return ""
+    return (
+        f"; net lane flow error {flows['net_flow_error']:.2f} "
+        f"({flows['bins_within']} of {flows['bins_judged']} bins within "
+        f"{lane_flow_fidelity.WITHIN:.0%})"
+    )
 
 
 def _stat(metrics: dict, name: str) -> str:

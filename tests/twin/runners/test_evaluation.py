@@ -80,3 +80,35 @@ def test_eval_settings_and_folders_are_checked(calibrated, wave_store, built_map
     assert main(["eval", "--data", str(wave_store.path), "--episodes", "1", "--behaviour",
                  "calibrated", "--out", str(tmp_path / "e"), "--quiet"]) == 2  # fmt: skip
     assert not (tmp_path / "e").exists()
+
+
+def test_fidelity_png_titles_each_panel_by_its_metric_with_units(tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    from twin.runners import evaluation
+
+    drawn = []
+    monkeypatch.setattr(plt, "close", lambda fig: drawn.append(fig))
+    config = _config()
+    frame = pd.DataFrame(
+        {
+            "arm": ["paper", "calibrated"],
+            "ego_speed_rmse_mps": [1.0, 0.5],
+            "ego_position_error_end_m": [10.0, 3.0],
+            "speed_field_rmse_mps": [2.0, 1.0],
+            "slow_spell_end_difference_s": [float("nan"), 1.0],
+            "lane_changes_simulated": [5, 4],
+        }
+    )
+    evaluation._plot(frame, config, tmp_path / "fidelity.png", {"paper": None, "calibrated": None})
+    top = drawn[0].axes[:5]
+    # before, every panel was titled by the last arm ("calibrated") and had no y label
+    assert [ax.get_title() for ax in top] == [
+        "ego speed RMSE",
+        "ego position error at the end",
+        "speed-field RMSE, all lanes",
+        "slow spell end, simulated - recorded",
+        "lane changes simulated per episode",
+    ]
+    assert top[0].get_ylabel() == "ego speed RMSE [m/s]"
+    assert all(ax.get_ylabel() for ax in drawn[0].axes)
