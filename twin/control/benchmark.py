@@ -23,7 +23,7 @@ import numpy as np
 
 from twin.core.atomic import atomic_file
 from twin.data.store import TrajectoryStore
-from twin.metrics.table import PAIRED
+from twin.metrics.table import PAIRED, section_head
 from twin.runners.evaluation import (
     EvalConfig,
     EvalResult,
@@ -132,13 +132,9 @@ def markdown(summary: dict) -> str:
     if not paired:
         return ""
     arms = list(paired)
-    lines = [
-        "",
-        "## Paired change against human, % (mean [95 % CI]; episodes)",
-        "",
-        "| metric | " + " | ".join(arms) + " |",
-        "|---|" + "---|" * len(arms),
-    ]
+    lines = section_head(
+        "Paired change against human, % (mean [95 % CI]; episodes)", "metric", arms
+    )
     for metric, better in PAIRED.items():
         cells = []
         for arm in arms:

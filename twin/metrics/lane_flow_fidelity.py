@@ -17,6 +17,7 @@ import pandas as pd
 
 from twin.calibration import following
 from twin.core.i24 import N_LANES
+from twin.metrics.table import section_head
 
 BIN = 200.0  # [m] the net flow's bins along the road
 LANES = tuple(range(-1, -N_LANES - 1, -1))
@@ -157,13 +158,11 @@ def markdown(by_arm: dict) -> str:
     arms = [a for a, s in by_arm.items() if s]
     if not arms:
         return ""
-    lines = [
-        "",
-        "## Lane changes by lane pair and net lane flow (simulated / recorded, summed)",
-        "",
-        "| | " + " | ".join(arms) + " |",
-        "|---|" + "---|" * len(arms),
-    ]
+    lines = section_head(
+        "Lane changes by lane pair and net lane flow (simulated / recorded, summed)",
+        "lane pair",
+        arms,
+    )
     for a, b in PAIRS:
         key = pair_key(a, b)
         cells = [

@@ -192,6 +192,18 @@ def document() -> str:
     )
 
 
+def section_head(title: str, first: str, columns) -> list[str]:
+    """The lines that open a Markdown section of ``summary.md``: a blank line, the
+    ``title`` as a heading, and a table's header with ``first`` then ``columns``."""
+    return [
+        "",
+        f"## {title}",
+        "",
+        f"| {first} | " + " | ".join(columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
+
+
 def markdown_table() -> str:
     """The table of metrics as Markdown."""
     lines = [
