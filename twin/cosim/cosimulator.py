@@ -57,7 +57,8 @@ class Counters:
     spawned: int = 0  # visible vehicles spawned after t0 (ghosts entering, new tracks)
     spawned_initially: int = 0  # the visible set at t0, ego excluded
     despawned: int = 0
-    skipped_overlap: int = 0  # spawns refused: a body was in the way
+    skipped_overlap: int = 0  # vehicles refused a spawn: a body was in the way (each is
+    # tried again every step while inside the visible window)
     skipped_invalid: int = 0  # spawns refused: recorded state outside the lanes or too fast
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
     collisions: list = field(default_factory=list)  # (time [s], id, id) of new contacts
@@ -141,6 +142,7 @@ class Cosimulator:
         self._is_sim = np.zeros(n_tids, dtype=bool)
         self._is_ghost = np.zeros(n_tids, dtype=bool)
         self._seen = np.zeros(n_tids, dtype=bool)  # in the windows at some step before
+        self._waiting = np.zeros(n_tids, dtype=bool)  # refused a spawn for lack of room
         self._lead_speed = dict.fromkeys(LANES, math.nan)  # smoothed ghost speed per lane
         self._just_spawned = (np.empty(0, np.int64), np.empty(0))  # ids, spawn speeds
         self._touching: set = set()
@@ -288,9 +290,11 @@ class Cosimulator:
         snap = self._snapshot()
         bounds = self.windows.bounds(snap.x)
         # (and the recorded vehicles that first appear inside it: an on-ramp's merges,
-        # tracks that begin there)
+        # tracks that begin there; and those refused for lack of room, tried again
+        # until they fit or leave the window, so that a refusal leaves no lasting hole)
         inside = snap.tid[bounds[1] : bounds[2]]
         new = self._is_ghost[inside] | ~(self._seen[inside] | self._is_sim[inside])
+        new |= self._waiting[inside] & ~self._is_sim[inside]
         entering = new.nonzero()[0] + bounds[1]
         self._seen[snap.tid] = True
         self.times.ghosts += time.perf_counter() - tick
@@ -419,10 +423,14 @@ class Cosimulator:
                 accepted.append(i)
                 for name in body:
                     body[name] = np.append(body[name], getattr(snap, name)[i])
-        self.counters.skipped_overlap += rows.size - len(accepted)
-        if not accepted:
+        accepted = np.array(accepted, dtype=np.int64)
+        refused = snap.tid[np.setdiff1d(rows, accepted)]
+        # counted once per vehicle, at its first refusal; tried again each step
+        self.counters.skipped_overlap += int(np.count_nonzero(~self._waiting[refused]))
+        self._waiting[refused] = True
+        if not accepted.size:
             return 0
-        accepted = np.array(accepted)
+        self._waiting[snap.tid[accepted]] = False
         new = _recorded_states(
             self.direction, snap.x[accepted], snap.y[accepted], snap.speed[accepted],
             snap.vehicle_class[accepted], snap.length[accepted], snap.width[accepted],

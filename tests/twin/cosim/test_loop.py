@@ -191,6 +191,23 @@ def test_step6_a_ghost_is_not_spawned_where_a_body_is_in_the_way(cosim):
     assert sim.counters.skipped_overlap == 1 and sim.counters.spawned == 1
 
 
+def test_a_vehicle_refused_for_lack_of_room_is_spawned_once_it_fits(cosim):
+    # 3 is recorded 1.4 m ahead of 2 at the start (too close to spawn) and pulls away
+    # at 26 m/s; before, a refusal left it out for good: a hole in the window
+    sim = cosim(
+        [ego_doc(), vehicle(2, -3, EGO_X + 100.0, 20.0), vehicle(3, -3, EGO_X + 106.0, 26.0)]
+    )
+    tid = tid_of(sim, 3)
+    assert tid not in sim._tids and sim.counters.skipped_overlap == 1
+    step_until(sim, lambda: tid in sim._tids, limit=100)
+    row = rows_of(sim, tid).iloc[0]
+    assert row["x"] == pytest.approx(EGO_X + 106.0 + 26.0 * row["time"], abs=0.05)
+    assert sim.counters.skipped_overlap == 1  # counted once, however often it was tried
+    for _ in range(50):
+        sim.step()
+    assert not sim.counters.collisions
+
+
 def test_step2_a_standing_queue_is_spawned_as_recorded_a_moving_one_with_room(cosim):
     length = 15.0 * 0.3048  # make_doc's default length
     docs = [ego_doc()]
