@@ -203,25 +203,45 @@ def _calibrate_road(store, road, window, settings, model, progress):
 def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]:
     """The MOBIL threshold and the lane-change flows (:mod:`lane_flows`). The threshold
     is fitted to every recorded change, then, where the flows show strategic changes,
-    again to the others: MOBIL models the discretionary ones only."""
+    again away from them: MOBIL models the discretionary changes only, so it is fitted
+    on the position bins without a strategic flow, both its decisions and the recorded
+    changes (where a lane ends, drivers resist incentives into it and leave it whatever
+    MOBIL says: counting either there would bend the threshold)."""
     every = max(1, round(settings.decision_every / grid.dt)) * grid.dt
     mobil = fit_threshold(incentives, len(changes))
     explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
     flows = lane_change_flows(changes, grid, explained)
-    excluded = 0
-    # a higher threshold explains fewer changes, leaving more strategic: refit until
-    # the threshold's changes and the strategic ones add up to the recording's
+    excluded = -1
+    # the strategic bins depend on what MOBIL explains: refit until they are stable
     for _ in range(FLOW_ROUNDS):
-        if not flows["identified"] or flows["strategic_count"] == excluded:
+        if not flows["identified"]:
             break
-        excluded = flows["strategic_count"]
-        mobil = fit_threshold(incentives, len(changes) - excluded)
+        away_changes, away_decisions = _away_from_strategic(flows, changes.x, incentives.x)
+        if int(np.count_nonzero(~away_changes)) == excluded:
+            break
+        excluded = int(np.count_nonzero(~away_changes))
+        mobil = fit_threshold(incentives, int(np.count_nonzero(away_changes)), where=away_decisions)
         explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
         flows = lane_change_flows(changes, grid, explained)
-    if excluded:
-        mobil["strategic_excluded"] = excluded
+    if excluded > 0:
+        mobil["strategic_bins_changes"] = excluded
         mobil["strategic_final"] = flows["strategic_count"]
     return mobil, flows
+
+
+def _away_from_strategic(flows: dict, change_x, decision_x) -> tuple[np.ndarray, np.ndarray]:
+    """(c,), (e,) bool: the recorded changes and MOBIL's decisions outside the position
+    bins where the flows show a strategic flow."""
+    edges = np.asarray(flows["x_edges"])
+    strategic = np.zeros(edges.size - 1, dtype=bool)
+    for pair in flows["strategic"].values():
+        strategic |= np.asarray(pair["by_position"]) > 0
+
+    def away(x):
+        at = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, edges.size - 2)
+        return ~strategic[at]
+
+    return away(change_x), away(decision_x)
 
 
 def _median_driver(model: CarFollowingModel, distribution):

@@ -61,6 +61,7 @@ class Incentives:
         gain: (e,) [m/s^2] MOBIL incentive before the threshold.
         possible: (e,) bool: the target lane exists, the HOV rule allows it and the
             change is safe.
+        x: (e,) [m] where the vehicle is (its back) at the decision.
     """
 
     tid: np.ndarray
@@ -68,10 +69,12 @@ class Incentives:
     direction: np.ndarray
     gain: np.ndarray
     possible: np.ndarray
+    x: np.ndarray
 
-    def changes(self, threshold: float) -> int:
+    def changes(self, threshold: float, where: np.ndarray | None = None) -> int:
         """Lane changes MOBIL would start with ``threshold``: one each time a vehicle's
-        incentive to move one way beats it where it did not at the previous decision."""
+        incentive to move one way beats it where it did not at the previous decision;
+        only the decisions ``where`` (e,) bool, if given, are counted."""
         want = self.possible & (self.gain > threshold)
         previous = np.zeros_like(want)
         same = (
@@ -80,7 +83,8 @@ class Incentives:
             & (self.decision[1:] == self.decision[:-1] + 1)
         )
         previous[1:] = want[:-1] & same
-        return int(np.count_nonzero(want & ~previous))
+        onset = want & ~previous
+        return int(np.count_nonzero(onset if where is None else onset & where))
 
 
 def recorded_incentives(
@@ -97,7 +101,7 @@ def recorded_incentives(
     rows_all = np.flatnonzero((grid.lane != 0) & (grid.k % stride == 0))
     rows_all = rows_all[np.argsort(grid.k[rows_all], kind="stable")]
     bounds = np.flatnonzero(np.r_[True, np.diff(grid.k[rows_all]) != 0, True])
-    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible")}
+    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible", "x")}
     road = np.int8(grid.road.direction)
     for a, b in itertools.pairwise(bounds):
         rows = rows_all[a:b]
@@ -142,8 +146,9 @@ def recorded_incentives(
             out["direction"].append(np.full(rows.size, direction, dtype=np.int8))
             out["gain"].append(gain)
             out["possible"].append(exists & safe)
+            out["x"].append(x)
     if not out["tid"]:
-        return Incentives(*(np.zeros(0) for _ in range(5)))
+        return Incentives(*(np.zeros(0) for _ in range(6)))
     columns = {name: np.concatenate(parts) for name, parts in out.items()}
     order = np.lexsort((columns["decision"], columns["direction"], columns["tid"]))
     return Incentives(**{name: values[order] for name, values in columns.items()})
@@ -155,14 +160,17 @@ def _accel_behind(v, i, j, gap, model: CarFollowingModel, driver) -> np.ndarray:
     return model.accel(v[i], lead_speed, np.where(j >= 0, gap, np.inf), driver)
 
 
-def fit_threshold(incentives: Incentives, recorded: int, *, high: float = 8.0) -> dict:
+def fit_threshold(
+    incentives: Incentives, recorded: int, *, high: float = 8.0, where: np.ndarray | None = None
+) -> dict:
     """The MOBIL threshold [m/s^2] at which the recorded scenes would start as many lane
     changes as the recording has: the lowest at which they start no more (bisection: the
     count falls as the threshold rises). With no recorded change that is just above the
     largest incentive the recorded drivers resisted, not the top of the range: they
     would have changed for more. Where even ``high`` starts more, it is ``high``; where
-    0 starts fewer, 0."""
-    low_count, high_count = incentives.changes(0.0), incentives.changes(high)
+    0 starts fewer, 0. With ``where`` (e,) bool, only those decisions are judged
+    (``recorded`` then counts the changes made where they are)."""
+    low_count, high_count = incentives.changes(0.0, where), incentives.changes(high, where)
     if low_count <= recorded:
         threshold = 0.0
     elif high_count > recorded:
@@ -171,7 +179,7 @@ def fit_threshold(incentives: Incentives, recorded: int, *, high: float = 8.0) -
         lo, hi = 0.0, high
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if incentives.changes(mid) > recorded:
+            if incentives.changes(mid, where) > recorded:
                 lo = mid
             else:
                 hi = mid
@@ -179,6 +187,6 @@ def fit_threshold(incentives: Incentives, recorded: int, *, high: float = 8.0) -
     return {
         "threshold": round(threshold, 4),
         "recorded": int(recorded),
-        "predicted": incentives.changes(threshold),
+        "predicted": incentives.changes(threshold, where),
         "at_zero_threshold": low_count,
     }

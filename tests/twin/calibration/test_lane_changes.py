@@ -15,6 +15,7 @@ def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted
         direction=np.ones(10, dtype=np.int8),
         gain=gains,
         possible=np.ones(10, dtype=bool),
+        x=np.tile(np.arange(5) * 100.0, 2),
     )
     assert incentives.changes(0.3) == 3  # onsets: 1 at 0.5, 2 at 0.9 and again at 1.5
     fit = fit_threshold(incentives, 1)
@@ -22,3 +23,7 @@ def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted
     # none recorded: just above the largest incentive resisted, not the top of the range
     none = fit_threshold(incentives, 0)
     assert none["predicted"] == 0 and none["threshold"] == pytest.approx(2.0, abs=1e-3)
+    # judged only short of 200 m (where 2.0 and 1.5 are resisted no more): 0.5 and 0.9
+    where = incentives.x < 200.0
+    assert incentives.changes(0.3, where) == 2
+    assert fit_threshold(incentives, 0, where=where)["threshold"] == pytest.approx(0.9, abs=1e-3)

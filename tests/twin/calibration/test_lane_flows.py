@@ -110,6 +110,7 @@ def test_a_change_is_explained_by_mobil_wanting_it_in_the_seconds_before():
         direction=np.array([direction[0], direction[1], -direction[2]], dtype=np.int8),
         gain=np.array([1.0, 1.0, 1.0]),
         possible=np.ones(3, dtype=bool),
+        x=np.zeros(3),
     )
     lex = np.lexsort((incentives.decision, incentives.direction, incentives.tid))
     incentives = Incentives(*(getattr(incentives, f)[lex] for f in Incentives.__dataclass_fields__))
