@@ -117,3 +117,18 @@ def test_a_change_is_explained_by_mobil_wanting_it_in_the_seconds_before():
     explained = explained_by_mobil(changes, incentives, 0.5, grid.t0, 1.0)
     assert explained[order][:3].tolist() == [True, False, False]
     assert not explained_by_mobil(changes, incentives, 1.5, grid.t0, 1.0).any()  # below it
+
+
+def test_the_threshold_is_refitted_away_from_the_strategic_bins_on_both_sides():
+    from twin.calibration.calibrate import _away_from_strategic
+
+    flows = {
+        "x_edges": [0.0, 100.0, 200.0, 300.0],
+        "strategic": {"-4>-3": {"by_position": [0, 0, 5]}, "-3>-2": {"by_position": [0, 2, 0]}},
+    }
+    changes, decisions = _away_from_strategic(
+        flows, np.array([50.0, 150.0, 250.0, 350.0]), np.array([10.0, 120.0, 299.0, -20.0])
+    )
+    # beyond the edges a place counts in the nearest bin, as the flows count it
+    assert changes.tolist() == [True, False, False, False]
+    assert decisions.tolist() == [True, False, False, True]
