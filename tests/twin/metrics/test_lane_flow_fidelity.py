@@ -90,7 +90,16 @@ def test_episodes_add_up_bin_by_bin_and_the_errors_follow():
     assert total["net_flow_error"] == pytest.approx((2 + 3 + 10) / 24, abs=1e-4)
     # judged: bins with |recorded| >= 10 (12 and 10); within 30 %: 10 of 12, not 20 of 10
     assert (total["bins_judged"], total["bins_within"]) == (2, 1)
+    assert total["episodes_summed"] == 2
     assert lff.sum_episodes([None, {}]) is None
+
+
+def test_episodes_far_apart_add_up_on_one_contiguous_grid():
+    a = _section([0.0, 200.0, 400.0], [1, 2], [1, 2])
+    b = _section([800.0, 1000.0], [5], [4])
+    total = lff.sum_episodes([a, b])
+    assert total["x_edges"] == [0.0, 200.0, 400.0, 600.0, 800.0, 1000.0]
+    assert total["net_out"]["-4"]["simulated"] == [1, 2, 0, 0, 5]  # nothing measured: 0
 
 
 def test_the_pictures_are_titled_labelled_and_have_legends():
