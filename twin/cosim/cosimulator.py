@@ -124,6 +124,7 @@ class Cosimulator:
         headings = {r: bundle.road.heading(r) for r in (1, -1)}
         self.manager = TrafficManager(config.traffic, headings)
         self.targets = StrategicTargets(self.behaviour, self.manager, config.seed)
+        self.manager.set_keep_out(self.direction, self.behaviour.keep_out)
         self.limits = road_limits(bundle, traffic, config.road)
         self.counters = Counters()
         self.times = StepTimes()
@@ -293,13 +294,17 @@ class Cosimulator:
         # tracks that begin there; and those refused for lack of room, tried again
         # until they fit or leave the window, so that a refusal leaves no lasting hole)
         inside = snap.tid[bounds[1] : bounds[2]]
-        new = self._is_ghost[inside] | ~(self._seen[inside] | self._is_sim[inside])
+        first_seen = ~(self._seen[inside] | self._is_sim[inside])
+        new = self._is_ghost[inside] | first_seen
         new |= self._waiting[inside] & ~self._is_sim[inside]
         entering = new.nonzero()[0] + bounds[1]
+        # a track that begins inside the window and finds a body in its way is not tried
+        # again: in real data it is most often the next fragment of that very vehicle
+        retry = ~first_seen[new.nonzero()[0]]
         self._seen[snap.tid] = True
         self.times.ghosts += time.perf_counter() - tick
         if entering.size:
-            self.counters.spawned += self._spawn_recorded(snap, entering)
+            self.counters.spawned += self._spawn_recorded(snap, entering, retry)
         tick = time.perf_counter()
         self._load_ghosts(snap, bounds)
         self.times.ghosts += time.perf_counter() - tick
@@ -399,15 +404,19 @@ class Cosimulator:
         self._lead_speed[lane] = target
         return target
 
-    def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray) -> int:
+    def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray, retry=None) -> int:
         """Step 6 (and 2): spawn the recorded vehicles ``rows`` of ``snap`` where they
-        fit; count the ones skipped. Returns how many were spawned."""
+        fit; count the ones skipped, and mark those refused for lack of room to be tried
+        again (where ``retry``, (k,) bool, says so; all by default). Returns how many
+        were spawned."""
         if rows.size == 0:
             return 0
-        rows = rows[np.argsort(snap.x[rows], kind="stable")]
+        retry = np.ones(rows.size, dtype=bool) if retry is None else np.asarray(retry, bool)
+        order = np.argsort(snap.x[rows], kind="stable")
+        rows, retry = rows[order], retry[order]
         valid = np.isin(snap.lane[rows], LANES) & (snap.speed[rows] <= MAX_SPEED)
         self.counters.skipped_invalid += int(np.count_nonzero(~valid))
-        rows = rows[valid]
+        rows, retry = rows[valid], retry[valid]
         states = self.world.states()
         params = self.world.params
         body = {
@@ -424,10 +433,11 @@ class Cosimulator:
                 for name in body:
                     body[name] = np.append(body[name], getattr(snap, name)[i])
         accepted = np.array(accepted, dtype=np.int64)
-        refused = snap.tid[np.setdiff1d(rows, accepted)]
+        refused_rows = ~np.isin(rows, accepted)
+        refused = snap.tid[rows[refused_rows]]
         # counted once per vehicle, at its first refusal; tried again each step
         self.counters.skipped_overlap += int(np.count_nonzero(~self._waiting[refused]))
-        self._waiting[refused] = True
+        self._waiting[refused[retry[refused_rows]]] = True
         if not accepted.size:
             return 0
         self._waiting[snap.tid[accepted]] = False

@@ -315,7 +315,8 @@ def summary(result: RunResult) -> str:
         f"{ego.get('min_speed_sim_mps', float('nan')):.2f} (recorded "
         f"{ego.get('min_speed_recorded_mps', float('nan')):.2f}) m/s",
         f"vehicles: {counts['visible_at_start']} visible at start, {counts['spawned']} spawned, "
-        f"{counts['despawned']} despawned, {counts['spawns_skipped_overlap']} spawns skipped; "
+        f"{counts['despawned']} despawned, {counts['spawns_skipped_overlap']} refused for lack "
+        "of room; "
         f"{physics['collisions']} collisions, {physics['vehicles_off_road']} off the road",
         f"simulated {m['simulated_s']:.1f} s in {m['timing']['loop_s']:.1f} s: "
         f"{m['timing']['real_time_factor']:.1f} x real time",

@@ -208,6 +208,18 @@ def test_a_vehicle_refused_for_lack_of_room_is_spawned_once_it_fits(cosim):
     assert not sim.counters.collisions
 
 
+def test_a_track_that_begins_on_a_simulated_body_is_not_tried_again(cosim):
+    # 3 begins 2 s in, 1 m ahead of where 2 then is (in real data: the next fragment of
+    # the same car); it is refused and, unlike a ghost entering, not tried again
+    sim = cosim([ego_doc(), vehicle(2, -3, EGO_X + 100.0, 20.0),
+                 vehicle(3, -3, EGO_X + 141.0 - 52.0, 26.0, start=2.0)])  # fmt: skip
+    tid = tid_of(sim, 3)
+    for _ in range(400):  # 4 s
+        sim.step()
+    assert tid not in sim._tids
+    assert sim.counters.skipped_overlap == 1
+
+
 def test_step2_a_standing_queue_is_spawned_as_recorded_a_moving_one_with_room(cosim):
     length = 15.0 * 0.3048  # make_doc's default length
     docs = [ego_doc()]
