@@ -36,7 +36,13 @@ from twin.calibration.car_following import FitSettings, fit_followers
 from twin.calibration.distributions import desired_speeds, group_distributions
 from twin.calibration.following import CalibrationDataError
 from twin.calibration.lane_changes import fit_threshold, lane_change_rates, recorded_incentives
-from twin.calibration.lane_flows import describe_flows, explained_by_mobil, lane_change_flows
+from twin.calibration.lane_flows import (
+    describe_flows,
+    explained_by_mobil,
+    in_keep_out,
+    keep_out,
+    lane_change_flows,
+)
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
@@ -48,6 +54,9 @@ from twin.traffic.models.base import CarFollowingModel
 from twin.traffic.models.idm import IDM
 
 CALIBRATION = "calibration.json"
+#: the threshold is refitted away from the strategic flows only where at least this
+#: share of MOBIL's decisions lies away from them (fewer cannot pin it down)
+MIN_AWAY_SHARE = 0.1
 FLOW_ROUNDS = 5  # refits of the MOBIL threshold against the strategic changes, at most
 FITS = "calibration_fits.parquet"
 FORMAT = "i24-twin-calibration"
@@ -204,20 +213,28 @@ def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]
     """The MOBIL threshold and the lane-change flows (:mod:`lane_flows`). The threshold
     is fitted to every recorded change, then, where the flows show strategic changes,
     again away from them: MOBIL models the discretionary changes only, so it is fitted
-    on the position bins without a strategic flow, both its decisions and the recorded
-    changes (where a lane ends, drivers resist incentives into it and leave it whatever
-    MOBIL says: counting either there would bend the threshold)."""
+    without the position bins that hold a strategic flow and without the moves into a
+    lane kept out of (:func:`~twin.calibration.lane_flows.keep_out`), MOBIL's decisions
+    and the recorded changes alike (where a lane ends, drivers resist incentives into it
+    and leave it whatever MOBIL says: counting either there would bend the threshold)."""
     every = max(1, round(settings.decision_every / grid.dt)) * grid.dt
     mobil = fit_threshold(incentives, len(changes))
     explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
     flows = lane_change_flows(changes, grid, explained)
-    excluded = -1
+    excluded, previous = 0, None
     # the strategic bins depend on what MOBIL explains: refit until they are stable
     for _ in range(FLOW_ROUNDS):
         if not flows["identified"]:
             break
-        away_changes, away_decisions = _away_from_strategic(flows, changes.x, incentives.x)
-        if int(np.count_nonzero(~away_changes)) == excluded:
+        away_changes, away_decisions = _away_from_strategic(flows, changes, incentives)
+        if previous is not None and np.array_equal(away_decisions, previous):
+            break
+        previous = away_decisions
+        if np.count_nonzero(away_decisions) < MIN_AWAY_SHARE * away_decisions.size:
+            mobil["note"] = (
+                f"not refitted (further): under {MIN_AWAY_SHARE:.0%} of MOBIL's decisions lie "
+                "away from the strategic flows, too few to fit it on the discretionary ones"
+            )
             break
         excluded = int(np.count_nonzero(~away_changes))
         mobil = fit_threshold(incentives, int(np.count_nonzero(away_changes)), where=away_decisions)
@@ -226,22 +243,25 @@ def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]
     if excluded > 0:
         mobil["strategic_bins_changes"] = excluded
         mobil["strategic_final"] = flows["strategic_count"]
+    flows["keep_out"] = keep_out(flows) if flows["identified"] else []
     return mobil, flows
 
 
-def _away_from_strategic(flows: dict, change_x, decision_x) -> tuple[np.ndarray, np.ndarray]:
+def _away_from_strategic(flows: dict, changes, incentives) -> tuple[np.ndarray, np.ndarray]:
     """(c,), (e,) bool: the recorded changes and MOBIL's decisions outside the position
-    bins where the flows show a strategic flow."""
+    bins where the flows show a strategic flow and not into a lane kept out of there."""
     edges = np.asarray(flows["x_edges"])
     strategic = np.zeros(edges.size - 1, dtype=bool)
     for pair in flows["strategic"].values():
         strategic |= np.asarray(pair["by_position"]) > 0
+    zones = keep_out(flows)
 
-    def away(x):
+    def away(x, into):
         at = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, edges.size - 2)
-        return ~strategic[at]
+        return ~strategic[at] & ~in_keep_out(zones, into, x)
 
-    return away(change_x), away(decision_x)
+    into = incentives.lane.astype(np.int64) + incentives.direction
+    return away(changes.x, changes.lane_to), away(incentives.x, into)
 
 
 def _median_driver(model: CarFollowingModel, distribution):
@@ -411,5 +431,7 @@ def describe_calibration(doc: dict | None) -> str:
             f" ({rate if rate is not None else 0:.3f} per km); MOBIL threshold "
             f"{mobil['threshold']:.2f} m/s^2"
         )
+        if mobil.get("note"):
+            lines.append(f"      MOBIL threshold {mobil['note']}")
         lines += describe_flows(section.get("lane_flows", {}))
     return "\n".join(lines)

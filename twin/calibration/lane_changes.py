@@ -62,6 +62,7 @@ class Incentives:
         possible: (e,) bool: the target lane exists, the HOV rule allows it and the
             change is safe.
         x: (e,) [m] where the vehicle is (its back) at the decision.
+        lane: (e,) the lane it is in.
     """
 
     tid: np.ndarray
@@ -70,6 +71,7 @@ class Incentives:
     gain: np.ndarray
     possible: np.ndarray
     x: np.ndarray
+    lane: np.ndarray
 
     def changes(self, threshold: float, where: np.ndarray | None = None) -> int:
         """Lane changes MOBIL would start with ``threshold``: one each time a vehicle's
@@ -101,7 +103,7 @@ def recorded_incentives(
     rows_all = np.flatnonzero((grid.lane != 0) & (grid.k % stride == 0))
     rows_all = rows_all[np.argsort(grid.k[rows_all], kind="stable")]
     bounds = np.flatnonzero(np.r_[True, np.diff(grid.k[rows_all]) != 0, True])
-    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible", "x")}
+    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible", "x", "lane")}
     road = np.int8(grid.road.direction)
     for a, b in itertools.pairwise(bounds):
         rows = rows_all[a:b]
@@ -147,8 +149,9 @@ def recorded_incentives(
             out["gain"].append(gain)
             out["possible"].append(exists & safe)
             out["x"].append(x)
+            out["lane"].append(lane)
     if not out["tid"]:
-        return Incentives(*(np.zeros(0) for _ in range(6)))
+        return Incentives(*(np.zeros(0) for _ in range(7)))
     columns = {name: np.concatenate(parts) for name, parts in out.items()}
     order = np.lexsort((columns["decision"], columns["direction"], columns["tid"]))
     return Incentives(**{name: values[order] for name, values in columns.items()})

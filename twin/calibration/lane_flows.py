@@ -28,6 +28,12 @@ EXPLAIN_BEFORE = 4.0  # [s] MOBIL decisions this long before a crossing count as
 Z_DIRECTIONAL = 2.0  # standard deviations of a fair split a directional flow must exceed
 #: strategic changes a recording needs before its strategic flow is used (fewer: MOBIL alone)
 MIN_STRATEGIC = 10
+#: [m] how far ahead drivers heed a lane they would have to leave (a lane that ends, a
+#: merge): one mile, where the first sign of a lane drop stands on US freeways
+LOOKAHEAD = 1609.0
+#: a lane is one to keep out of where at least this share of its vehicles must leave it
+#: (strategically) within LOOKAHEAD
+KEEP_OUT_SHARE = 0.5
 
 
 def pair_name(lane_from: int, lane_to: int) -> str:
@@ -182,6 +188,45 @@ def lane_change_flows(
     }
 
 
+def keep_out(flows: dict, lookahead: float = LOOKAHEAD, share: float = KEEP_OUT_SHARE) -> list:
+    """Where drivers keep out of a lane (no discretionary change into it): where the
+    strategic flows say that at least ``share`` of its vehicles must leave it within
+    ``lookahead`` metres (a lane that ends, a merge), as the recording's drivers do when
+    they resist a faster lane that ends ahead. Returns ``[{"lane", "x0", "x1"}, ...]``
+    [m], contiguous bins merged."""
+    edges = np.asarray(flows["x_edges"], dtype=np.float64)
+    n = edges.size - 1
+    zones = []
+    for lane in LANES:
+        stay = np.ones(n)  # the share of the lane's vehicles a bin lets stay in it
+        for name, flow in flows.get("strategic", {}).items():
+            if int(name.split(">")[0]) == lane:
+                stay *= 1.0 - np.minimum(np.asarray(flow["probability"], dtype=np.float64), 1.0)
+        leave = np.array(
+            [
+                1.0 - stay[(edges[:-1] >= x) & (edges[:-1] < x + lookahead)].prod()
+                for x in edges[:-1]
+            ]
+        )
+        inside = leave >= share
+        starts = np.flatnonzero(inside & ~np.r_[False, inside[:-1]])
+        ends = np.flatnonzero(inside & ~np.r_[inside[1:], False])
+        zones += [
+            {"lane": lane, "x0": float(edges[a]), "x1": float(edges[b + 1])}
+            for a, b in zip(starts, ends, strict=True)
+        ]
+    return zones
+
+
+def in_keep_out(zones: list, lane, x) -> np.ndarray:
+    """(k,) bool: places ``x`` (k,) [m] in lanes ``lane`` (k,) lie in one of ``zones``."""
+    lane, x = np.asarray(lane), np.asarray(x, dtype=np.float64)
+    out = np.zeros(x.shape, dtype=bool)
+    for z in zones:
+        out |= (lane == z["lane"]) & (x >= z["x0"]) & (x < z["x1"])
+    return out
+
+
 def describe_flows(flows: dict) -> list[str]:
     """Lines for ``twin data info``: what the recording's lane-change flows hold."""
     if not flows:
@@ -202,5 +247,10 @@ def describe_flows(flows: dict) -> list[str]:
         lines.append(
             f"      {name}: {s['count']} strategic, {span}, up to "
             f"{100 * max(s['probability']):.0f} % of the lane's vehicles per bin"
+        )
+    for z in flows.get("keep_out", []):
+        lines.append(
+            f"      lane {z['lane']} kept out of from x {z['x0']:.0f} to {z['x1']:.0f} m "
+            f"(it must be left ahead)"
         )
     return lines

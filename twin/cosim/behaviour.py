@@ -114,6 +114,7 @@ class Behaviour:
         self._fits = None
         self.planned: PlannedChanges | None = None
         self.strategic_flows: dict | None = None
+        self.keep_out: list = []  # lanes kept out of (calibrated): lane_flows.keep_out
         if self.name == "paper":
             return
         doc = read_calibration(store)
@@ -149,6 +150,7 @@ class Behaviour:
         flows = section.get("lane_flows")
         if self.name == "calibrated" and flows and flows.get("identified"):
             self.strategic_flows = flows
+            self.keep_out = list(flows.get("keep_out", []))
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])
         if self.name == "recorded":

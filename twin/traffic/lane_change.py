@@ -21,9 +21,9 @@ from twin.traffic.strategic import urgency
 
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
 # [m] the shortest path of an urgent (strategic) change: a driver who must leave its
-# lane noses across a queue in about two car lengths (peak slope about 25 degrees, a
-# radius of about 11 m), where a discretionary change keeps a path made for
-# MIN_SPEED_PATH; without it no change in a standing queue finds room
+# lane noses across a queue in about three car lengths (the path's peak heading about
+# 21 degrees, its least radius about 12.5 m), where a discretionary change keeps a path
+# made for MIN_SPEED_PATH; without it no change in a crawling queue finds room
 URGENT_PATH = 15.0
 
 
@@ -43,7 +43,9 @@ class _Candidates:
     old_follower_after: np.ndarray
 
 
-def decide(drivers, scene, centre_x, *, time, rng, model, params, config, excluded) -> int:
+def decide(
+    drivers, scene, centre_x, *, time, rng, model, params, config, excluded, keep_out=()
+) -> int:
     """Start the lane changes MOBIL chooses for the drivers due to decide, and the
     changes asked for where they are safe; returns how many started.
 
@@ -57,6 +59,8 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
             vehicles and obstacles, (n + k,).
         config: the :class:`~twin.traffic.config.TrafficConfig`.
         excluded: ids whose controller decides their lane changes (no MOBIL).
+        keep_out: (road, lane, x0, x1) zones with no discretionary change into the lane
+            (:meth:`TrafficManager.set_keep_out`).
     """
     auto = drivers.auto_lane_change
     strategic = (drivers.strategic != 0) & (centre_x >= drivers.strategic_from)
@@ -88,6 +92,8 @@ def decide(drivers, scene, centre_x, *, time, rng, model, params, config, exclud
         allowed &= hov_allows(drivers, cand, c.lane, target, c.x, config.hov_openings)
         allowed &= (requested == 0) | (requested == step)
         allowed &= ~((urge >= 0) & (drivers.strategic[cand] == -step))  # not away from it
+        if keep_out:  # no discretionary change into a lane that must be left ahead
+            allowed &= (requested == step) | ~_kept_out(keep_out, c.road, target, c.x)
         if not allowed.any():
             continue
         gain, safe = _judge(
@@ -207,6 +213,14 @@ def _start(drivers, scene, centre_x, index, choice, urgent, rng, config) -> None
     drivers.start_y[index] = scene.y[index]
     drivers.path_length[index] = path_length(scene.speed[index], duration, urgent)
     drivers.requested[index] = 0
+
+
+def _kept_out(zones, road, lane, x) -> np.ndarray:
+    """(k,) bool: ``lane`` at ``x`` on ``road`` lies in one of the keep-out ``zones``."""
+    out = np.zeros(x.shape, dtype=bool)
+    for z_road, z_lane, x0, x1 in zones:
+        out |= (road == z_road) & (lane == z_lane) & (x >= x0) & (x < x1)
+    return out
 
 
 def hov_allows(drivers, cand, lane, target, x, openings) -> np.ndarray:

@@ -61,6 +61,7 @@ class TrafficManager:
         self._d = DriverState.empty(self.model.params)
         self._controllers = Controllers()
         self.lane_changes = 0
+        self._keep_out: list[tuple[int, int, float, float]] = []  # (road, lane, x0, x1)
         self.emergency_steps = 0
 
     @property
@@ -269,6 +270,24 @@ class TrafficManager:
         d.strategic_from[index] = np.where(on, x_from, np.nan)
         d.strategic_by[index] = np.where(on, x_by, np.nan)
 
+    def set_keep_out(self, road: int, zones) -> None:
+        """Where drivers on ``road`` (+1 eastbound, -1 westbound) make no discretionary
+        change into a lane: ``zones`` ``[{"lane", "x0", "x1"}, ...]`` [m, road frame]
+        (:func:`twin.calibration.lane_flows.keep_out`: a lane they would have to leave
+        ahead). Strategic and asked-for changes are not held back. Replaces the zones
+        of that road.
+
+        Raises:
+            ValueError: a zone with no lane -1 to -4 or not x0 < x1.
+        """
+        checked = []
+        for z in zones:
+            lane, x0, x1 = int(z["lane"]), float(z["x0"]), float(z["x1"])
+            if not (-N_LANES <= lane <= -1 and x0 < x1):
+                raise ValueError(f"a keep-out zone needs a lane -1 to -{N_LANES} and x0 < x1: {z}")
+            checked.append((int(road), lane, x0, x1))
+        self._keep_out = [z for z in self._keep_out if z[0] != int(road)] + checked
+
     def strategic(self, ids) -> np.ndarray:
         """(k,) the strategic directions of vehicles ``ids`` (0: none)."""
         return self._d.strategic[self._index(ids)].copy()
@@ -371,7 +390,7 @@ class TrafficManager:
             self.lane_changes += lane_change.decide(
                 d, scene, centre_x, time=self.time, rng=self.rng, model=self.model,
                 params=self._with_obstacles(len(obstacles)), config=cfg,
-                excluded=self._controllers.by_id.keys(),
+                excluded=self._controllers.by_id.keys(), keep_out=self._keep_out,
             )  # fmt: skip
         d.accel = self._limits(scene, command, need, emergency)
         steer, path_y = steering.steer(d, states, speed, centre_x, self._heading, cfg)

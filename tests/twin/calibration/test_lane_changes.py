@@ -16,6 +16,7 @@ def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted
         gain=gains,
         possible=np.ones(10, dtype=bool),
         x=np.tile(np.arange(5) * 100.0, 2),
+        lane=np.full(10, -3),
     )
     assert incentives.changes(0.3) == 3  # onsets: 1 at 0.5, 2 at 0.9 and again at 1.5
     fit = fit_threshold(incentives, 1)

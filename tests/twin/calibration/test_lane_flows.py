@@ -111,6 +111,7 @@ def test_a_change_is_explained_by_mobil_wanting_it_in_the_seconds_before():
         gain=np.array([1.0, 1.0, 1.0]),
         possible=np.ones(3, dtype=bool),
         x=np.zeros(3),
+        lane=np.full(3, -2),
     )
     lex = np.lexsort((incentives.decision, incentives.direction, incentives.tid))
     incentives = Incentives(*(getattr(incentives, f)[lex] for f in Incentives.__dataclass_fields__))
@@ -120,15 +121,88 @@ def test_a_change_is_explained_by_mobil_wanting_it_in_the_seconds_before():
 
 
 def test_the_threshold_is_refitted_away_from_the_strategic_bins_on_both_sides():
+    from types import SimpleNamespace
+
     from twin.calibration.calibrate import _away_from_strategic
 
     flows = {
         "x_edges": [0.0, 100.0, 200.0, 300.0],
-        "strategic": {"-4>-3": {"by_position": [0, 0, 5]}, "-3>-2": {"by_position": [0, 2, 0]}},
+        "strategic": {
+            "-4>-3": {"by_position": [0, 0, 5], "probability": [0.0, 0.0, 0.1]},
+            "-3>-2": {"by_position": [0, 2, 0], "probability": [0.0, 0.05, 0.0]},
+        },
     }
-    changes, decisions = _away_from_strategic(
-        flows, np.array([50.0, 150.0, 250.0, 350.0]), np.array([10.0, 120.0, 299.0, -20.0])
+    changes = SimpleNamespace(x=np.array([50.0, 150.0, 250.0, 350.0]), lane_to=np.full(4, -2))
+    incentives = SimpleNamespace(
+        x=np.array([10.0, 120.0, 299.0, -20.0]),
+        lane=np.full(4, -3),
+        direction=np.full(4, 1, dtype=np.int8),
     )
+    away_changes, away_decisions = _away_from_strategic(flows, changes, incentives)
     # beyond the edges a place counts in the nearest bin, as the flows count it
-    assert changes.tolist() == [True, False, False, False]
-    assert decisions.tolist() == [True, False, False, True]
+    assert away_changes.tolist() == [True, False, False, False]
+    assert away_decisions.tolist() == [True, False, False, True]
+
+
+def test_a_lane_most_drivers_must_leave_ahead_is_kept_out_of_upstream():
+    from twin.calibration.lane_flows import in_keep_out, keep_out
+
+    edges = np.arange(0.0, 1100.0, 100.0)  # 10 bins
+    p = np.zeros(10)
+    p[8], p[9] = 0.5, 1.0  # lane -4 ends at 1000 m: half leave in 800-900, all by 1000
+    flows = {
+        "x_edges": edges.tolist(),
+        "strategic": {
+            "-4>-3": {"by_position": (p > 0).astype(int).tolist(), "probability": p.tolist()},
+            "-2>-3": {"by_position": [0] * 9 + [1], "probability": [0.0] * 9 + [0.1]},
+        },
+    }
+    zones = keep_out(flows, lookahead=300.0)
+    # from 300 m before the first bin that leaves half; lane -2's 10 % is no lane end
+    assert zones == [{"lane": -4, "x0": 600.0, "x1": 1000.0}]
+    assert in_keep_out(zones, [-4, -4, -3, -4], [599.0, 600.0, 700.0, 999.0]).tolist() == [
+        False,
+        True,
+        False,
+        True,
+    ]
+    assert keep_out({**flows, "strategic": {}}) == []
+
+
+def test_the_refit_keeps_the_first_fit_where_too_few_decisions_lie_away(monkeypatch):
+    from types import SimpleNamespace
+
+    import twin.calibration.calibrate as calibrate
+    from twin.calibration.lane_changes import fit_threshold
+
+    # every decision lies in a bin with a strategic flow: nothing to refit on (before,
+    # the refit judged no decision at all and returned a threshold of 0)
+    flows = {
+        "identified": True,
+        "x_edges": [0.0, 100.0],
+        "strategic": {"-4>-3": {"by_position": [3], "probability": [0.2]}},
+        "strategic_count": 3,
+    }
+    monkeypatch.setattr(calibrate, "lane_change_flows", lambda *args: dict(flows))
+    monkeypatch.setattr(calibrate, "explained_by_mobil", lambda *args: np.zeros(1, bool))
+    incentives = Incentives(
+        tid=np.array([1, 1]),
+        decision=np.array([0, 2]),  # two onsets at a threshold of 0
+        direction=np.ones(2, dtype=np.int8),
+        gain=np.array([0.5, 2.0]),
+        possible=np.ones(2, dtype=bool),
+        x=np.array([50.0, 60.0]),
+        lane=np.full(2, -3),
+    )
+
+    class Changes(SimpleNamespace):
+        def __len__(self):
+            return self.x.size
+
+    changes = Changes(x=np.array([50.0]), lane_to=np.array([-2]))
+    grid = SimpleNamespace(dt=0.1, t0=0.0)
+    mobil, _ = calibrate._lane_change_flows(
+        grid, changes, incentives, SimpleNamespace(decision_every=1.0)
+    )
+    assert mobil["threshold"] == fit_threshold(incentives, 1)["threshold"] > 0.0
+    assert "too few" in mobil["note"]

@@ -146,3 +146,28 @@ def test_with_a_path_made_for_5_m_s_the_same_change_finds_no_room(
 ):
     monkeypatch.setattr(lane_change, "URGENT_PATH", 30.0)  # 5 m/s x 6 s, as discretionary
     assert not _merges_in_the_queue(kinematic, built_map)
+
+
+def _overtaker_kept_out(zones, x_from=None):
+    manager, params = point_mass_manager(np.full(2, -3), 0)
+    manager.add([0, 1], 1, -3, params, desired_speed=[30.0, 10.0])
+    manager.set_keep_out(1, zones)
+    if x_from is not None:
+        manager.set_strategic([0], 1, x_from, x_from + 200.0)
+    for _ in range(300):
+        commands = manager.step(point_states([0, 1], [100.0, 190.0], [-3, -3], [25.0, 10.0]))
+        if commands.changing[0]:
+            break
+    return int(commands.lane[0])
+
+
+def test_no_discretionary_change_into_a_lane_kept_out_of():
+    assert _overtaker_kept_out([]) == -2  # MOBIL's choice, left
+    lane_2 = {"lane": -2, "x0": 0.0, "x1": 500.0}
+    assert _overtaker_kept_out([lane_2]) == -3  # kept out of -2: stays behind the slow car
+    assert _overtaker_kept_out([{**lane_2, "x0": 200.0}]) == -2  # the zone is ahead of it
+    assert _overtaker_kept_out([lane_2], x_from=0.0) == -2  # a strategic change still goes
+    with pytest.raises(ValueError, match="keep-out zone"):
+        _overtaker_kept_out([{"lane": -5, "x0": 0.0, "x1": 1.0}])
+    with pytest.raises(ValueError, match="keep-out zone"):
+        _overtaker_kept_out([{"lane": -2, "x0": 5.0, "x1": 1.0}])
