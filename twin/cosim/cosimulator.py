@@ -43,7 +43,7 @@ from twin.physics.states import MAX_SPEED, SpawnStates
 from twin.physics.worlds import make_world
 from twin.traffic.controller_api import EgoController, load_controller
 from twin.traffic.manager import TrafficManager
-from twin.traffic.scene import Obstacles
+from twin.traffic.scene import Obstacles, centre_y
 
 AV_STREAM = 0x41565F  # seeds the AV draws apart from the run's other random choices
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
@@ -426,6 +426,11 @@ class Cosimulator:
             "width": params.width,
             "speed": np.maximum(states.speed, 0.0),
         }
+        # a body changing lanes holds its new lane too: nothing is spawned beside it there
+        changing = self.manager.changing(states.id)
+        if changing.any():
+            body = {name: np.concatenate((v, v[changing])) for name, v in body.items()}
+            body["y"][-int(changing.sum()) :] = centre_y(self.manager.lanes(states.id[changing]))
         accepted = []
         for i in rows:
             if self._fits(snap, i, body):

@@ -220,6 +220,24 @@ def test_a_track_that_begins_on_a_simulated_body_is_not_tried_again(cosim):
     assert sim.counters.skipped_overlap == 1
 
 
+def test_nothing_is_spawned_beside_a_body_changing_into_its_lane(cosim):
+    # 2, 2 m inside the window's rear edge and keeping pace with it, starts a change
+    # from lane -3 into -4; 3, whose track begins 0.3 s in just behind the edge in lane
+    # -4, 4 m/s faster, reaches the window beside it half a second later. Before, 2 was
+    # judged by where its body was (still in lane -3) and 3 was spawned into the lane it
+    # was moving into (a side collision in the physics world on preset D)
+    sim = cosim([ego_doc(), vehicle(2, -3, EGO_X - 148.0, 20.0),
+                 vehicle(3, -4, EGO_X - 152.2, 24.0, start=0.3)])  # fmt: skip
+    changer = int(sim.world.states().id[sim._tids == tid_of(sim, 2)][0])
+    sim.manager.force_lane_change(changer, "right")
+    tid = tid_of(sim, 3)
+    for _ in range(100):  # 1 s
+        sim.step()
+        assert sim.manager.changing([changer])[0]
+        assert tid not in sim._tids
+    assert sim.counters.skipped_overlap == 1
+
+
 def test_step2_a_standing_queue_is_spawned_as_recorded_a_moving_one_with_room(cosim):
     length = 15.0 * 0.3048  # make_doc's default length
     docs = [ego_doc()]
