@@ -21,6 +21,7 @@ import numpy as np
 from twin.calibration.following import GridTraffic, LaneChanges, distance_driven
 from twin.calibration.lane_changes import Incentives
 from twin.core.i24 import LANES
+from twin.traffic.lane_change import kept_out
 
 POSITION_BIN = 100.0  # [m] bins along the road
 TIME_BIN = 60.0  # [s] bins over the window
@@ -220,11 +221,8 @@ def keep_out(flows: dict, lookahead: float = LOOKAHEAD, share: float = KEEP_OUT_
 
 def in_keep_out(zones: list, lane, x) -> np.ndarray:
     """(k,) bool: places ``x`` (k,) [m] in lanes ``lane`` (k,) lie in one of ``zones``."""
-    lane, x = np.asarray(lane), np.asarray(x, dtype=np.float64)
-    out = np.zeros(x.shape, dtype=bool)
-    for z in zones:
-        out |= (lane == z["lane"]) & (x >= z["x0"]) & (x < z["x1"])
-    return out
+    as_tuples = [(0, z["lane"], z["x0"], z["x1"]) for z in zones]  # one road here
+    return kept_out(as_tuples, 0, np.asarray(lane), x)
 
 
 def describe_flows(flows: dict) -> list[str]:

@@ -125,12 +125,9 @@ class StrategicTargets:
         not already far behind it, as a target, or None."""
         plan = self._plan.get(i, [])
         while plan:
-            x_change, lane_from, lane_to = plan[0]
-            if lane_from != lane or x > x_change + RECORDED_SPAN:
-                plan.pop(0)
-                continue
-            plan.pop(0)
-            return (1 if lane_to > lane_from else -1), x_change, x_change + RECORDED_SPAN
+            x_change, lane_from, lane_to = plan.pop(0)
+            if lane_from == lane and x <= x_change + RECORDED_SPAN:
+                return (1 if lane_to > lane_from else -1), x_change, x_change + RECORDED_SPAN
         return None
 
 

@@ -138,13 +138,22 @@ def recorded_lane_changes_in_window(
     changes_time: np.ndarray, changes_x: np.ndarray, windows: pd.DataFrame, t0: float
 ) -> int:
     """Recorded lane changes that happened inside the moving visible window."""
-    if changes_time.size == 0:
-        return 0
-    time = windows["time"].to_numpy() + t0
-    inside_episode = (changes_time >= time[0]) & (changes_time <= time[-1])
-    k = np.clip(np.searchsorted(time, changes_time), 0, len(time) - 1)
+    return int(
+        np.count_nonzero(in_moving_window(np.asarray(changes_time) - t0, changes_x, windows))
+    )
+
+
+def in_moving_window(time: np.ndarray, x: np.ndarray, windows: pd.DataFrame) -> np.ndarray:
+    """(k,) bool: events at ``time`` [s since t0] and ``x`` [m] lie inside the moving
+    visible window (``windows``: ``time`` [s since t0], ``x0``, ``x1``) at their time."""
+    time, x = np.asarray(time, dtype=np.float64), np.asarray(x, dtype=np.float64)
+    if time.size == 0:
+        return np.zeros(0, dtype=bool)
+    at = windows["time"].to_numpy()
+    inside_episode = (time >= at[0]) & (time <= at[-1])
+    k = np.clip(np.searchsorted(at, time), 0, len(at) - 1)
     x0, x1 = windows["x0"].to_numpy()[k], windows["x1"].to_numpy()[k]
-    return int(np.count_nonzero(inside_episode & (changes_x >= x0) & (changes_x <= x1)))
+    return inside_episode & (x >= x0) & (x <= x1)
 
 
 def traffic_speed_error(rows: pd.DataFrame, traffic: EmpiricalTraffic, t0: float) -> dict:

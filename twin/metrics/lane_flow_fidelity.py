@@ -17,6 +17,7 @@ import pandas as pd
 
 from twin.calibration import following
 from twin.core.i24 import N_LANES
+from twin.metrics import fidelity
 from twin.metrics.table import section_head
 
 BIN = 200.0  # [m] the net flow's bins along the road
@@ -60,14 +61,8 @@ def recorded_changes_in_window(changes, windows: pd.DataFrame, t0: float) -> pd.
             "lane_to": changes.lane_to,
         }
     )
-    if frame.empty:
-        return frame
-    time = windows["time"].to_numpy()
-    k = np.clip(np.searchsorted(time, frame["time"].to_numpy()), 0, len(time) - 1)
-    x0, x1 = windows["x0"].to_numpy()[k], windows["x1"].to_numpy()[k]
-    inside = (frame["time"] >= time[0]) & (frame["time"] <= time[-1])
-    inside &= (frame["x"] >= x0) & (frame["x"] <= x1)
-    return frame[inside.to_numpy()].reset_index(drop=True)
+    inside = fidelity.in_moving_window(frame["time"].to_numpy(), frame["x"].to_numpy(), windows)
+    return frame[inside].reset_index(drop=True)
 
 
 def episode_section(simulated: pd.DataFrame, recorded: pd.DataFrame, windows) -> dict:

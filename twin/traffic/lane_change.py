@@ -93,7 +93,7 @@ def decide(
         allowed &= (requested == 0) | (requested == step)
         allowed &= ~((urge >= 0) & (drivers.strategic[cand] == -step))  # not away from it
         if keep_out:  # no discretionary change into a lane that must be left ahead
-            allowed &= (requested == step) | ~_kept_out(keep_out, c.road, target, c.x)
+            allowed &= (requested == step) | ~kept_out(keep_out, c.road, target, c.x)
         if not allowed.any():
             continue
         gain, safe = _judge(
@@ -215,8 +215,10 @@ def _start(drivers, scene, centre_x, index, choice, urgent, rng, config) -> None
     drivers.requested[index] = 0
 
 
-def _kept_out(zones, road, lane, x) -> np.ndarray:
-    """(k,) bool: ``lane`` at ``x`` on ``road`` lies in one of the keep-out ``zones``."""
+def kept_out(zones, road, lane, x) -> np.ndarray:
+    """(k,) bool: ``lane`` (k,) at ``x`` (k,) [m] on ``road`` lies in one of the
+    keep-out ``zones``, (road, lane, x0, x1) each (half-open in x)."""
+    x = np.asarray(x, dtype=np.float64)
     out = np.zeros(x.shape, dtype=bool)
     for z_road, z_lane, x0, x1 in zones:
         out |= (road == z_road) & (lane == z_lane) & (x >= x0) & (x < x1)
