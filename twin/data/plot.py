@@ -1,6 +1,7 @@
 """Time-space diagrams of recorded traffic, one panel per lane, as in the paper's figures."""
 
 import os
+from datetime import datetime
 from pathlib import Path
 
 import matplotlib
@@ -18,6 +19,9 @@ from twin.core.timeutil import CST, format_local
 from twin.data.store import TrajectoryStore
 
 SPEED_RANGE = (0.0, 35.0)  # [m/s] colour scale
+#: Speed colours: lightness grows with speed, so they read in greyscale and to a
+#: colour-blind reader (red-green scales do neither).
+SPEED_CMAP = "cividis"
 MAX_POINTS_PER_LANE = 400_000
 
 
@@ -60,7 +64,7 @@ def time_space_plot(
             i24.mile_marker(samples["x"][rows], road),
             c=samples["speed"][rows],
             s=0.4,
-            cmap="RdYlGn",
+            cmap=SPEED_CMAP,
             vmin=SPEED_RANGE[0],
             vmax=SPEED_RANGE[1],
             rasterized=True,
@@ -78,6 +82,12 @@ def time_space_plot(
     fig.colorbar(points, ax=axes, label="speed [m/s]", shrink=0.6)
     fig.suptitle(f"I-24 {road.value}, {len(np.unique(samples['tid'])):,} trajectories")
     return save_figure(fig, out, dpi=110)
+
+
+def clock(t: float) -> str:
+    """``YYYY-MM-DD HH:MM:SS.s CST`` of unix seconds ``t`` (I-24 local time), for labels."""
+    when = datetime.fromtimestamp(round(float(t), 1), CST)
+    return f"{when:%Y-%m-%d %H:%M:%S}.{when.microsecond // 100_000} CST"
 
 
 def save_figure(fig, out: str | os.PathLike, *, dpi: int = 100) -> Path:

@@ -275,19 +275,19 @@ def _write_folder(
     bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
     ghost_times = np.unique(ghosts["time"].to_numpy()) if len(ghosts) else np.zeros(1)
     at = float(ghost_times[np.argmin(np.abs(ghost_times - min(bev_time, sim_s)))])
-    plots.write_png(_bev(vehicles, ghosts, windows, arrays, at, title), tmp / "bev.png")
+    scene = _bev_scene(vehicles, ghosts, windows, arrays, at)
+    plots.bev_plot(scene, cfg.road, sim.t0, title, tmp / "bev.png")
     if cfg.bev_video:
-        plots.write_mp4(
-            (_bev(vehicles, ghosts, windows, arrays, t, title) for t in ghost_times),
-            tmp / "bev.mp4",
-            fps=cfg.ghost_log_rate,
-        )
+        plots.bev_video(
+            (_bev_scene(vehicles, ghosts, windows, arrays, t) for t in ghost_times),
+            cfg.road, sim.t0, title, tmp / "bev.mp4", fps=cfg.ghost_log_rate,
+        )  # fmt: skip
     per_second = max(1, round(1.0 / cfg.dt))
     figures["_ego_speed"] = ego_rows["speed"].to_numpy()[::per_second]
     return figures
 
 
-def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):
+def _bev_scene(vehicles, ghosts, windows, arrays, at: float) -> plots.BevScene:
     def near(frame):
         return frame[np.abs(frame["time"].to_numpy() - at) < 1e-6]
 
@@ -298,7 +298,7 @@ def _bev(vehicles, ghosts, windows, arrays, at: float, title: str):
         frame["length"] = arrays["length"][tid]
         frame["width"] = arrays["width"][tid]
     window = windows.iloc[int(np.argmin(np.abs(windows["time"].to_numpy() - at)))]
-    return plots.bev_frame(sim, ghost, window, at, title)
+    return plots.BevScene(sim, ghost, window, at)
 
 
 def summary(result: RunResult) -> str:

@@ -11,6 +11,7 @@ import pytest
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
 from twin.cli import main
 from twin.core.i24 import MILE
+from twin.cosim import plots
 from twin.cosim.config import load_config
 from twin.data.empirical import EmpiricalTraffic
 from twin.metrics import economy
@@ -109,7 +110,7 @@ def test_energy_in_the_log_and_in_metrics_json(run_folder):
 
 def test_pictures_open_in_opencv(run_folder):
     bev = cv2.imread(str(run_folder / "bev.png"))
-    assert bev is not None and bev.shape[1] == 1600
+    assert bev is not None and bev.shape[1] == round(plots.BEV_WIDTH * plots.BEV_DPI)
     video = cv2.VideoCapture(str(run_folder / "bev.mp4"))
     frames = int(video.get(cv2.CAP_PROP_FRAME_COUNT))
     video.release()
