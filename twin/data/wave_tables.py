@@ -16,6 +16,7 @@ from twin.data.wave_analysis import (
     MPH,
     POINT_COLUMNS,
     REAL_MILES,
+    REFERENCE_MPH,
     LaneWaves,
     WaveAnalysisError,
     statistics,
@@ -111,22 +112,36 @@ def write_tables(lanes: dict[int, LaneWaves], out: str | Path, meta: dict) -> Pa
                 table.to_csv(sub / f"{name}.csv", index=False)
         doc = {"format": FORMAT, "version": 1, **meta, "lanes": summary(lanes)}
         (folder.tmp / "waves.json").write_text(json.dumps(doc, indent=1) + "\n")
-        plot_waves(lanes, folder.tmp / "waves.png", meta.get("title", "waves"))
+        plot_waves(lanes, folder.tmp / "waves.png", meta.get("title", "waves"),
+                   meta.get("start_unix"))  # fmt: skip
     return Path(out)
 
 
-def plot_waves(lanes: dict[int, LaneWaves], out: Path, title: str) -> Path:
-    """Each lane's virtual trajectories coloured by speed, with the fronts (triangles)
-    and tails (circles) of its waves, one colour per wave."""
+#: One colour per wave (Okabe-Ito, apart from the speed scale's blues and yellows).
+WAVE_COLOURS = ("#D55E00", "#CC79A7", "#009E73", "#E69F00", "#56B4E9")
+
+
+def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | None = None):
+    """Each lane's virtual trajectories coloured by speed, with the fronts (hollow
+    triangles) and tails (filled circles) of its waves, one colour per wave; a matplotlib
+    figure. Speeds in m/s with mph beside them (the I-24 tables' unit).
+
+    Args:
+        lanes: the lanes' tables and virtual trajectories.
+        title: the figure's title.
+        start_unix: [s] unix time of the span's start, to label the time axis with the
+            clock; ``None``: seconds from the start of the span.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
-    from twin.data.plot import save_figure
+    from twin.data.plot import SPEED_CMAP, SPEED_RANGE, clock
 
     shown = sorted(lanes.values(), key=lambda w: w.lane)
-    fig, axes = plt.subplots(len(shown), 1, figsize=(12, 2.6 * len(shown) + 1),
+    fig, axes = plt.subplots(len(shown), 1, figsize=(12, 2.6 * len(shown) + 1.4),
                              sharex=True, constrained_layout=True, squeeze=False)  # fmt: skip
     points = None
     for ax, w in zip(axes[:, 0], shown, strict=True):
@@ -134,33 +149,69 @@ def plot_waves(lanes: dict[int, LaneWaves], out: Path, title: str) -> Path:
         if vt is not None:
             every = vt.v_id % 2 == 0  # every other virtual vehicle is enough to see
             points = ax.scatter(vt.time[every], i24.mile_marker(vt.x[every], w.road),
-                                c=vt.speed[every] / MPH, s=1.2, cmap="RdYlGn", vmin=0, vmax=70,
-                                rasterized=True, linewidths=0)  # fmt: skip
-        colours = plt.get_cmap("tab20")
-        for c in pd.unique(w.cc["c_id"]) if len(w.cc) else []:
+                                c=vt.speed[every], s=1.2, cmap=SPEED_CMAP, vmin=SPEED_RANGE[0],
+                                vmax=SPEED_RANGE[1], rasterized=True, linewidths=0)  # fmt: skip
+        for k, c in enumerate(pd.unique(w.cc["c_id"]) if len(w.cc) else []):
             rows = w.cc[w.cc["c_id"] == c]
-            colour = colours(int(c) % 20)
-            ax.scatter(rows["time_front"], rows["space_front"], marker="^", s=9,
-                       facecolors="none", edgecolors=[colour], linewidths=0.6)  # fmt: skip
-            ax.scatter(rows["time_tail"], rows["space_tail"], marker="o", s=5, color=colour)
-        stats = statistics(w.front, w.cc, w.miles)
-        speed = stats["front_speed_mps"]["median"]
-        ax.set_title(
-            f"lane {w.lane}{' (HOV)' if w.lane == 1 else ''}: {stats['waves']} waves, "
-            f"{stats['fronts_per_vehicle_mile']} fronts per vehicle-mile, front speed "
-            f"{'-' if speed is None else f'{speed:.1f}'} m/s, front to tail "
-            f"{stats['front_to_tail_s']['median']} s",
-            fontsize=9, loc="left",
-        )  # fmt: skip
+            colour = WAVE_COLOURS[k % len(WAVE_COLOURS)]
+            ax.scatter(rows["time_front"], rows["space_front"], marker="^", s=10,
+                       facecolors="none", edgecolors=[colour], linewidths=0.7)  # fmt: skip
+            ax.scatter(rows["time_tail"], rows["space_tail"], marker="o", s=6, color=colour)
+        ax.set_title(f"lane {w.lane}{' (HOV)' if w.lane == 1 else ''}: "
+                     f"{_lane_caption(statistics(w.front, w.cc, w.miles))}",
+                     fontsize=9, loc="left")  # fmt: skip
         ax.set_ylabel("mile marker")
         if w.road is Road.WESTBOUND:
             ax.invert_yaxis()  # travel goes up the page either way
         ax.grid(alpha=0.2)
-    axes[-1, 0].set_xlabel("time [s] from the start of the span")
+    axes[0, 0].legend(
+        handles=[
+            Line2D([], [], ls="", marker="^", mfc="none", mec="black",
+                   label=f"wave front: slowing through {REFERENCE_MPH:g} mph"),
+            Line2D([], [], ls="", marker="o", color="black",
+                   label=f"wave tail: speeding up through {REFERENCE_MPH:g} mph"),
+            Line2D([], [], ls="", marker="s", color=WAVE_COLOURS[0],
+                   label="one colour per wave"),
+        ],
+        loc="upper right", fontsize=8, framealpha=0.9,
+    )  # fmt: skip
+    axes[-1, 0].set_xlabel(
+        "time [s] from the start of the span"
+        if start_unix is None
+        else f"time [s] after {clock(start_unix)}"
+    )
     if points is not None:
-        fig.colorbar(points, ax=axes[:, 0], label="speed [mph]", shrink=0.6)
+        bar = fig.colorbar(points, ax=axes[:, 0], label="speed [m/s]", shrink=0.6)
+        mph = bar.ax.secondary_yaxis("left", functions=(lambda v: v / MPH, lambda v: v * MPH))
+        mph.set_ylabel("speed [mph]")
     fig.suptitle(title)
-    return save_figure(fig, out, dpi=100)
+    return fig
+
+
+def _lane_caption(stats: dict) -> str:
+    """One lane's figures for its panel's title: 'no wave', or the waves' figures."""
+    if not stats["waves"]:
+        return "no wave"
+    speed = stats["front_speed_mps"]["median"]
+    gap = stats["front_to_tail_s"]["median"]
+    parts = [
+        f"{stats['waves']} wave{'s' if stats['waves'] > 1 else ''}",
+        f"{stats['fronts_per_vehicle_mile']:.2f} fronts per vehicle-mile",
+    ]
+    if speed is not None:
+        parts.append(f"fronts move upstream at {speed:.1f} m/s ({speed / MPH:.1f} mph)")
+    if gap is not None:
+        parts.append(f"front to tail {gap:.0f} s")
+    return ", ".join(parts)
+
+
+def plot_waves(
+    lanes: dict[int, LaneWaves], out: Path, title: str, start_unix: float | None = None
+) -> Path:
+    """Write :func:`waves_figure` as a PNG (a temporary name, then renamed)."""
+    from twin.data.plot import save_figure
+
+    return save_figure(waves_figure(lanes, title, start_unix), out, dpi=100)
 
 
 # -- the real morning as the reference -------------------------------------------------

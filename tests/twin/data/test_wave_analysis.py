@@ -172,3 +172,37 @@ def test_the_embedded_morning_has_the_real_mornings_waves_in_every_lane():
     assert [row["lane"] for row in rows] == ["lane_1", "lane_2", "lane_3", "lane_4"]
     missed = [(row["lane"], name) for row in rows for name, ok in row["within"].items() if not ok]
     assert not missed, tables.format_comparison(rows, "preset C")
+
+
+def test_the_waves_figure_says_no_wave_and_has_a_legend_and_both_speed_units():
+    """A lane with a wave and one without: titles say 'no wave' rather than 'None s',
+    fronts and tails are in the legend, the colour bar is in m/s with mph beside it."""
+    import matplotlib.pyplot as plt
+
+    t, x, v, span, x_range = _one_wave(c=5.0)
+    miles = (x_range[1] - x_range[0]) / i24.MILE
+    wave = wa.analyse_lane(wa.virtual_trajectories(t, x, v, span, x_range), Road.WESTBOUND,
+                           -2, miles)  # fmt: skip
+    t, x, v, span, x_range = _one_wave(slow=30.0)
+    calm = wa.analyse_lane(wa.virtual_trajectories(t, x, v, span, x_range), Road.WESTBOUND,
+                           -3, miles)  # fmt: skip
+    fig = tables.waves_figure({2: wave, 3: calm}, "two lanes", start_unix=1669812350.0)
+    try:
+        titles = [ax.get_title(loc="left") for ax in fig.axes[:2]]
+        assert titles[0].startswith("lane 2: 1 wave, ") and "m/s (" in titles[0]
+        assert titles[1] == "lane 3: no wave"
+        assert not any("None" in title for title in titles)
+        legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+        assert legend == [
+            "wave front: slowing through 15 mph",
+            "wave tail: speeding up through 15 mph",
+            "one colour per wave",
+        ]
+        assert fig.axes[1].get_xlabel() == "time [s] after 2022-11-30 06:45:50.0 CST"
+        assert all(ax.get_ylabel() == "mile marker" for ax in fig.axes[:2])
+        labels = {ax.get_ylabel() for ax in fig.axes[2:]} | {
+            child.get_ylabel() for ax in fig.axes[2:] for child in ax.child_axes
+        }
+        assert {"speed [m/s]", "speed [mph]"} <= labels
+    finally:
+        plt.close(fig)
