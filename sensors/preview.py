@@ -20,23 +20,69 @@ def frame_vehicles(frame: Frame) -> np.ndarray:
 
 
 def frame_picture(frame: Frame, out: Path, *, labels: bool = False) -> Path:
-    """Write ``frame`` as a PNG (written whole, then renamed): RGB, or with ``labels``
-    a 2 x 2 panel of RGB, depth, semantic classes and instances.
+    """Write ``frame`` as a PNG (written whole, then renamed): the RGB image pixel for
+    pixel, or with ``labels`` the figure of :func:`labels_figure`.
 
     Returns:
         ``out``.
     """
-    picture = frame.rgb
     if labels:
-        top = np.concatenate([frame.rgb, colour_depth(frame.depth)], axis=1)
-        bottom = np.concatenate(
-            [colour_semantic(frame.semantic), colour_instance(frame.instance)], axis=1
-        )
-        picture = np.concatenate([top, bottom], axis=0)
+        import matplotlib.pyplot as plt
+
+        figure = labels_figure(frame)
+        try:
+            with atomic_file(out) as tmp:
+                figure.savefig(tmp, dpi=100, format="png")
+        finally:
+            plt.close(figure)
+        return Path(out)
     with atomic_file(out) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR)):
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)):
             raise OSError(f"could not write {out}")
     return Path(out)
+
+
+def labels_figure(frame: Frame):
+    """A frame and its labels for people (a matplotlib figure), 2 x 2 panels, each titled:
+    RGB; planar depth with a colour bar in metres (log scale); the semantic classes in the
+    class table's label colours with a legend of the classes in view; the instances, one
+    colour per vehicle."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Patch
+
+    h, w = frame.rgb.shape[:2]
+    fig, axes = plt.subplots(2, 2, figsize=(2 * w / 100 + 3.2, 2 * h / 100 + 1.0),
+                             layout="constrained")  # fmt: skip
+    (rgb, depth), (semantic, instance) = axes
+    rgb.imshow(frame.rgb)
+    rgb.set_title(f"RGB: camera {frame.camera.name} ({frame.renderer} renderer)")
+    cmap = matplotlib.colormaps["cividis"].with_extremes(bad="black", over="black")
+    shown = depth.imshow(np.where(np.isfinite(frame.depth), frame.depth, np.nan), cmap=cmap,
+                         norm=LogNorm(*DEPTH_RANGE, clip=False))  # fmt: skip
+    depth.set_title("depth, planar (black: nothing within range)")
+    bar = fig.colorbar(shown, ax=depth, label="depth [m] (log scale)", shrink=0.9)
+    ticks = [t for t in (1, 2, 5, 10, 20, 50, 100, 150) if DEPTH_RANGE[0] <= t <= DEPTH_RANGE[1]]
+    bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+    semantic.imshow(colour_semantic(frame.semantic))
+    semantic.set_title("semantic classes")
+    present = set(np.unique(frame.semantic).tolist())
+    semantic.legend(
+        handles=[Patch(facecolor=np.array(c.color) / 255.0, edgecolor="black", lw=0.5,
+                       label=c.name) for c in semantic_classes() if c.class_id in present],
+        loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, frameon=False,
+    )  # fmt: skip
+    n_vehicles = len(frame_vehicles(frame))
+    instance.imshow(colour_instance(frame.instance))
+    instance.set_title(f"instances: one colour per vehicle ({n_vehicles} in view)")
+    for ax in axes.flat:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"{frame.sim_time:.2f} s after t0, {w} x {h} px")
+    return fig
 
 
 def colour_depth(depth: np.ndarray) -> np.ndarray:
