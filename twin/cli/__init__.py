@@ -51,6 +51,20 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BUG
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help lines end with the option's default where it has one and its help does not
+    already say it (argparse's ``ArgumentDefaultsHelpFormatter`` repeats those)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        quiet = default in (None, False, [], argparse.SUPPRESS) or "default" in text.lower()
+        if quiet or action.option_strings == [] or "%(default)" in text:
+            return text
+        shown = default.name if hasattr(default, "name") and default.name else "%(default)s"
+        return f"{text} (default {shown})"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``twin`` parser; each command's ``handler(args)`` is in ``args.handler``."""
     parser = argparse.ArgumentParser(
@@ -60,4 +74,15 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(title="commands")
     for group in (run, data, maps, export, dataset, calibrate, evaluate, train, bench):
         group.register(commands)
+    for command in _parsers(parser):
+        command.formatter_class = DefaultsFormatter
     return parser
+
+
+def _parsers(parser: argparse.ArgumentParser):
+    """``parser`` and every subcommand's parser under it."""
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                yield from _parsers(sub)

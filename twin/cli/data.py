@@ -44,7 +44,7 @@ def _register_ingest(commands) -> None:
         default=None,
         help="metres kept beyond each end of the segment (>= 400; default: all)",
     )
-    p.add_argument("--bucket", type=float, default=60.0, help="seconds per Parquet row group")
+    p.add_argument("--bucket", type=float, default=60.0, help="time per Parquet row group [s]")
     add_quiet(p)
     p.set_defaults(handler=_ingest)
 
@@ -131,10 +131,14 @@ def _register_synth(commands) -> None:
             "the preset's, or --drivers other's)",
         )
     p.add_argument("--out", required=True, type=Path, help="JSON file to write")
-    p.add_argument("--minutes", type=float, default=None, help="recorded minutes (default 16)")
+    p.add_argument(
+        "--minutes", type=float, default=None,
+        help="time recorded [min] (default: the preset's: 16 for A and B, 20 for S, 30 for C, D "
+        "and E)",
+    )  # fmt: skip
     add_start(p, "first recorded time (unix or ISO 8601 with offset)")
-    p.add_argument("--seed", type=int, default=0)
-    add_quiet(p, help=None)
+    p.add_argument("--seed", type=int, default=0, help="random seed of the drivers and demand")
+    add_quiet(p)
     p.set_defaults(handler=_synth)
 
 
@@ -179,10 +183,10 @@ def _synth_config(args):
 def _register_plot(commands) -> None:
     p = commands.add_parser("plot", help="time-space diagram per lane, coloured by speed")
     add_store(p)
-    p.add_argument("--road", default="westbound")
+    p.add_argument("--road", default="westbound", help="eastbound or westbound")
     add_start(p, WINDOW_START_HELP)
-    p.add_argument("--minutes", type=float, default=10.0)
-    p.add_argument("--out", type=Path, default=Path("timespace.png"))
+    p.add_argument("--minutes", type=float, default=10.0, help="time span plotted [min]")
+    p.add_argument("--out", type=Path, default=Path("timespace.png"), help="PNG file to write")
     p.set_defaults(handler=_plot)
 
 
@@ -211,9 +215,11 @@ def _register_waves(commands) -> None:
         "lane's figures beside the real westbound morning's.",
     )
     add_store(p)
-    p.add_argument("--road", default="westbound")
+    p.add_argument("--road", default="westbound", help="eastbound or westbound")
     add_start(p, WINDOW_START_HELP)
-    p.add_argument("--minutes", type=float, default=None, help="span (default: to the data's end)")
+    p.add_argument(
+        "--minutes", type=float, default=None, help="time span [min] (default: to the data's end)"
+    )
     p.add_argument("--out", type=Path, default=None, help="folder to write (replaced as a whole)")
     p.add_argument(
         "--tables",
@@ -226,7 +232,7 @@ def _register_waves(commands) -> None:
         "--miles", type=float, default=None,
         help="miles the --tables cover (default: from their waves.json, else 3.85, the real ones')",
     )  # fmt: skip
-    add_quiet(p, help=None)
+    add_quiet(p)
     p.set_defaults(handler=_waves)
 
 

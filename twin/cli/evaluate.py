@@ -72,7 +72,7 @@ def add_eval_options(p) -> None:
         help="share of the visible vehicles driven by the controller as well as the ego "
         "(needs --controller; default 0: the ego alone)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the episode draw and the runs")
     add_workers(p, "processes (default: the cores)")
 
 

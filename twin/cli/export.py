@@ -11,7 +11,10 @@ def register(commands) -> None:
         "the twin's trajectories as FCD, a sumocfg)",
     )
     p.add_argument("run", type=Path, help="a run folder (twin run --out)")
-    p.add_argument("--format", choices=["sumo"], default="sumo")
+    p.add_argument(
+        "--format", choices=["sumo"], default="sumo",
+        help="sumo: a network, routes, FCD trajectories and a sumocfg for Eclipse SUMO",
+    )  # fmt: skip
     p.add_argument("--out", type=Path, required=True, help="folder to write")
     p.set_defaults(handler=_export)
 

@@ -15,18 +15,23 @@ def register(commands) -> None:
     p.add_argument(
         "--out", type=Path, default=None, help="map folder to write (default: the cache)"
     )
-    p.add_argument("--seed", type=int, default=0, help="terrain seed")
+    p.add_argument("--seed", type=int, default=0, help="terrain seed (the map's random parts)")
     p.set_defaults(handler=_build)
     p = map_commands.add_parser(
         "export",
         help="the map for other tools: OpenDRIVE 1.6 (CARLA, esmini, SUMO's netconvert)",
     )
-    p.add_argument("--format", choices=["opendrive"], default="opendrive")
+    p.add_argument(
+        "--format",
+        choices=["opendrive"],
+        default="opendrive",
+        help="file format: ASAM OpenDRIVE 1.6",
+    )
     p.add_argument("--out", type=Path, required=True, help="file to write, e.g. i24.xodr")
     add_map(p)
     p.set_defaults(handler=_export)
     p = map_commands.add_parser("preview", help="render a top view and a driver's-eye view")
-    p.add_argument("--out", type=Path, default=Path("map.png"))
+    p.add_argument("--out", type=Path, default=Path("map.png"), help="PNG file to write")
     add_map(p)
     p.set_defaults(handler=_preview)
 

@@ -111,7 +111,10 @@ def add_worker_counts(parser: argparse.ArgumentParser) -> None:
 
 def add_engine(parser: argparse.ArgumentParser) -> None:
     """``--engine`` and ``--ray-address``: where the episodes run."""
-    parser.add_argument("--engine", choices=["local", "ray"], default="local")
+    parser.add_argument(
+        "--engine", choices=["local", "ray"], default="local",
+        help="local: processes on this machine; ray: Ray tasks, here or on a cluster",
+    )  # fmt: skip
     parser.add_argument("--ray-address", default=None, help="Ray cluster to join (--engine ray)")
 
 

@@ -39,7 +39,10 @@ def _register_run(commands) -> None:
         "--dt", type=float, default=None, help="step [s] (default 0.01 physics, 0.1 kinematic)"
     )
     add_world(p)
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument(
+        "--seed", type=int, default=None,
+        help="seed of the visible drivers' draw (default: the preset's, 0)",
+    )  # fmt: skip
     p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
     p.add_argument(
         "--behaviour",
@@ -125,15 +128,19 @@ def _register_render(commands) -> None:
         "write one frame of the ego's camera as PNG: RGB, or with --labels RGB, depth, "
         "semantic and instance side by side.",
     )
-    p.add_argument("--scenario", choices=["A", "B"], default="B", help="paper preset")
+    p.add_argument("--scenario", choices=["A", "B"], default="B", help="the paper's preset")
     add_config(p)
     add_data(p)
     p.add_argument("--t", type=float, default=0.0, help="time of the frame [s after t0]")
     p.add_argument("--camera", default=None, help="camera name (default: the rig's first)")
-    p.add_argument("--renderer", choices=["auto", "tiny", "egl"], default=None)
+    p.add_argument(
+        "--renderer", choices=["auto", "tiny", "egl"], default=None,
+        help="pybullet's renderer: tiny (CPU), egl (GPU, headless) or auto (EGL where it "
+        "works) (default: the camera settings', auto)",
+    )  # fmt: skip
     p.add_argument("--labels", action="store_true", help="add depth and segmentation panels")
     add_set(p, "any setting, e.g. --set camera.hfov_deg=60 (repeatable)")
-    p.add_argument("--out", type=Path, default=Path("frame.png"), help="PNG file")
+    p.add_argument("--out", type=Path, default=Path("frame.png"), help="PNG file to write")
     p.set_defaults(handler=_render)
 
 

@@ -26,17 +26,30 @@ def register(commands) -> None:
         "controller.policy.model=OUT/policy.json.",
     )
     add_data(p, "store (default: embedded:morning)")
-    p.add_argument("--iterations", type=int, default=30)
+    p.add_argument("--iterations", type=int, default=30, help="random-search iterations")
     p.add_argument("--directions", type=int, default=8, help="perturbations per iteration")
     p.add_argument("--top", type=int, default=4, help="best directions kept per iteration")
     p.add_argument("--episodes", type=int, default=4, help="training episodes per iteration")
     p.add_argument("--duration", type=float, default=120.0, help="episode length [s]")
-    p.add_argument("--step-size", type=float, default=0.3, help="ARS alpha")
-    p.add_argument("--noise", type=float, default=0.5, help="ARS nu (times each feature's scale)")
     p.add_argument(
-        "--world", choices=["kinematic", "physics"], default="kinematic", help="where runs are"
+        "--step-size",
+        type=float,
+        default=0.3,
+        help="ARS step size alpha (Mania et al. 2018)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=0.5,
+        help="ARS exploration noise nu (times each feature's scale)",
+    )
+    p.add_argument(
+        "--world",
+        choices=["kinematic", "physics"],
+        default="kinematic",
+        help="the world the training episodes run in",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the perturbations and episodes")
     add_workers(p, "processes (default: the cores)")
     p.add_argument("--out", type=Path, required=True, help="training folder")
     add_quiet(p)
