@@ -137,8 +137,13 @@ def test_the_first_twin_run_prints_only_the_twins_summary(fresh):
     lines = assert_clean(fresh.first)
     assert len(lines) <= MAX_LINES, "\n".join(lines)
     assert lines[0].startswith("building the embedded data")
-    assert "run folder: runs/B (behaviour paper)" in lines
-    assert lines[-1].startswith("simulated 30.0 s")
+    assert "scenario B, behaviour paper, the ego driven by the traffic manager" in lines
+    assert any(line.startswith("simulated 30.0 s") for line in lines)
+    # it ends by listing what it wrote
+    listed = lines[lines.index("wrote runs/B:") + 1 :]
+    assert [line.split()[0] for line in listed] == [
+        "config.toml", "trajectories.parquet", "metrics.json", "timespace.png", "bev.png"
+    ]  # fmt: skip
     assert (fresh.cwd / "runs" / "B" / "metrics.json").is_file()
 
 

@@ -108,6 +108,19 @@ class RunResult:
     folder: Path
     metrics: dict
     ego_speed: np.ndarray  # [m/s] the simulated ego, one value per second
+    ego_controller: str = ""  # what drove the ego ("": the traffic manager, as the others)
+
+
+#: What each entry of a run folder holds, in the order ``twin run`` lists them.
+FOLDER_CONTENTS = {
+    "config.toml": "the resolved settings (twin run --config repeats the run)",
+    "trajectories.parquet": "every vehicle every step: the ego, simulated vehicles, ghosts",
+    "metrics.json": "fidelity to the recording, counts, energy, control figures, timing",
+    "timespace.png": "time-space diagram: recorded traffic, simulated vehicles, the ego",
+    "bev.png": "bird's-eye view of the visible window and ghost cells",
+    "bev.mp4": "the bird's-eye view over the whole episode",
+    CAMERAS: "the ego's camera frames and labels",
+}
 
 
 def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> TrajectoryStore:
@@ -181,7 +194,10 @@ def run_episode(
         loop_s = time.perf_counter() - start
         figures = _write_folder(folder.tmp, sim, store, bundle, loop_s, start - setup, cameras)
     ego = figures.pop("_ego_speed")
-    return RunResult(folder.out, figures, ego)
+    name = config.ego_controller
+    if controller is not None:
+        name = getattr(controller, "__qualname__", type(controller).__qualname__)
+    return RunResult(folder.out, figures, ego, name)
 
 
 def render_at(
@@ -307,7 +323,8 @@ def summary(result: RunResult) -> str:
     ego, counts, physics = m["ego"], m["counts"], m["physics"]
     profile = " ".join(f"{round(v):d}" for v in result.ego_speed)
     lines = [
-        f"run folder: {result.folder} (behaviour {m['behaviour']})",
+        f"scenario {m['scenario']}, behaviour {m['behaviour']}, the ego driven by "
+        f"{result.ego_controller or 'the traffic manager'}",
         f"ego {ego['record_id']} (lane {ego['selected']['lane']}, x {ego['selected']['x_m']:.0f} m)"
         f" speed each second [m/s]: {profile}",
         f"ego vs recording: speed RMSE {ego.get('speed_rmse_mps', float('nan')):.2f} m/s, "
@@ -323,4 +340,10 @@ def summary(result: RunResult) -> str:
     ]
     if m["ended_early"]:
         lines.append(f"ended early: {m['ended_early']}")
+    lines.append(f"wrote {result.folder}:")
+    for name, holds in FOLDER_CONTENTS.items():
+        path = result.folder / name
+        if path.exists():
+            shown = f"{name}/" if path.is_dir() else name
+            lines.append(f"  {shown:<22}{holds}")
     return "\n".join(lines)

@@ -17,6 +17,7 @@ from twin.data.empirical import EmpiricalTraffic
 from twin.metrics import economy
 from twin.metrics import fidelity as metrics
 from twin.physics.energy import RAV4_2019
+from twin.runners.run import FOLDER_CONTENTS
 
 COLUMNS = [
     "time", "id", "record_id", "role", "road", "lane", "x", "y", "z", "speed", "accel",
@@ -49,6 +50,20 @@ def run_folder(scene_store, tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "scene"
     assert main(run_args(scene_store, out, "--bev-video", "--set", "traffic.hov_share=0.2")) == 0
     return out
+
+
+def test_twin_run_names_the_egos_controller_and_lists_what_it_wrote(scene_store, tmp_path, capsys):
+    out = tmp_path / "acc"
+    world = ["--world", "kinematic", "--ego-controller", "twin.controllers:acc"]
+    assert main(run_args(scene_store, out, *world)) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "scenario B, behaviour paper, the ego driven by twin.controllers:acc"
+    listed = lines[lines.index(f"wrote {out}:") + 1 :]
+    names = [line.split()[0] for line in listed]
+    assert names == ["config.toml", "trajectories.parquet", "metrics.json", "timespace.png",
+                     "bev.png"]  # fmt: skip
+    assert names == [p for p in FOLDER_CONTENTS if (out / p).exists()]
+    assert all(len(line.split(maxsplit=1)) == 2 for line in listed)  # each says what it holds
 
 
 def test_the_run_folder_holds_every_output(run_folder):
