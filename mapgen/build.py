@@ -278,7 +278,7 @@ def _describe(
         "frame": (
             "world: east-north-up metres, origin on the median centre line at MM 60.6, "
             "z = 0 at the road there; eastbound station s = (MM - 60.6) * 1609.344 m "
-            "along the bearing; road frame per carriageway as in DESIGN.md"
+            "along the bearing; road frame per carriageway as in docs/design.md"
         ),
         "road": road.to_dict(),
         "cross_section": {

@@ -1,8 +1,8 @@
 """The map's geometry parameters, read from ``assets/map.toml`` into frozen dataclasses.
 
-Every length is in metres. What DESIGN.md fixes (lane width, lane count, the yellow
-edge line 12 ft from the median centre line) comes from :mod:`twin.core.i24` and is
-not repeated here.
+Every length is in metres. What the design fixes (``docs/design.md``: lane width, lane
+count, the yellow edge line 12 ft from the median centre line) comes from
+:mod:`twin.core.i24` and is not repeated here.
 """
 
 import tomllib

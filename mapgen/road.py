@@ -1,7 +1,7 @@
 """The road model: the segment's alignment, elevation profile and cross-section, and the
 vectorised transforms between the road frame and the world frame.
 
-World frame (DESIGN.md): local east-north-up metres, origin on the median centre line
+World frame (``docs/design.md``): local east-north-up metres, origin on the median centre line
 at MM 60.6, z = 0 at the road elevation there. The alignment is the straight line
 through the mile-marker posts (bearing about 138 degrees), stationed by nominal mile
 length: eastbound station ``s = (MM - 60.6) * 1609.344`` is the horizontal distance
@@ -9,7 +9,7 @@ from the origin along the bearing, so that I-24 MOTION x maps exactly (the posts
 themselves are closer together than a mile; :meth:`RoadModel.to_geodetic` accounts
 for that when it places a world point on the globe).
 
-Road frame per carriageway (DESIGN.md): ``x`` along travel from the segment entry,
+Road frame per carriageway (``docs/design.md``): ``x`` along travel from the segment entry,
 ``y`` from the median centre line outward, lanes -1 (inner, HOV) to -4. Eastbound
 lies to the right of the eastbound direction, westbound to the left, so the world
 point of ``(road, x, y)`` is ``O + s * d + direction * y * r`` with ``d`` the unit

@@ -2,7 +2,7 @@
 
 These are the I-24 MOTION auxiliary files (Gloudemans et al. 2023; see
 ``assets/i24_aux/README_auxiliary_data.txt``), shipped with the twin so that a map
-can be built without ``../shared``. Each reader checks its columns and values and
+is built from the repository alone. Each reader checks its columns and values and
 raises :class:`~twin.core.errors.MapError` naming the file and the problem.
 """
 

@@ -244,7 +244,8 @@ class CameraRig:
         cameras: the rig.
         renderer: ``auto``, ``tiny`` or ``egl`` (see :func:`resolve_renderer`).
         dt: [s] the simulation step; each camera's rate must divide its rate.
-        sun, shadows: the light (see :class:`CameraSettings`).
+        sun: the light (see :class:`CameraSettings`).
+        shadows: the sun casts shadows (see :class:`CameraSettings`).
         seed: draws the episode's sun when ``sun`` is ``random``.
 
     Raises:
@@ -501,8 +502,11 @@ class CameraSettings:
             or ``egl``.
         cameras: names of mounts in ``mounts`` making up the rig.
         mounts: CSV of named mounts; empty: ``assets/camera_mounts.csv``.
-        width, height: [px]; hfov_deg: [deg]; near, far: [m]; rate_hz: [Hz], the same
-            for every camera of the rig.
+        width, height: [px] image size, the same for every camera of the rig (as the
+            settings below).
+        hfov_deg: [deg] horizontal field of view.
+        near, far: [m] clipping planes; depth is measured within them.
+        rate_hz: [Hz] frames per simulated second.
         video: also write each camera's RGB stream as MP4.
         sun: the light: ``recorded`` (the sun over the segment at the frame's time,
             from its date and the segment's latitude and longitude), ``noon`` (the

@@ -23,9 +23,10 @@ same limits).
 [m/s^2]; gap [m] to the leader in the own lane (bumper to bumper, 200 when none within
 200 m) and its speed (the own speed when none); the same of the follower; and the
 recorded speeds ahead [m/s], per lane -1..-4, the mean of the recording 0-200, 200-400
-and 400-600 m downstream of the ego (what a connected vehicle could know; the lane's
-free speed where nobody is recorded). Optional Gaussian noise (``obs_noise``, sd as a
-fraction of each value) and latency (``latency_steps``, control steps).
+and 400-600 m downstream of the ego (what a connected vehicle could know; the run's
+default desired speed ``vel_default`` where nobody is recorded). Optional Gaussian
+noise (``obs_noise``, sd as a fraction of each value) and latency (``latency_steps``,
+control steps).
 
 **Reward** per control step (:class:`Reward`; weights settable): minus the fuel [g] of
 the AV and its 5 followers over the step (RAV4 model, :mod:`twin.physics.energy`), minus

@@ -24,8 +24,8 @@ The calibrated behaviours drive the model the calibration fitted (``twin calibra
 
 ``auto`` (the default of ``twin run``) is :data:`AUTO_CHOICE` where the store has a
 calibration of the road for the run's car-following model, else ``paper``: the
-behaviour ``twin eval`` found most faithful on data it was not calibrated on (README,
-"Calibration, behaviours and fidelity", for the figures).
+behaviour ``twin eval`` found most faithful on data it was not calibrated on
+(``docs/results/behaviours_held_out.md`` gives the figures).
 """
 
 from dataclasses import dataclass
@@ -43,8 +43,8 @@ BEHAVIOURS = ("paper", "calibrated", "recorded")
 AUTO = "auto"
 #: What ``auto`` means on a calibrated road: on the held-out halves of recordings made by
 #: drivers unlike the twin's (IDM with other parameters, Gipps) it beat ``paper`` on
-#: speeds, positions and the speed field, and matched ``recorded`` there (the README
-#: gives the figures).
+#: speeds, positions and the speed field, and matched ``recorded`` there
+#: (``docs/results/behaviours_held_out.md``).
 AUTO_CHOICE = "calibrated"
 SEED_STREAM = 0x6265686176  # the behaviour's random draws use their own stream
 PLANNED_LATE = 100.0  # [m] a recorded lane change not started this far past its place is dropped

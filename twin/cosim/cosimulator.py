@@ -1,4 +1,4 @@
-"""The cosimulator: the paper's ghost-cell loop around an ego (DESIGN.md, steps 1 to 8).
+"""The cosimulator: the paper's ghost-cell loop around an ego (steps 1 to 8 of ``docs/design.md``).
 
 The ego and the recorded vehicles near it (the visible window, ``w_visible`` each side)
 are physics bodies driven by the traffic manager; the recorded vehicles beyond them

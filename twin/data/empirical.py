@@ -184,7 +184,8 @@ class EmpiricalTraffic:
         Args:
             road: the carriageway.
             t: [s] unix time.
-            x_min, x_max: [m] road-frame window on the vehicles' back centre.
+            x_min: [m] lower end of the road-frame window on the vehicles' back centre.
+            x_max: [m] upper end of that window.
 
         Raises:
             ValueError: for a non-finite time or an empty/reversed window.

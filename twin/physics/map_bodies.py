@@ -1,7 +1,7 @@
 """The map's static bodies in a pybullet client: collision meshes and visual parts.
 
 Meshes come from the map's OBJ files, never from in-memory vertices: with the EGL
-renderer loaded, in-memory meshes crash ``createMultiBody`` (PYBULLET_FACTS.md). A
+renderer loaded, in-memory meshes crash ``createMultiBody`` (``docs/physics.md``). A
 collision mesh from a file is a convex hull unless ``GEOM_FORCE_CONCAVE_TRIMESH`` is
 set, and triangle internal edges give sliding bodies bogus contact normals unless
 ``GEOM_CONCAVE_INTERNAL_EDGE`` is set: both flags are always set here.

@@ -9,7 +9,7 @@ picture. Proxies are pooled by class and size like the physics bodies. Body ids
 never leave this module: a picture comes back with semantic classes and twin
 vehicle ids per pixel.
 
-EGL pitfalls (PYBULLET_FACTS.md), handled here: the plugin is found through
+EGL pitfalls (``docs/physics.md``), handled here: the plugin is found through
 ``pkgutil`` and loaded into this world's client before any visual body; every mesh
 comes from an OBJ file (with the plugin loaded, in-memory meshes crash
 ``createMultiBody``); pictures are taken with ``ER_BULLET_HARDWARE_OPENGL``; the

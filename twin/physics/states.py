@@ -78,14 +78,23 @@ class VehicleStates:
     """The active vehicles after the last step, struct-of-arrays.
 
     Attributes:
-        id: (n,) twin ids. position: (n, 3) [m] centre of mass; orientation: (n, 4)
-        quaternion (x, y, z, w); velocity, angular_velocity: (n, 3) world frame.
-        speed: (n,) [m/s] along the body's heading; yaw_rate: (n,) [rad/s] about the
-        world's up axis; heading: (n,) [rad] world yaw.
-        road, x, y, lane: road frame (x of the back centre, as the data's x).
-        wheel_spin, load: (n, 4) [rad/s], [N]; contact: (n, 4) bool.
+        id: (n,) twin ids.
+        position: (n, 3) [m] centre of mass, world frame.
+        orientation: (n, 4) quaternion (x, y, z, w).
+        velocity: (n, 3) [m/s] world frame.
+        angular_velocity: (n, 3) [rad/s] world frame.
+        speed: (n,) [m/s] along the body's heading.
+        yaw_rate: (n,) [rad/s] about the world's up axis.
+        heading: (n,) [rad] world yaw.
+        road: (n,) road frame: the carriageway, +1 eastbound, -1 westbound.
+        x: (n,) [m] road frame, of the back centre (as the data's x).
+        y: (n,) [m] road frame, from the median centre line.
+        lane: (n,) lane id, -1 to -4 (0 off the lanes).
+        wheel_spin: (n, 4) [rad/s].
+        load: (n, 4) [N] wheel loads.
+        contact: (n, 4) bool, the wheel touches the road.
         drive_power: (n,) [W] what the powertrain delivered at the wheels in the last
-        step (drive torque times wheel spin; braking and coasting deliver none).
+            step (drive torque times wheel spin; braking and coasting deliver none).
     """
 
     id: np.ndarray

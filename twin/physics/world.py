@@ -2,8 +2,9 @@
 
 This is the only module that creates or moves pybullet bodies. The rest of the twin
 names vehicles by the twin's own ids (int64, never reused); bodies are created once
-per size and recycled (PYBULLET_FACTS.md: removing and re-creating bodies leaks
-memory, and a removed body's id is handed to the next new body).
+per size and recycled (``docs/physics.md``, what is known about pybullet: removing and
+re-creating bodies leaks memory, and a removed body's id is handed to the next new
+body).
 
 Collision groups: rays see only the road; vehicle bodies collide with each other and
 with the barrier and overpass, never with the road (the wheels' rays carry them).

@@ -78,7 +78,7 @@ class SpeedLoop:
 
 @dataclass(frozen=True)
 class FollowerStopperParams:
-    """FollowerStopper (Stern et al. 2018; CONTROL.md).
+    """FollowerStopper (Stern et al. 2018; ``docs/control.md``).
 
     Attributes:
         desired_speed: [m/s] U; ``None``: the ego's desired speed (the run's
@@ -104,7 +104,7 @@ class FollowerStopperParams:
 def follower_stopper_speed(
     gap: float, speed: float, leader_speed: float, desired_speed: float, p: FollowerStopperParams
 ) -> float:
-    """FollowerStopper's commanded speed [m/s] (CONTROL.md's definition).
+    """FollowerStopper's commanded speed [m/s] (Stern et al. 2018; ``docs/control.md``).
 
     Args:
         gap: [m] to the leader (``inf``: none). speed, leader_speed: [m/s].
@@ -139,12 +139,12 @@ class FollowerStopper:
 
 @dataclass(frozen=True)
 class PISaturationParams:
-    """PI with saturation (Stern et al. 2018; CONTROL.md).
+    """PI with saturation (Stern et al. 2018; ``docs/control.md``).
 
     Attributes:
         window: [s] the own-speed average that sets U (38 s).
-        gap_low, gap_high: [m] g_l, g_u: the gaps between which the target rises by
-            ``catch_up`` (7, 30).
+        gap_low: [m] g_l, the gap from which the target rises by ``catch_up`` (7).
+        gap_high: [m] g_u, the gap by which it has risen by all of ``catch_up`` (30).
         catch_up: [m/s] v_catch (1).
         safe_gap_min: [m] the floor of dx_s = max(2 (v_lead - v), floor) (4).
         gamma: [m] the blending width (2).
@@ -175,7 +175,7 @@ def pi_saturation_speed(
     last_command: float,
     p: PISaturationParams,
 ) -> float:
-    """PI with saturation's new commanded speed [m/s] (CONTROL.md's definition).
+    """PI with saturation's new commanded speed [m/s] (Stern et al. 2018; ``docs/control.md``).
 
     Args:
         gap: [m] to the leader (``inf``: none, the target alone). speed, leader_speed:
@@ -222,10 +222,14 @@ class ACCParams:
     apply, within the comfort limits.
 
     Attributes:
-        time_gap: [s] h (1.5). min_gap: [m] s0 (2). k1: [1/s^2] (0.23). k2: [1/s] (0.07).
+        time_gap: [s] h, the time gap kept (1.5).
+        min_gap: [m] s0, the gap kept at a standstill (2).
+        k1: [1/s^2] gain on the gap error (0.23).
+        k2: [1/s] gain on the speed difference to the leader (0.07).
         desired_speed: [m/s] U; ``None``: the ego's desired speed.
         cruise_gain: [1/s] speed-keeping gain without a leader (0.4).
-        max_accel, max_decel: [m/s^2] comfort limits (1.5, 3.0).
+        max_accel: [m/s^2] comfort limit speeding up (1.5).
+        max_decel: [m/s^2] comfort limit slowing down, positive (3.0).
     """
 
     time_gap: float = 1.5
@@ -305,7 +309,9 @@ class ControllerSettings:
             needed, by the same test as the drivers' emergency braking
             (:func:`twin.traffic.longitudinal.required_decel`). ``False``: the
             controller's command alone (``human`` has the drivers' braking anyway).
-        follower_stopper, pi_saturation, acc: each controller's parameters.
+        follower_stopper: FollowerStopper's parameters (``twin.controllers:follower_stopper``).
+        pi_saturation: PI with saturation's parameters (``twin.controllers:pi_saturation``).
+        acc: the constant time-gap ACC's parameters (``twin.controllers:acc``).
         policy: a trained policy's model (``twin.rl:policy``).
     """
 

@@ -51,14 +51,21 @@ class Observation:
     """What a user's ego controller sees each step.
 
     Attributes:
-        time: [s] manager time. id: the ego's twin id. road: +1 / -1.
-        lane: lane the ego is in or changing to. changing: mid-lane-change.
-        x: [m] back centre; y: [m] lateral position; speed: [m/s].
-        desired_speed: [m/s] the ego's setting. default_accel: [m/s^2] what the
-        traffic manager would command (its car-following model with emergency braking).
+        time: [s] manager time.
+        id: the ego's twin id.
+        road: +1 eastbound, -1 westbound.
+        lane: lane the ego is in or changing to.
+        changing: mid-lane-change.
+        x: [m] back centre, road frame.
+        y: [m] lateral position, road frame.
+        speed: [m/s].
+        desired_speed: [m/s] the ego's setting.
+        default_accel: [m/s^2] what the traffic manager would command (its
+            car-following model with emergency braking).
         lanes: leaders and followers per lane (:class:`LaneView`).
         neighbours: vehicles within ``NEIGHBOUR_RANGE`` on the ego's road as arrays
-        ``id`` (-1 for obstacles), ``dx`` [m] (back to back), ``y`` [m], ``speed``, ``lane``.
+            ``id`` (-1 for obstacles), ``dx`` [m] (back to back), ``y`` [m] and ``speed``
+            [m/s].
     """
 
     time: float

@@ -10,11 +10,11 @@ which the Stanley controller turns into a steering angle
 
 Lifecycle (the cosimulator's order)::
 
-    manager.add(ids, world.params_of(ids), lanes)      # when bodies are spawned
-    commands = manager.step(world.states(), ghosts)    # each step
+    manager.add(ids, road, lanes, world.params_of(ids))  # when bodies are spawned
+    commands = manager.step(world.states(), ghosts)      # each step
     world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
     world.step()
-    manager.remove(ids)                                # when bodies are despawned
+    manager.remove(ids)                                  # when bodies are despawned
 
 The manager never touches pybullet; it sees vehicles through the states and the
 physical parameters the world gives it.

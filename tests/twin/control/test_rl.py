@@ -1,5 +1,5 @@
 """``twin.control.rl``: a trained policy drives the twin's ego seeing what the env's agent saw;
-the README's PPO example (where the ``rl`` extra is installed)."""
+the PPO example of docs/control.md (where the ``rl`` extra is installed)."""
 
 import json
 
@@ -88,7 +88,7 @@ def test_a_policy_that_returns_nan_stops_the_run(data):
 
 @pytest.mark.slow
 def test_the_readme_ppo_example_trains_and_evaluates(data, tmp_path):
-    """The README's example, shortened: PPO for 128 steps, then twin eval against human
+    """docs/control.md's example, shortened: PPO for 128 steps, then twin eval against human
     on held-out episodes."""
     pytest.importorskip("stable_baselines3", reason="the rl extra is not installed")
     from twin.control.rl import train_ppo
