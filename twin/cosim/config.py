@@ -23,7 +23,7 @@ from twin.traffic.baselines import ControllerSettings
 from twin.traffic.config import TrafficConfig
 
 MPH = 0.44704  # [m/s per mph]
-VEL_DEFAULT = 70.0 * MPH  # [m/s] the posted limit of this stretch (I24_DATA.md)
+VEL_DEFAULT = 70.0 * MPH  # [m/s] the posted limit of this stretch (docs/data/i24-format.md)
 
 
 class ConfigError(TwinError):
@@ -32,13 +32,17 @@ class ConfigError(TwinError):
 
 @dataclass(frozen=True)
 class CosimConfig:
-    """One cosimulation run (DESIGN.md: the paper's configuration, with its defaults).
+    """One cosimulation run: the paper's configuration, with its defaults.
 
     Attributes:
         scenario: a label for the run ("A", "B" for the presets, else "custom").
         road: carriageway of the ego.
-        lane, x, time: the desired ego lane, road-frame x [m] and unix time [s]; the
-            ego is the recorded vehicle closest to them.
+        lane: the desired ego lane, -1 (the HOV lane) to -4; the ego is the recorded
+            vehicle closest to ``lane``, ``x`` and ``time``.
+        x: [m] the desired ego position, road-frame x (along the direction of travel
+            from the segment's entry).
+        time: [s] the desired ego time, unix (default 2022-11-30 06:45:50 CST, the time
+            of the paper's scenarios).
         t_max: [s] episode length.
         dt: [s] step of the world and the cosimulation. Each world has its default
             (0.01 s physics, 0.1 s kinematic) that :func:`switch_world`, ``--world``,
@@ -55,12 +59,13 @@ class CosimConfig:
         ghost_smoothing: [s] time constant of a first-order lag on the speed a lane's
             lead vehicle takes from its ghost (0: off, the paper's behaviour).
         spawn_clearance: [m] bumper-to-bumper room a spawned vehicle needs to any body
-            it shares its lane's width with...
-        spawn_clearance_at_rest: [m] ...that room when the rear of the two is at rest
-            (it grows to ``spawn_clearance`` at 5 m/s; recorded standing queues have gaps
-            under 2 m, and a queue spawned with holes closes them and drifts)...
-        spawn_decel: [m/s^2] ...plus the difference of their braking distances at this
-            deceleration when the one behind is faster.
+            it shares its lane's width with, plus the difference of their braking
+            distances at ``spawn_decel`` when the one behind is faster.
+        spawn_clearance_at_rest: [m] that room when the rear of the two is at rest; it
+            grows to ``spawn_clearance`` at 5 m/s (recorded standing queues have gaps
+            under 2 m, and a queue spawned with holes closes them and drifts).
+        spawn_decel: [m/s^2] deceleration of the braking distances added to the spawn
+            clearance.
         ego_controller: ``"module:function"`` driving the ego (see
             :mod:`twin.traffic.manager`, ``EgoController``), or a controller factory
             such as ``twin.controllers:follower_stopper`` (:mod:`twin.traffic.baselines`);
@@ -69,7 +74,8 @@ class CosimConfig:
             well as the ego (each recorded vehicle drawn once by the seed and its
             record, so the same vehicles in every run of an episode); 0 by default.
         ghost_log_rate: [Hz] rate at which the ghost set is written to the log.
-        bev_time: [s] after t0 of the bird's-eye picture; ``None``: half the episode.
+        bev_time: [s] after t0 of the bird's-eye picture; unset (``None``): half the
+            episode.
         bev_video: also write ``bev.mp4`` of the whole episode.
         seed: seed of every random choice of the run (drivers, HOV eligibility).
         behaviour: how the visible vehicles drive: ``paper`` (the paper's rules),

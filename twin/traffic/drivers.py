@@ -42,9 +42,11 @@ class DriverDistribution:
 
     Attributes:
         time_headway_sd_log: [-] log-normal spread of T around the class's T.
-        min_gap: [m] mean s0; min_gap_sd: [m] its spread.
+        min_gap: [m] mean s0, the gap kept at a standstill.
+        min_gap_sd: [m] standard deviation of s0.
         max_accel_sd_log: [-] log-normal spread of a around the class's a.
-        comfortable_decel: [m/s^2] b, positive; comfortable_decel_sd: [m/s^2].
+        comfortable_decel: [m/s^2] mean b, the comfortable deceleration (positive).
+        comfortable_decel_sd: [m/s^2] standard deviation of b (0: every driver the same).
         delta: [-] IDM exponent.
         desired_speed_scale, time_headway_scale, max_accel_scale: [-] factors on the
             class table's means (drivers unlike the table's, e.g. for test data).

@@ -16,7 +16,7 @@ class MOBILParams:
     """MOBIL parameters, each (n,) float64 or a scalar.
 
     Attributes:
-        politeness: p [-], weight of the followers' acceleration changes.
+        politeness: [-] p, weight of the followers' acceleration changes.
         threshold: [m/s^2] gain a change must beat.
         safe_decel: [m/s^2] positive; the new follower must not have to brake harder.
         keep_right: [m/s^2] bias added to moves to the right, taken from moves left.
