@@ -1,5 +1,7 @@
 """``twin bench``: the performance benchmarks of :mod:`twin.perf.bench`, each printing
-one JSON line of figures with the commit and machine they were taken on."""
+one JSON line of figures with the options, commit, date and machine they were taken
+with; ``twin bench report`` makes the benchmarks page of such lines
+(:mod:`twin.perf.report`)."""
 
 import json
 from pathlib import Path
@@ -8,10 +10,10 @@ from twin.cli.evaluate import add_eval_options
 from twin.cli.options import (
     UsageError,
     add_data,
-    add_repeats,
     add_worker_counts,
     add_workers,
     add_world,
+    at_least_one,
     checked_data,
     checked_road,
     listed,
@@ -21,80 +23,147 @@ from twin.cli.options import (
     workers_or_cores,
 )
 
-STORE_HELP = "store (default: the embedded data)"
+STORE_HELP = "store folder or embedded:NAME (default: the embedded data)"
+#: ``args`` attributes that are not options of a benchmark.
+NOT_OPTIONS = frozenset({"handler"})
+#: Options whose attribute is not their flag's name (the others: ``--`` + dashed name).
+FLAGS = {"t_from": "--from", "t_until": "--until", "assignments": "--set"}
 
 
 def register(commands) -> None:
     """Add ``bench`` and its benchmarks to the subparsers ``commands``."""
-    bench = commands.add_parser("bench", help="benchmarks; each prints one JSON line")
+    bench = commands.add_parser(
+        "bench",
+        help="benchmarks; each prints one JSON line",
+        description="Performance benchmarks. Each prints one JSON line: its figures "
+        "(medians of --repeats repeats), the options it ran with, the date, the commit "
+        "and the machine. 'twin bench report' makes docs/benchmarks.md of such lines.",
+    )
     benchmarks = bench.add_subparsers(title="benchmarks")
     _register_parts(benchmarks)
     _register_commands(benchmarks)
+    _register_report(benchmarks)
+
+
+def _repeats(parser, default: int) -> None:
+    """``--repeats``: how often a benchmark is timed (its figures are the medians)."""
+    parser.add_argument(
+        "--repeats",
+        type=at_least_one,
+        default=default,
+        help="times the measurement is repeated; figures are medians",
+    )
 
 
 def _register_parts(benchmarks) -> None:
     """The twin's parts and its loop: query, synth, map, physics, traffic, run, camera."""
-    p = benchmarks.add_parser("query", help="snapshot latency of EmpiricalTraffic")
+    p = benchmarks.add_parser(
+        "query", help="snapshot latency of EmpiricalTraffic on a 400 m window of scenario B"
+    )
     add_data(p, STORE_HELP)
-    add_repeats(p, 5)
+    _repeats(p, 5)
     p.set_defaults(handler=_query)
-    p = benchmarks.add_parser("synth", help="time to synthesize 10 minutes of one direction")
-    p.add_argument("--minutes", type=float, default=10.0)
-    add_repeats(p, 3)
+    p = benchmarks.add_parser(
+        "synth", help="time to synthesise preset B (one direction) and write it as I-24 JSON"
+    )
+    p.add_argument(
+        "--minutes",
+        type=float,
+        default=10.0,
+        help="length of the synthetic recording [min]",
+    )
+    _repeats(p, 3)
     p.set_defaults(handler=_synth)
     p = benchmarks.add_parser("map", help="full map build time and triangle counts")
-    add_repeats(p, 5)
+    _repeats(p, 5)
     p.set_defaults(handler=_map)
     p = benchmarks.add_parser("physics", help="physics step time with 100 and 200 vehicles")
-    p.add_argument("--steps", type=int, default=500)
-    add_repeats(p, 3)
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=500,
+        help="physics steps of 0.01 s timed per repeat",
+    )
+    _repeats(p, 3)
     p.set_defaults(handler=_physics)
     p = benchmarks.add_parser(
         "traffic", help="traffic manager decision step and closed loop, 100 vehicles"
     )
-    p.add_argument("--vehicles", type=int, default=100)
-    p.add_argument("--steps", type=int, default=3000)
-    add_repeats(p, 3)
+    p.add_argument(
+        "--vehicles",
+        type=int,
+        default=100,
+        help="vehicles in the circuit",
+    )
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=3000,
+        help="steps of 0.01 s timed per repeat",
+    )
+    _repeats(p, 3)
     p.set_defaults(handler=_traffic)
     p = benchmarks.add_parser(
-        "run", help="the whole cosimulation loop of scenario B (no outputs written)"
+        "run", help="the whole cosimulation loop of a scenario (no outputs written)"
     )
-    p.add_argument("--scenario", choices=["A", "B"], default="B")
+    p.add_argument(
+        "--scenario",
+        choices=["A", "B"],
+        default="B",
+        help="the paper's scenario timed",
+    )
     add_data(p, STORE_HELP)
-    add_repeats(p, 3)
+    _repeats(p, 3)
     p.set_defaults(handler=_run)
     p = benchmarks.add_parser(
         "camera", help="camera frames per second, 640x480, 100 vehicles, with and without files"
     )
-    p.add_argument("--renderer", choices=["tiny", "egl"], default="tiny")
-    p.add_argument("--frames", type=int, default=30)
-    add_repeats(p, 3)
-    add_data(p, "recording drawn around the scene (default: the embedded data)")
     p.add_argument(
-        "--no-replay", action="store_true", help="without the recorded traffic around the scene"
+        "--renderer",
+        choices=["tiny", "egl"],
+        default="tiny",
+        help="tiny: TinyRenderer on the CPU; egl: the EGL plugin",
+    )
+    p.add_argument(
+        "--frames",
+        type=int,
+        default=30,
+        help="frames timed per repeat",
+    )
+    _repeats(p, 3)
+    add_data(p, "recording replayed around the scene (default: the embedded data)")
+    p.add_argument(
+        "--no-replay",
+        action="store_true",
+        help="without the recorded traffic around the scene (default: with it)",
     )
     p.set_defaults(handler=_camera)
 
 
 def _register_commands(benchmarks) -> None:
-    """The commands run at scale: dataset, env, eval, calibrate, ingest."""
+    """The commands run at scale: dataset, env, worlds, eval, calibrate, ingest."""
     p = benchmarks.add_parser(
         "dataset", help="labelled 640x480 frames per second of twin dataset, by workers"
     )
     add_data(p, STORE_HELP)
-    p.add_argument("--episodes", type=int, default=16)
+    p.add_argument("--episodes", type=int, default=16, help="episodes per dataset")
     p.add_argument("--frames", type=int, default=20, help="frames per episode")
     add_worker_counts(p)
-    add_repeats(p, 3)
+    _repeats(p, 3)
     p.set_defaults(handler=_dataset)
     p = benchmarks.add_parser(
         "env", help="env steps per second of i24twin/WaveDampening-v0, one env and a vector env"
     )
-    add_data(p, "store (default: the embedded morning)", type=str)
-    p.add_argument("--steps", type=int, default=200, help="steps timed per env")
-    add_workers(p, "vector env size (default: cores)")
+    add_data(p, "store folder or embedded:NAME (default: the embedded morning)", type=str)
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=200,
+        help="env steps of 0.1 s timed per env and repeat",
+    )
+    add_workers(p, "envs in the vector env (default: the cores)")
     add_world(p)
-    add_repeats(p, 3)
+    _repeats(p, 3)
     p.set_defaults(handler=_env)
     p = benchmarks.add_parser(
         "worlds",
@@ -106,33 +175,96 @@ def _register_commands(benchmarks) -> None:
         "ranking. Rerun the same command to resume.",
     )
     add_eval_options(p)
-    p.add_argument("--out", type=Path, required=True, help="comparison folder")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--out", type=Path, required=True, help="comparison folder (required)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (default: shown)")
     p.set_defaults(handler=_worlds)
     p = benchmarks.add_parser("eval", help="wall time of twin eval, by workers")
     add_data(p, STORE_HELP)
-    p.add_argument("--episodes", type=int, default=4)
-    p.add_argument("--duration", type=float, default=60.0, help="episode length [s]")
-    p.add_argument("--behaviour", default="paper", help="behaviours, comma-separated")
+    p.add_argument("--episodes", type=int, default=4, help="episodes evaluated")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=60.0,
+        help="episode length [s]",
+    )
+    p.add_argument(
+        "--behaviour",
+        default="paper",
+        help="behaviours, comma-separated",
+    )
     add_worker_counts(p)
-    add_repeats(p, 1)
+    _repeats(p, 1)
     p.set_defaults(handler=_eval)
     p = benchmarks.add_parser("calibrate", help="wall time of twin calibrate on one road")
     add_data(p, STORE_HELP)
-    p.add_argument("--road", default="westbound")
-    add_repeats(p, 3)
+    p.add_argument("--road", default="westbound", help="eastbound or westbound")
+    _repeats(p, 3)
     p.set_defaults(handler=_calibrate)
     p = benchmarks.add_parser("ingest", help="ingest throughput and peak memory")
-    p.add_argument("--size-mb", type=float, default=300.0)
-    add_repeats(p, 3)
+    p.add_argument(
+        "--size-mb",
+        type=float,
+        default=300.0,
+        help="size of the synthetic day file ingested [MB]",
+    )
+    _repeats(p, 3)
     p.set_defaults(handler=_ingest)
 
 
-def _emit(name: str, figures: dict) -> int:
-    """Print the figures of benchmark ``name`` as one JSON line, with their context."""
+def _register_report(benchmarks) -> None:
+    """``twin bench report``: the benchmarks page from JSON lines."""
+    from twin.perf.report import PAGE, QUICK
+
+    names = tuple(benchmarks.choices)
+    p = benchmarks.add_parser(
+        "report",
+        help="write docs/benchmarks.md from benchmark JSON lines (or run them first)",
+        description="Make the benchmarks page (a table of every figure with its unit, the "
+        "runs with their options, date and commit, and the machines) from JSON lines of "
+        "twin bench. With --run, first run the named benchmarks one at a time with their "
+        "default options. All lines reported are also written to --lines.",
+    )
+    p.add_argument(
+        "files",
+        nargs="*",
+        metavar="JSONL",
+        help="files of twin bench lines, one JSON object a line; '-' reads standard input",
+    )
+    p.add_argument(
+        "--run",
+        nargs="?",
+        const=",".join(QUICK),
+        default=None,
+        metavar="NAMES",
+        help="run these benchmarks first, comma-separated, after reading JSONL (without "
+        f"NAMES: {','.join(QUICK)}; default: run none)",
+    )
+    p.add_argument(
+        "--lines",
+        dest="lines_out",
+        metavar="FILE",
+        type=Path,
+        default=Path("docs/benchmarks.jsonl"),
+        help="JSON Lines file of every line reported (default: docs/benchmarks.jsonl)",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path(PAGE), help=f"the page written (default: {PAGE})"
+    )
+    p.set_defaults(handler=_report, benchmarks=names)
+
+
+def _emit(name: str, figures: dict, args) -> int:
+    """Print the figures of benchmark ``name`` as one JSON line, with the options of
+    ``args`` it ran with and the context (commit, date, machine)."""
     from twin.perf.bench import context
 
-    print(json.dumps({"bench": name, **figures, **context()}))
+    options = {
+        FLAGS.get(key, "--" + key.replace("_", "-")): value
+        for key, value in vars(args).items()
+        if key not in NOT_OPTIONS
+    }
+    line = {"bench": name, **figures, "options": options, **context()}
+    print(json.dumps(line, default=str))
     return 0
 
 
@@ -151,26 +283,26 @@ def _check_positive(**values: float) -> None:
 def _query(args) -> int:
     from twin.perf.bench import query
 
-    return _emit("query", query(open_store(args.data), repeats=args.repeats))
+    return _emit("query", query(open_store(args.data), repeats=args.repeats), args)
 
 
 def _synth(args) -> int:
     from twin.perf.bench import synth_bench
 
     _check_positive(minutes=args.minutes)
-    return _emit("synth", synth_bench(minutes=args.minutes, repeats=args.repeats))
+    return _emit("synth", synth_bench(minutes=args.minutes, repeats=args.repeats), args)
 
 
 def _map(args) -> int:
     from twin.perf.bench import map_bench
 
-    return _emit("map", map_bench(repeats=args.repeats))
+    return _emit("map", map_bench(repeats=args.repeats), args)
 
 
 def _physics(args) -> int:
     from twin.perf.bench import physics_bench
 
-    return _emit("physics", physics_bench(steps=args.steps, repeats=args.repeats))
+    return _emit("physics", physics_bench(steps=args.steps, repeats=args.repeats), args)
 
 
 def _traffic(args) -> int:
@@ -180,6 +312,7 @@ def _traffic(args) -> int:
     return _emit(
         "traffic",
         traffic_bench(vehicles=args.vehicles, steps=args.steps, repeats=args.repeats),
+        args,
     )
 
 
@@ -187,7 +320,7 @@ def _run(args) -> int:
     from twin.perf.bench import run_bench
 
     store = open_store(args.data)
-    return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats))
+    return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats), args)
 
 
 def _camera(args) -> int:
@@ -203,6 +336,7 @@ def _camera(args) -> int:
             repeats=args.repeats,
             replay=not args.no_replay,
         ),
+        args,
     )
 
 
@@ -219,6 +353,7 @@ def _dataset(args) -> int:
             workers=workers,
             repeats=args.repeats,
         ),
+        args,
     )
 
 
@@ -237,6 +372,7 @@ def _env(args) -> int:
             repeats=args.repeats,
             world=args.world or "physics",
         ),
+        args,
     )
 
 
@@ -252,7 +388,7 @@ def _worlds(args) -> int:
         workers=workers_or_cores(args.workers),
         progress=not args.quiet,
     )
-    return _emit("worlds", figures)
+    return _emit("worlds", figures, args)
 
 
 def _eval(args) -> int:
@@ -268,6 +404,7 @@ def _eval(args) -> int:
             workers=worker_counts(args.workers),
             repeats=args.repeats,
         ),
+        args,
     )
 
 
@@ -276,7 +413,9 @@ def _calibrate(args) -> int:
 
     road = checked_road(args.road)
     return _emit(
-        "calibrate", calibrate_bench(_store_or_none(args.data), road=road, repeats=args.repeats)
+        "calibrate",
+        calibrate_bench(_store_or_none(args.data), road=road, repeats=args.repeats),
+        args,
     )
 
 
@@ -284,4 +423,23 @@ def _ingest(args) -> int:
     from twin.perf.bench import ingest_bench
 
     _check_positive(size_mb=args.size_mb)
-    return _emit("ingest", ingest_bench(size_mb=args.size_mb, repeats=args.repeats))
+    return _emit("ingest", ingest_bench(size_mb=args.size_mb, repeats=args.repeats), args)
+
+
+def _report(args) -> int:
+    from twin.perf.report import read_lines, run_benchmarks, write_lines, write_page
+
+    names = listed(args.run)
+    if not args.files and not names:
+        raise UsageError("give JSONL files of twin bench lines, or --run to run benchmarks")
+    unknown = [name for name in names if name not in args.benchmarks]
+    if unknown:
+        raise UsageError(
+            f"--run: no benchmark {', '.join(unknown)}; choose from {', '.join(args.benchmarks)}"
+        )
+    lines = read_lines(args.files)
+    lines += run_benchmarks(names)
+    write_lines(lines, args.lines_out)
+    write_page(lines, args.out, lines_path=str(args.lines_out))
+    print(f"{args.out}: {len(lines)} benchmark lines (kept in {args.lines_out})")
+    return 0

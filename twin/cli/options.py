@@ -64,11 +64,6 @@ def add_world(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_repeats(parser: argparse.ArgumentParser, default: int) -> None:
-    """``--repeats``: how often a benchmark is timed (its figures are the medians), >= 1."""
-    parser.add_argument("--repeats", type=at_least_one, default=default)
-
-
 def at_least_one(text: str) -> int:
     """An integer option that must be >= 1 (argparse names the option when it is not)."""
     try:

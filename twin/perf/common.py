@@ -1,6 +1,6 @@
-"""What the benchmarks share: the commit and machine line, timing, medians, the
-worker counts and scaling of the runners' benchmarks, and the class mix of the
-vehicles spawned on the I-24 mesh."""
+"""What the benchmarks share: the commit, date and machine of each line, timing,
+medians, the worker counts and scaling of the runners' benchmarks, and the class mix
+of the vehicles spawned on the I-24 mesh."""
 
 import os
 import platform
@@ -8,6 +8,8 @@ import resource
 import subprocess
 import time
 from collections.abc import Callable, Sequence
+from datetime import UTC, datetime
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -17,20 +19,74 @@ SIZE_COLUMNS = ("length_m", "width_m", "height_m")
 
 
 def context() -> dict:
-    """Commit and machine, printed with every benchmark line."""
+    """Commit, date and machine, printed with every benchmark line.
+
+    Returns:
+        ``commit`` (short hash, ``None`` outside a git checkout), ``dirty`` (the work
+        tree differs from it), ``date`` (UTC, ISO 8601), ``python``, ``cpus`` (the cores
+        this process may use) and ``machine``: ``cpu`` (model name), ``cores`` (of the
+        machine), ``memory_gb``, ``os``, and the versions of ``numpy`` and ``pybullet``.
+    """
+    commit = _git("rev-parse", "--short", "HEAD") or None
+    return {
+        "commit": commit,
+        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")) if commit else None,
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "python": platform.python_version(),
+        "cpus": cores(),
+        "machine": machine(),
+    }
+
+
+def machine() -> dict:
+    """What the benchmarks ran on: CPU model, its cores, memory [GB], OS and the versions
+    of the libraries the figures depend on (``None`` where unknown)."""
+    return {
+        "cpu": _cpu_model(),
+        "cores": os.cpu_count(),
+        "memory_gb": _memory_gb(),
+        "os": platform.platform(terse=True),
+        "numpy": _version("numpy"),
+        "pybullet": _version("pybullet"),
+    }
+
+
+def _git(*args: str) -> str:
+    """The stripped output of ``git ARGS`` in this checkout ('' where git fails)."""
     try:
-        commit = (
-            subprocess.run(
-                ["git", "rev-parse", "--short", "HEAD"],
-                capture_output=True,
-                text=True,
-                cwd=Path(__file__).parent,
-            ).stdout.strip()
-            or None
+        done = subprocess.run(
+            ["git", *args], capture_output=True, text=True, cwd=Path(__file__).parent
         )
     except OSError:
-        commit = None
-    return {"commit": commit, "python": platform.python_version(), "cpus": cores()}
+        return ""
+    return done.stdout.strip() if done.returncode == 0 else ""
+
+
+def _cpu_model() -> str | None:
+    """The CPU's model name (Linux ``/proc/cpuinfo``), else what ``platform`` says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
+
+
+def _memory_gb() -> float | None:
+    """Physical memory [GB] (POSIX ``sysconf``), ``None`` where it cannot be read."""
+    try:
+        return round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9, 1)
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _version(package: str) -> str | None:
+    """The installed version of ``package``, ``None`` where it is not installed."""
+    try:
+        return metadata.version(package)
+    except metadata.PackageNotFoundError:
+        return None
 
 
 def cores() -> int:
