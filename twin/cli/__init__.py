@@ -61,8 +61,7 @@ class DefaultsFormatter(argparse.HelpFormatter):
         quiet = default in (None, False, [], argparse.SUPPRESS) or "default" in text.lower()
         if quiet or action.option_strings == [] or "%(default)" in text:
             return text
-        shown = default.name if hasattr(default, "name") and default.name else "%(default)s"
-        return f"{text} (default {shown})"
+        return f"{text} (default %(default)s)"
 
 
 def build_parser() -> argparse.ArgumentParser:
