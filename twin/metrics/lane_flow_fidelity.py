@@ -199,7 +199,7 @@ def draw(axes_pairs, axes_lanes, by_arm: dict) -> None:
     if arms:
         first = by_arm[arms[0]]
         recorded = [first["pairs"][pair_key(a, b)]["recorded"] for a, b in PAIRS]
-        axes_pairs.bar(x, recorded, width, color="black", label="recorded")
+        axes_pairs.bar(x, recorded, width, color="black", label="the recording")
         hatches = ("//", "..", "xx", "\\\\", "oo")
         for k, arm in enumerate(arms):
             values = [by_arm[arm]["pairs"][pair_key(a, b)]["simulated"] for a, b in PAIRS]
@@ -221,7 +221,9 @@ def draw(axes_pairs, axes_lanes, by_arm: dict) -> None:
             s = by_arm[arm]
             centres = np.asarray(s["x_edges"][:-1]) + BIN / 2
             if k == 0:
-                ax.plot(centres, s["net_out"][str(lane)]["recorded"], "k-", lw=2, label="recorded")
+                ax.plot(
+                    centres, s["net_out"][str(lane)]["recorded"], "k-", lw=2, label="the recording"
+                )
             ax.plot(
                 centres, s["net_out"][str(lane)]["simulated"], styles[k % len(styles)],
                 color=f"C{k}", ms=4, label=arm,

@@ -107,12 +107,13 @@ def test_the_pictures_are_titled_labelled_and_have_legends():
 
     total = lff.sum_episodes([_section([0.0, 200.0, 400.0], [10, 2], [12, 0], pair=(3, 4))])
     fig, axes = plt.subplots(1, 5)
-    lff.draw(axes[0], axes[1:], {"paper": total, "calibrated": total})
+    lff.draw(axes[0], axes[1:], {"paper": total, "recorded": total})
     for ax in axes:
         assert ax.get_title() and ax.get_ylabel()
         assert ax.get_legend() is not None
         labels = [t.get_text() for t in ax.get_legend().get_texts()]
-        assert labels[0] == "recorded" and "calibrated" in labels
+        # the recording is told apart from the behaviour named recorded
+        assert labels == ["the recording", "paper", "recorded"]
     assert axes[1].get_title() == "net flow out of lane -1 (HOV)"
     plt.close(fig)
     text = lff.markdown({"paper": total, "calibrated": None})
