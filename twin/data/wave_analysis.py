@@ -336,8 +336,11 @@ def _traces(points: pd.DataFrame, road: Road) -> tuple[dict, dict]:
     return dict(zip(index, trace, strict=True)), dict(zip(index, listed, strict=True))
 
 
-def statistics(front: pd.DataFrame, cc: pd.DataFrame, miles: float) -> dict:
-    """The figures of the tables' README for one lane (see the module doc)."""
+def statistics(front: pd.DataFrame, cc: pd.DataFrame, miles: float, *, road: Road) -> dict:
+    """The figures of the tables' README for one lane (see the module doc); front speeds
+    are positive upstream on either carriageway (mile markers grow upstream westbound
+    and fall upstream eastbound)."""
+    upstream = 1.0 if Road.parse(road) is Road.WESTBOUND else -1.0
     sizes = cc.groupby("c_id").size() if len(cc) else pd.Series(dtype=int)
     big = sizes[sizes >= MIN_ROWS].index
     speeds = []
@@ -348,7 +351,7 @@ def statistics(front: pd.DataFrame, cc: pd.DataFrame, miles: float) -> dict:
         slope = np.polyfit(rows["time_front"].astype(float), rows["space_front"].astype(float), 1)[
             0
         ]
-        speeds.append(slope * i24.MILE)
+        speeds.append(upstream * slope * i24.MILE)
     speeds = np.array(speeds)
     gap = (cc["time_tail"].astype(float) - cc["time_front"].astype(float)).to_numpy()
     vehicles = front["v_id"].nunique()

@@ -77,7 +77,7 @@ def read_tables(
 def summary(lanes: dict[int, LaneWaves]) -> dict:
     """``{"lane_N": statistics}`` of every lane."""
     return {
-        f"lane_{w.lane}": statistics(w.front, w.cc, w.miles)
+        f"lane_{w.lane}": statistics(w.front, w.cc, w.miles, road=w.road)
         for _, w in sorted(lanes.items(), key=lambda kv: kv[1].lane)
     }
 
@@ -158,7 +158,7 @@ def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | No
                        facecolors="none", edgecolors=[colour], linewidths=0.7)  # fmt: skip
             ax.scatter(rows["time_tail"], rows["space_tail"], marker="o", s=6, color=colour)
         ax.set_title(f"lane {w.lane}{' (HOV)' if w.lane == 1 else ''}: "
-                     f"{_lane_caption(statistics(w.front, w.cc, w.miles))}",
+                     f"{_lane_caption(statistics(w.front, w.cc, w.miles, road=w.road))}",
                      fontsize=9, loc="left")  # fmt: skip
         ax.set_ylabel("mile marker")
         if w.road is Road.WESTBOUND:

@@ -54,7 +54,7 @@ def test_one_wave_of_known_speed_gives_that_speed_and_one_front_per_vehicle():
     t, x, v, span, x_range = _one_wave(c=5.0)
     vt = wa.virtual_trajectories(t, x, v, span, x_range)
     lane = wa.analyse_lane(vt, Road.WESTBOUND, -2, (x_range[1] - x_range[0]) / i24.MILE)
-    stats = wa.statistics(lane.front, lane.cc, lane.miles)
+    stats = wa.statistics(lane.front, lane.cc, lane.miles, road=Road.WESTBOUND)
     assert stats["waves"] == 1
     assert stats["front_speed_mps"]["median"] == pytest.approx(5.0, abs=0.25)
     # every vehicle that met the wave met it once: one front and one tail each
@@ -68,9 +68,20 @@ def test_one_wave_of_known_speed_gives_that_speed_and_one_front_per_vehicle():
     t, x, v, span, x_range = _one_wave(c=3.0)
     vt = wa.virtual_trajectories(t, x, v, span, x_range)
     lane = wa.analyse_lane(vt, Road.WESTBOUND, -2, 1.0)
-    assert wa.statistics(lane.front, lane.cc, 1.0)["front_speed_mps"]["median"] == (
-        pytest.approx(3.0, abs=0.25)
-    )
+    assert wa.statistics(lane.front, lane.cc, 1.0, road=Road.WESTBOUND)["front_speed_mps"][
+        "median"
+    ] == (pytest.approx(3.0, abs=0.25))
+
+
+def test_front_speeds_are_positive_upstream_on_either_carriageway():
+    """Mile markers grow upstream westbound and fall upstream eastbound: the same wave,
+    moving upstream at 5 m/s, has a front speed of +5 m/s on both."""
+    t, x, v, span, x_range = _one_wave(c=5.0)
+    vt = wa.virtual_trajectories(t, x, v, span, x_range)
+    for road in (Road.WESTBOUND, Road.EASTBOUND):
+        lane = wa.analyse_lane(vt, road, -2, 1.0)
+        speed = wa.statistics(lane.front, lane.cc, 1.0, road=road)["front_speed_mps"]["median"]
+        assert speed == pytest.approx(5.0, abs=0.25), road
 
 
 def test_free_flow_has_no_wave():
@@ -78,7 +89,7 @@ def test_free_flow_has_no_wave():
     vt = wa.virtual_trajectories(t, x, v, span, x_range)
     lane = wa.analyse_lane(vt, Road.WESTBOUND, -3, 1.0)
     assert len(lane.front) == len(lane.tail) == len(lane.cc) == 0
-    stats = wa.statistics(lane.front, lane.cc, 1.0)
+    stats = wa.statistics(lane.front, lane.cc, 1.0, road=Road.WESTBOUND)
     assert stats["waves"] == 0 and stats["front_speed_mps"]["median"] is None
 
 
