@@ -9,6 +9,7 @@ a line asking to report it, and exit status 70.
 """
 
 import argparse
+import re
 import sys
 import traceback
 
@@ -58,10 +59,16 @@ class DefaultsFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
         default = action.default
-        quiet = default in (None, False, [], argparse.SUPPRESS) or "default" in text.lower()
-        if quiet or action.option_strings == [] or "%(default)" in text:
+        unset = default is None or default is False or default is argparse.SUPPRESS
+        if unset or default == [] or not action.option_strings or says_default(text):
             return text
         return f"{text} (default %(default)s)"
+
+
+def says_default(text: str) -> bool:
+    """Whether a help line already gives its option's default (the word, not
+    "defaults")."""
+    return re.search(r"\bdefault\b", text) is not None
 
 
 def build_parser() -> argparse.ArgumentParser:

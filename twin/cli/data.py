@@ -42,7 +42,7 @@ def _register_ingest(commands) -> None:
         "--margin",
         type=float,
         default=None,
-        help="metres kept beyond each end of the segment (>= 400; default: all)",
+        help="kept beyond each end of the segment [m] (>= 400; default: all)",
     )
     p.add_argument("--bucket", type=float, default=60.0, help="time per Parquet row group [s]")
     add_quiet(p)
@@ -136,7 +136,11 @@ def _register_synth(commands) -> None:
         help="time recorded [min] (default: the preset's: 16 for A and B, 20 for S, 30 for C, D "
         "and E)",
     )  # fmt: skip
-    add_start(p, "first recorded time (unix or ISO 8601 with offset)")
+    add_start(
+        p,
+        "first recorded time, unix or ISO 8601 with offset (default: the preset's, CST "
+        "2022-11-30 06:39:30 for A and B, 06:35:50 for the others)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed of the drivers and demand")
     add_quiet(p)
     p.set_defaults(handler=_synth)
@@ -220,13 +224,16 @@ def _register_waves(commands) -> None:
     p.add_argument(
         "--minutes", type=float, default=None, help="time span [min] (default: to the data's end)"
     )
-    p.add_argument("--out", type=Path, default=None, help="folder to write (replaced as a whole)")
+    p.add_argument(
+        "--out", type=Path, default=None,
+        help="folder to write (replaced as a whole; no default: required unless --tables)",
+    )  # fmt: skip
     p.add_argument(
         "--tables",
         type=Path,
         default=None,
         help="summarise a folder of lane_N tables instead (e.g. the I-24 MOTION team's "
-        "published tables of the real 2022-11-22 morning)",
+        "published tables of the real 2022-11-22 morning; default: none, analyse STORE)",
     )
     p.add_argument(
         "--miles", type=float, default=None,

@@ -37,7 +37,7 @@ def register(commands) -> None:
     )
     add_workers(p, "processes (local) or CPUs (Ray) to use (default: the cores available)")
     add_engine(p)
-    add_config(p, "dataset TOML configuration")
+    add_config(p, "dataset TOML configuration (default: none, the default settings)")
     add_set(p, "any other setting, e.g. --set filters.min_height_px=25 (repeatable)")
     add_quiet(p)
     p.set_defaults(handler=_dataset)

@@ -57,7 +57,8 @@ def add_eval_options(p) -> None:
         default=None,
         help="ego controllers run on every episode, comma-separated: human, follower_stopper, "
         "pi_saturation, acc or module:function (the benchmark: paired against human; "
-        "default behaviour then: calibrated where the store is calibrated, else paper)",
+        "default behaviour then: calibrated where the store is calibrated, else paper; "
+        "default: none, the behaviours are compared)",
     )
     add_set(
         p,

@@ -87,7 +87,10 @@ def add_quiet(parser: argparse.ArgumentParser, help: str | None = QUIET_HELP) ->
     parser.add_argument("--quiet", action="store_true", help=help)
 
 
-def add_config(parser: argparse.ArgumentParser, help: str = "TOML configuration file") -> None:
+def add_config(
+    parser: argparse.ArgumentParser,
+    help: str = "TOML configuration file (default: none, the preset's settings)",
+) -> None:
     """``--config``: a TOML file of settings."""
     parser.add_argument("--config", type=Path, default=None, help=help)
 
@@ -110,7 +113,10 @@ def add_engine(parser: argparse.ArgumentParser) -> None:
         "--engine", choices=["local", "ray"], default="local",
         help="local: processes on this machine; ray: Ray tasks, here or on a cluster",
     )  # fmt: skip
-    parser.add_argument("--ray-address", default=None, help="Ray cluster to join (--engine ray)")
+    parser.add_argument(
+        "--ray-address", default=None,
+        help="Ray cluster to join (--engine ray; default: a local Ray started for the run)",
+    )  # fmt: skip
 
 
 def add_start(parser: argparse.ArgumentParser, help: str) -> None:
@@ -120,8 +126,11 @@ def add_start(parser: argparse.ArgumentParser, help: str) -> None:
 
 def add_window(parser: argparse.ArgumentParser, from_help: str, until_help: str) -> None:
     """``--from`` and ``--until`` (``args.t_from``, ``args.t_until``): a time window."""
-    parser.add_argument("--from", dest="t_from", default=None, help=from_help)
-    parser.add_argument("--until", dest="t_until", default=None, help=until_help)
+    parser.add_argument(
+        "--from", dest="t_from", default=None, help=f"{from_help} (default: the data's start)"
+    )
+    parser.add_argument("--until", dest="t_until", default=None,
+                        help=f"{until_help} (default: the data's end)")  # fmt: skip
 
 
 def add_map(parser: argparse.ArgumentParser) -> None:

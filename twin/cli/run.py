@@ -30,11 +30,25 @@ def _register_run(commands) -> None:
     p.add_argument("--scenario", choices=["A", "B"], default=None, help="paper preset (default B)")
     add_config(p)
     add_data(p)
-    p.add_argument("--road", default=None, help="eastbound or westbound")
-    p.add_argument("--lane", type=int, default=None, help="desired ego lane, -1 (HOV) .. -4")
-    p.add_argument("--x", type=float, default=None, help="desired ego x [m] along travel")
-    p.add_argument("--time", default=None, help="desired ego time: unix or ISO 8601 with offset")
-    p.add_argument("--duration", type=float, default=None, help="episode length t_max [s]")
+    p.add_argument(
+        "--road", default=None, help="eastbound or westbound (default: the preset's; B westbound)"
+    )
+    p.add_argument(
+        "--lane", type=int, default=None,
+        help="desired ego lane, -1 (HOV) .. -4 (default: the preset's; B -1)",
+    )  # fmt: skip
+    p.add_argument(
+        "--x", type=float, default=None,
+        help="desired ego x [m] along travel (default: the preset's; B 700)",
+    )  # fmt: skip
+    p.add_argument(
+        "--time", default=None,
+        help="desired ego time: unix or ISO 8601 with offset (default: the preset's; "
+        "2022-11-30T06:45:50-06:00)",
+    )  # fmt: skip
+    p.add_argument(
+        "--duration", type=float, default=None, help="episode length t_max [s] (default 30)"
+    )
     p.add_argument(
         "--dt", type=float, default=None, help="step [s] (default 0.01 physics, 0.1 kinematic)"
     )
@@ -43,7 +57,10 @@ def _register_run(commands) -> None:
         "--seed", type=int, default=None,
         help="seed of the visible drivers' draw (default: the preset's, 0)",
     )  # fmt: skip
-    p.add_argument("--vel-default", type=float, default=None, help="default desired speed [m/s]")
+    p.add_argument(
+        "--vel-default", type=float, default=None,
+        help="default desired speed [m/s] (default 31.29, the posted 70 mph)",
+    )  # fmt: skip
     p.add_argument(
         "--behaviour",
         choices=["auto", "paper", "calibrated", "recorded"],
@@ -51,18 +68,29 @@ def _register_run(commands) -> None:
         help="how the visible vehicles drive (default auto: calibrated where the store has "
         "been calibrated with 'twin calibrate', else paper)",
     )
-    p.add_argument("--w-visible", type=float, default=None, help="visible window each side [m]")
-    p.add_argument("--w-ghost", type=float, default=None, help="ghost window beyond it [m]")
     p.add_argument(
-        "--ghost-smoothing", type=float, default=None, help="lag on ghost speeds [s] (0: off)"
+        "--w-visible", type=float, default=None, help="visible window each side [m] (default 150)"
+    )
+    p.add_argument(
+        "--w-ghost", type=float, default=None, help="ghost window beyond it [m] (default 50)"
+    )
+    p.add_argument(
+        "--ghost-smoothing",
+        type=float,
+        default=None,
+        help="lag on ghost speeds [s] (default 0: off)",
     )
     p.add_argument(
         "--ego-controller",
         default=None,
         help="module:function driving the ego, or a baseline: twin.controllers:human, "
-        "follower_stopper, pi_saturation or acc (parameters: --set controller.NAME.KEY=V)",
+        "follower_stopper, pi_saturation or acc (parameters: --set controller.NAME.KEY=V; "
+        "default: none, the traffic manager drives the ego)",
     )
-    p.add_argument("--bev-time", type=float, default=None, help="time of bev.png [s after t0]")
+    p.add_argument(
+        "--bev-time", type=float, default=None,
+        help="time of bev.png [s after t0] (default: half the episode)",
+    )  # fmt: skip
     p.add_argument("--bev-video", action="store_true", default=None, help="also write bev.mp4")
     add_set(p, "any other setting, e.g. --set traffic.hov_share=0.2 (repeatable)")
     p.add_argument(
