@@ -10,7 +10,7 @@ from mapgen.semantics import semantic_classes
 from sensors.camera import Frame
 from twin.core.atomic import atomic_file
 
-DEPTH_RANGE = (1.0, 150.0)  # [m] of the depth colour map (log scale)
+DEPTH_TICKS = (0.5, 1, 2, 5, 10, 20, 50, 100, 200, 300)  # [m] on the depth colour bar
 
 
 def frame_vehicles(frame: Frame) -> np.ndarray:
@@ -27,14 +27,8 @@ def frame_picture(frame: Frame, out: Path, *, labels: bool = False) -> Path:
         ``out``.
     """
     if labels:
-        import matplotlib.pyplot as plt
-
-        figure = labels_figure(frame)
-        try:
-            with atomic_file(out) as tmp:
-                figure.savefig(tmp, dpi=100, format="png")
-        finally:
-            plt.close(figure)
+        with atomic_file(out) as tmp:
+            labels_figure(frame).savefig(tmp, dpi=100, format="png")
         return Path(out)
     with atomic_file(out) as tmp:
         if not cv2.imwrite(str(tmp), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR)):
@@ -46,27 +40,30 @@ def labels_figure(frame: Frame):
     """A frame and its labels for people (a matplotlib figure), 2 x 2 panels, each titled:
     RGB; planar depth with a colour bar in metres (log scale); the semantic classes in the
     class table's label colours with a legend of the classes in view; the instances, one
-    colour per vehicle."""
+    colour per vehicle. Made without pyplot, so drawing it leaves the caller's
+    matplotlib backend and figures alone."""
     import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
     from matplotlib.patches import Patch
+    from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 
     h, w = frame.rgb.shape[:2]
-    fig, axes = plt.subplots(2, 2, figsize=(2 * w / 100 + 3.2, 2 * h / 100 + 1.0),
-                             layout="constrained")  # fmt: skip
+    fig = Figure(figsize=(2 * w / 100 + 3.2, 2 * h / 100 + 1.0), layout="constrained")
+    axes = fig.subplots(2, 2)
     (rgb, depth), (semantic, instance) = axes
     rgb.imshow(frame.rgb)
     rgb.set_title(f"RGB: camera {frame.camera.name} ({frame.renderer} renderer)")
-    cmap = matplotlib.colormaps["cividis"].with_extremes(bad="black", over="black")
+    near, far = frame.camera.near, frame.camera.far  # [m] depth is measured within them
+    cmap = matplotlib.colormaps["cividis"].with_extremes(bad="black")
     shown = depth.imshow(np.where(np.isfinite(frame.depth), frame.depth, np.nan), cmap=cmap,
-                         norm=LogNorm(*DEPTH_RANGE, clip=False))  # fmt: skip
-    depth.set_title("depth, planar (black: nothing within range)")
+                         norm=LogNorm(near, far))  # fmt: skip
+    depth.set_title(f"depth, planar (black: nothing within {far:g} m)")
     bar = fig.colorbar(shown, ax=depth, label="depth [m] (log scale)", shrink=0.9)
-    ticks = [t for t in (1, 2, 5, 10, 20, 50, 100, 150) if DEPTH_RANGE[0] <= t <= DEPTH_RANGE[1]]
-    bar.set_ticks(ticks, labels=[f"{t:g}" for t in ticks])
+    ticks = [t for t in DEPTH_TICKS if near <= t <= far]
+    bar.ax.yaxis.set_major_locator(FixedLocator(ticks))
+    bar.ax.yaxis.set_major_formatter(FixedFormatter([f"{t:g}" for t in ticks]))
+    bar.ax.yaxis.set_minor_locator(NullLocator())
     semantic.imshow(colour_semantic(frame.semantic))
     semantic.set_title("semantic classes")
     present = set(np.unique(frame.semantic).tolist())
@@ -83,17 +80,6 @@ def labels_figure(frame: Frame):
         ax.set_yticks([])
     fig.suptitle(f"{frame.sim_time:.2f} s after t0, {w} x {h} px")
     return fig
-
-
-def colour_depth(depth: np.ndarray) -> np.ndarray:
-    """(h, w, 3) uint8 RGB: near yellow to far purple (log scale), black where nothing."""
-    lo, hi = np.log(DEPTH_RANGE)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scaled = (np.log(np.clip(depth, *DEPTH_RANGE)) - lo) / (hi - lo)
-    grey = np.nan_to_num(255.0 * (1.0 - scaled)).astype(np.uint8)
-    rgb = cv2.cvtColor(cv2.applyColorMap(grey, cv2.COLORMAP_PLASMA), cv2.COLOR_BGR2RGB)
-    rgb[~np.isfinite(depth)] = 0
-    return rgb
 
 
 def colour_semantic(semantic: np.ndarray) -> np.ndarray:

@@ -21,25 +21,31 @@ def _frame():
     depth[24:] = np.linspace(40.0, 2.0, h - 24)[:, None]
     return SimpleNamespace(
         rgb=np.zeros((h, w, 3), np.uint8), depth=depth, semantic=semantic, instance=instance,
-        camera=SimpleNamespace(name="front"), renderer="tiny", sim_time=12.5,
+        camera=SimpleNamespace(name="front", near=0.5, far=300.0), renderer="tiny",
+        sim_time=12.5,
     )  # fmt: skip
 
 
 def test_labels_figure_titles_every_panel_and_explains_its_colours():
     fig = labels_figure(_frame())
-    try:
-        rgb, depth, semantic, instance = fig.axes[:4]
-        assert rgb.get_title() == "RGB: camera front (tiny renderer)"
-        assert depth.get_title().startswith("depth")
-        assert semantic.get_title() == "semantic classes"
-        assert instance.get_title() == "instances: one colour per vehicle (1 in view)"
-        assert fig.get_suptitle() == "12.50 s after t0, 64 x 48 px"
-        assert fig.axes[4].get_ylabel() == "depth [m] (log scale)"  # the colour bar
-        names = {c.class_id: c.name for c in semantic_classes()}
-        legend = [t.get_text() for t in semantic.get_legend().get_texts()]
-        assert legend == [names[0], names[1], names[9]]  # the classes in view, in id order
-    finally:
-        plt.close(fig)
+    rgb, depth, semantic, instance = fig.axes[:4]
+    assert rgb.get_title() == "RGB: camera front (tiny renderer)"
+    assert semantic.get_title() == "semantic classes"
+    assert instance.get_title() == "instances: one colour per vehicle (1 in view)"
+    assert fig.get_suptitle() == "12.50 s after t0, 64 x 48 px"
+    bar = fig.axes[4]
+    assert bar.get_ylabel() == "depth [m] (log scale)"
+    fig.canvas.draw()  # the ticks as drawn, after the layout
+    ticks = [t.get_text() for t in bar.get_yticklabels()]
+    assert ticks == ["0.5", "1", "2", "5", "10", "20", "50", "100", "200", "300"]
+    assert not bar.yaxis.get_minorticklabels() or not any(
+        t.get_text() for t in bar.yaxis.get_minorticklabels()
+    )
+    assert depth.get_title() == "depth, planar (black: nothing within 300 m)"
+    names = {c.class_id: c.name for c in semantic_classes()}
+    legend = [t.get_text() for t in semantic.get_legend().get_texts()]
+    assert legend == [names[0], names[1], names[9]]  # the classes in view, in id order
+    assert plt.get_fignums() == []  # drawn without pyplot: the caller's figures untouched
 
 
 def test_plain_frames_stay_pixel_for_pixel(tmp_path):
