@@ -29,6 +29,7 @@ from twin import __version__
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
 from twin.core.paths import cache_dir
+from twin.core.timeutil import steps_per_sample
 from twin.cosim import plots
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
@@ -114,7 +115,7 @@ class RunResult:
 #: What each entry of a run folder holds, in the order ``twin run`` lists them.
 FOLDER_CONTENTS = {
     "config.toml": "the resolved settings (twin run --config repeats the run)",
-    "trajectories.parquet": "every vehicle every step: the ego, simulated vehicles, ghosts",
+    "trajectories.parquet": "the ego and simulated vehicles every step, ghosts at the log rate",
     "metrics.json": "fidelity to the recording, counts, energy, control figures, timing",
     "timespace.png": "time-space diagram: recorded traffic, simulated vehicles, the ego",
     "bev.png": "bird's-eye view of the visible window and ghost cells",
@@ -196,7 +197,12 @@ def run_episode(
     ego = figures.pop("_ego_speed")
     name = config.ego_controller
     if controller is not None:
-        name = getattr(controller, "__qualname__", type(controller).__qualname__)
+        kind = (
+            controller
+            if callable(controller) and hasattr(controller, "__qualname__")
+            else (type(controller))
+        )
+        name = f"{kind.__module__}:{kind.__qualname__}"
     return RunResult(folder.out, figures, ego, name)
 
 
@@ -289,7 +295,11 @@ def _write_folder(
         recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
     )
     bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
-    ghost_times = np.unique(ghosts["time"].to_numpy()) if len(ghosts) else np.zeros(1)
+    if len(ghosts):
+        ghost_times = np.unique(ghosts["time"].to_numpy())
+    else:  # no ghost logged: the vehicles' steps, at the rate ghosts would have been
+        every = steps_per_sample(cfg.ghost_log_rate, cfg.dt)
+        ghost_times = np.unique(vehicles["time"].to_numpy())[::every]
     at = float(ghost_times[np.argmin(np.abs(ghost_times - min(bev_time, sim_s)))])
     scene = _bev_scene(vehicles, ghosts, windows, arrays, at)
     plots.bev_plot(scene, cfg.road, sim.t0, title, tmp / "bev.png")

@@ -17,7 +17,6 @@ from twin.data.empirical import EmpiricalTraffic
 from twin.metrics import economy
 from twin.metrics import fidelity as metrics
 from twin.physics.energy import RAV4_2019
-from twin.runners.run import FOLDER_CONTENTS
 
 COLUMNS = [
     "time", "id", "record_id", "role", "road", "lane", "x", "y", "z", "speed", "accel",
@@ -62,8 +61,20 @@ def test_twin_run_names_the_egos_controller_and_lists_what_it_wrote(scene_store,
     names = [line.split()[0] for line in listed]
     assert names == ["config.toml", "trajectories.parquet", "metrics.json", "timespace.png",
                      "bev.png"]  # fmt: skip
-    assert names == [p for p in FOLDER_CONTENTS if (out / p).exists()]
     assert all(len(line.split(maxsplit=1)) == 2 for line in listed)  # each says what it holds
+
+
+def test_a_run_without_ghosts_still_has_its_birds_eye_video(tmp_path):
+    """With no ghost ever logged, the pictures take the vehicles' steps at the ghost rate."""
+    store = make_store(tmp_path / "alone", [vehicle(1, -2, EGO_X, 20.0)])
+    out = tmp_path / "alone_run"
+    assert main(run_args(store, out, "--bev-video", "--world", "kinematic")) == 0
+    ghosts = pd.read_parquet(out / "trajectories.parquet").query("role == 'ghost'")
+    assert ghosts.empty
+    video = cv2.VideoCapture(str(out / "bev.mp4"))
+    frames = int(video.get(cv2.CAP_PROP_FRAME_COUNT))
+    video.release()
+    assert frames == 21  # 2 s at 10 Hz, both ends
 
 
 def test_the_run_folder_holds_every_output(run_folder):
