@@ -266,7 +266,7 @@ def _waves(args) -> int:
         "road": road,
         "start_unix": first,
         "minutes": args.minutes,
-        "title": f"{store.path.name}, {road}: waves at 15 mph",
+        "title": f"{args.store or 'the embedded data'}, {road}: waves at 15 mph",
     }
     out = tables.write_tables(lanes, args.out, meta)
     print(

@@ -43,9 +43,13 @@ def parse_time(value: str | float) -> float:
     return t
 
 
-def format_local(t: float) -> str:
-    """``YYYY-MM-DD HH:MM:SS`` in I-24 local time (CST) for unix seconds ``t``."""
-    return datetime.fromtimestamp(float(t), CST).strftime("%Y-%m-%d %H:%M:%S")
+def format_local(t: float, *, tenths: bool = False) -> str:
+    """``YYYY-MM-DD HH:MM:SS`` in I-24 local time (CST) for unix seconds ``t``; with
+    ``tenths``, rounded to a tenth of a second and shown (``HH:MM:SS.s``)."""
+    if not tenths:
+        return datetime.fromtimestamp(float(t), CST).strftime("%Y-%m-%d %H:%M:%S")
+    when = datetime.fromtimestamp(round(float(t), 1), CST)
+    return f"{when:%Y-%m-%d %H:%M:%S}.{when.microsecond // 100_000}"
 
 
 def local_days(t: np.ndarray) -> list[str]:

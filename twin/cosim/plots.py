@@ -81,8 +81,8 @@ def timespace_figure(
     points = None
     for ax, (label, rows, lane) in zip(axes, panels, strict=True):
         ax.fill_between(
-            windows["time"], windows["x0"], windows["x1"], color="0.5", alpha=0.18, lw=0,
-            label="visible window",
+            windows["time"], windows["x0"], windows["x1"], color=COLOURS["visible_window"],
+            alpha=0.15, lw=0, label="visible window",
         )  # fmt: skip
         points = ax.scatter(
             rec_t[rows], rec["x"][rows], c=rec["speed"][rows], s=1.5, cmap=SPEED_CMAP,
@@ -196,8 +196,7 @@ class BevFigure:
                                 for lane in i24.LANES])  # fmt: skip
         ax.tick_params(axis="y", labelsize=8)
         ax.set_ylabel("lane")
-        right = ax.secondary_yaxis("right")
-        right.set_ylabel("y from the median [m]")
+        ax.secondary_yaxis("right").set_ylabel("y from the median [m]")
         ax.legend(
             handles=[
                 Patch(facecolor=COLOURS["visible_window"], alpha=0.3, label="visible window"),

@@ -1,7 +1,6 @@
 """Time-space diagrams of recorded traffic, one panel per lane, as in the paper's figures."""
 
 import os
-from datetime import datetime
 from pathlib import Path
 
 import matplotlib
@@ -86,8 +85,7 @@ def time_space_plot(
 
 def clock(t: float) -> str:
     """``YYYY-MM-DD HH:MM:SS.s CST`` of unix seconds ``t`` (I-24 local time), for labels."""
-    when = datetime.fromtimestamp(round(float(t), 1), CST)
-    return f"{when:%Y-%m-%d %H:%M:%S}.{when.microsecond // 100_000} CST"
+    return f"{format_local(t, tenths=True)} CST"
 
 
 def save_figure(fig, out: str | os.PathLike, *, dpi: int = 100) -> Path:

@@ -123,8 +123,10 @@ WAVE_COLOURS = ("#D55E00", "#CC79A7", "#009E73", "#E69F00", "#56B4E9")
 
 def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | None = None):
     """Each lane's virtual trajectories coloured by speed, with the fronts (hollow
-    triangles) and tails (filled circles) of its waves, one colour per wave; a matplotlib
-    figure. Speeds in m/s with mph beside them (the I-24 tables' unit).
+    triangles) and tails (filled circles) of its waves, a colour per wave; a matplotlib
+    figure, made without pyplot (the caller's backend and figures are left alone). Lanes
+    are numbered as the I-24 tables number them (1 the HOV lane, the twin's -1). Speeds
+    in m/s with mph beside them (the tables' unit).
 
     Args:
         lanes: the lanes' tables and virtual trajectories.
@@ -132,17 +134,14 @@ def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | No
         start_unix: [s] unix time of the span's start, to label the time axis with the
             clock; ``None``: seconds from the start of the span.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
     from twin.data.plot import SPEED_CMAP, SPEED_RANGE, clock
 
     shown = sorted(lanes.values(), key=lambda w: w.lane)
-    fig, axes = plt.subplots(len(shown), 1, figsize=(12, 2.6 * len(shown) + 1.4),
-                             sharex=True, constrained_layout=True, squeeze=False)  # fmt: skip
+    fig = Figure(figsize=(12, 2.6 * len(shown) + 1.4), layout="constrained")
+    axes = fig.subplots(len(shown), 1, sharex=True, squeeze=False)
     points = None
     for ax, w in zip(axes[:, 0], shown, strict=True):
         vt = w.trajectories
@@ -157,7 +156,8 @@ def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | No
             ax.scatter(rows["time_front"], rows["space_front"], marker="^", s=10,
                        facecolors="none", edgecolors=[colour], linewidths=0.7)  # fmt: skip
             ax.scatter(rows["time_tail"], rows["space_tail"], marker="o", s=6, color=colour)
-        ax.set_title(f"lane {w.lane}{' (HOV)' if w.lane == 1 else ''}: "
+        twin_lane = f"twin lane {-w.lane}{', HOV' if w.lane == 1 else ''}"
+        ax.set_title(f"lane {w.lane} ({twin_lane}): "
                      f"{_lane_caption(statistics(w.front, w.cc, w.miles, road=w.road))}",
                      fontsize=9, loc="left")  # fmt: skip
         ax.set_ylabel("mile marker")
@@ -171,7 +171,7 @@ def waves_figure(lanes: dict[int, LaneWaves], title: str, start_unix: float | No
             Line2D([], [], ls="", marker="o", color="black",
                    label=f"wave tail: speeding up through {REFERENCE_MPH:g} mph"),
             Line2D([], [], ls="", marker="s", color=WAVE_COLOURS[0],
-                   label="one colour per wave"),
+                   label=f"a colour per wave ({len(WAVE_COLOURS)} colours, repeated in turn)"),
         ],
         loc="upper right", fontsize=8, framealpha=0.9,
     )  # fmt: skip

@@ -198,22 +198,20 @@ def test_the_waves_figure_says_no_wave_and_has_a_legend_and_both_speed_units():
     calm = wa.analyse_lane(wa.virtual_trajectories(t, x, v, span, x_range), Road.WESTBOUND,
                            -3, miles)  # fmt: skip
     fig = tables.waves_figure({2: wave, 3: calm}, "two lanes", start_unix=1669812350.0)
-    try:
-        titles = [ax.get_title(loc="left") for ax in fig.axes[:2]]
-        assert titles[0].startswith("lane 2: 1 wave, ") and "m/s (" in titles[0]
-        assert titles[1] == "lane 3: no wave"
-        assert not any("None" in title for title in titles)
-        legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
-        assert legend == [
-            "wave front: slowing through 15 mph",
-            "wave tail: speeding up through 15 mph",
-            "one colour per wave",
-        ]
-        assert fig.axes[1].get_xlabel() == "time [s] after 2022-11-30 06:45:50.0 CST"
-        assert all(ax.get_ylabel() == "mile marker" for ax in fig.axes[:2])
-        labels = {ax.get_ylabel() for ax in fig.axes[2:]} | {
-            child.get_ylabel() for ax in fig.axes[2:] for child in ax.child_axes
-        }
-        assert {"speed [m/s]", "speed [mph]"} <= labels
-    finally:
-        plt.close(fig)
+    titles = [ax.get_title(loc="left") for ax in fig.axes[:2]]
+    assert titles[0].startswith("lane 2 (twin lane -2): 1 wave, ") and "m/s (" in titles[0]
+    assert titles[1] == "lane 3 (twin lane -3): no wave"
+    assert not any("None" in title for title in titles)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend == [
+        "wave front: slowing through 15 mph",
+        "wave tail: speeding up through 15 mph",
+        "a colour per wave (5 colours, repeated in turn)",
+    ]
+    assert fig.axes[1].get_xlabel() == "time [s] after 2022-11-30 06:45:50.0 CST"
+    assert all(ax.get_ylabel() == "mile marker" for ax in fig.axes[:2])
+    labels = {ax.get_ylabel() for ax in fig.axes[2:]} | {
+        child.get_ylabel() for ax in fig.axes[2:] for child in ax.child_axes
+    }
+    assert {"speed [m/s]", "speed [mph]"} <= labels
+    assert plt.get_fignums() == []  # drawn without pyplot: the caller's figures untouched
