@@ -8,7 +8,15 @@ import pytest
 from twin.cli import main
 from twin.core.paths import REPO_ROOT
 from twin.perf.common import context
-from twin.perf.report import ReportError, document, figures, read_lines, unit_of
+from twin.perf.report import (
+    ReportError,
+    document,
+    figures,
+    met,
+    read_lines,
+    replace_lines,
+    unit_of,
+)
 
 MACHINE = {
     "cpu": "Test CPU",
@@ -54,10 +62,14 @@ PHYSICS = {
 
 def test_every_figure_becomes_a_row_with_its_unit_target_and_run():
     page = document([QUERY, PHYSICS])
-    assert "| query | `snapshot_median_us` | 21.3 | µs | <= 200 | 1 |" in page
-    assert "| query | `vehicles_in_window` | 34 | count | - | 1 |" in page
-    assert "| physics | `vehicles_100.step_ms` | 1.54 | ms | >= 10 x | 2 |" in page
-    assert "| physics | `vehicles_200.real_time_factor` | 3.8 | x real time | >= 5 x | 2 |" in page
+    assert "| query | `snapshot_median_us` | 21.3 | µs | <= 200 | yes | 1 |" in page
+    assert "| query | `vehicles_in_window` | 34 | count | - | - | 1 |" in page
+    # a group's target in another unit is shown, and judged only where its unit is the figure's
+    assert "| physics | `vehicles_100.step_ms` | 1.54 | ms | >= 10 x | - | 2 |" in page
+    assert (
+        "| physics | `vehicles_200.real_time_factor` | 3.8 | x real time | >= 5 x | **no** | 2 |"
+        in page
+    )
     # settings, context and the single repeats are not figures
     names = [f.name for f in figures(PHYSICS, 2)]
     assert names == [
@@ -99,6 +111,30 @@ def test_a_malformed_line_is_named_by_file_and_line(tmp_path, line, message):
     with pytest.raises(ReportError, match=message) as error:
         read_lines([path])
     assert f"{path}:3" in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ("target", "value", "unit", "expected"),
+    [
+        ("<= 200", 31.0, "µs", True),
+        ("<= 0.3", 0.45, "ms", False),
+        (">= 10 x (<= 1 ms)", 0.9, "ms", True),
+        (">= 10 x (<= 1 ms)", 4.6, "x real time", False),
+        (">= 5 x", 4.0, "ms", None),
+        (None, 1.0, "ms", None),
+    ],
+)
+def test_a_figure_is_judged_by_the_bound_in_its_unit(target, value, unit, expected):
+    assert met(target, value, unit) is expected
+
+
+def test_refreshing_some_benchmarks_keeps_the_others_in_their_places():
+    old = [QUERY, PHYSICS, {**QUERY, "bench": "synth"}]
+    new_physics, new_map = {**PHYSICS, "commit": "0000000"}, {**QUERY, "bench": "map"}
+    merged = replace_lines(old, [new_map, new_physics])
+    assert [(line["bench"], line["commit"]) for line in merged] == [
+        ("query", "abc1234"), ("physics", "0000000"), ("synth", "abc1234"), ("map", "abc1234")
+    ]  # fmt: skip
 
 
 def test_twin_bench_report_writes_the_page_and_keeps_the_lines(tmp_path, capsys):

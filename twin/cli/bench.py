@@ -427,7 +427,13 @@ def _ingest(args) -> int:
 
 
 def _report(args) -> int:
-    from twin.perf.report import read_lines, run_benchmarks, write_lines, write_page
+    from twin.perf.report import (
+        read_lines,
+        replace_lines,
+        run_benchmarks,
+        write_lines,
+        write_page,
+    )
 
     names = listed(args.run)
     if not args.files and not names:
@@ -437,8 +443,11 @@ def _report(args) -> int:
         raise UsageError(
             f"--run: no benchmark {', '.join(unknown)}; choose from {', '.join(args.benchmarks)}"
         )
-    lines = read_lines(args.files)
-    lines += run_benchmarks(names)
+    if args.files:
+        lines = read_lines(args.files)
+    else:  # refresh some benchmarks of the kept lines, keeping the others
+        lines = read_lines([args.lines_out]) if Path(args.lines_out).is_file() else []
+    lines = replace_lines(lines, run_benchmarks(names))
     write_lines(lines, args.lines_out)
     write_page(lines, args.out, lines_path=str(args.lines_out))
     print(f"{args.out}: {len(lines)} benchmark lines (kept in {args.lines_out})")

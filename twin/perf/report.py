@@ -21,9 +21,10 @@ from pathlib import Path
 from twin.core.atomic import atomic_file
 from twin.core.errors import TwinError
 
-#: The benchmarks cheap enough to rerun for the page (each well under a few minutes on
-#: two cores), in the order they run; the others (``camera``, ``dataset``, ``eval``,
-#: ``ingest``, ``worlds``) are run by hand and their lines passed to the report.
+#: What ``--run`` without names runs: the benchmarks well under a few minutes each on two
+#: cores, in that order. ``camera``, ``ingest`` and ``eval`` take a few minutes more and
+#: are named to run; ``dataset`` and ``worlds`` are long and are run by hand, their lines
+#: passed to the report.
 QUICK = ("query", "synth", "map", "physics", "traffic", "run", "calibrate", "env")
 
 #: Keys of a line that describe the run, not a figure.
@@ -212,6 +213,28 @@ def _targets(line: dict) -> dict[str, str]:
     return targets
 
 
+_BOUND = re.compile(r"(<=|>=|<|>)\s*(-?[\d.]+)\s*([^\s()]*)")
+
+
+def met(target: str | None, value: float, unit: str) -> bool | None:
+    """Whether ``value`` meets ``target``: a bound such as ``<= 0.3``, or several, each
+    with its unit (``>= 10 x (<= 1 ms)``: a real-time factor of 10 x, or a 1 ms step).
+    The bound whose unit starts the figure's unit is used, else the only bound without a
+    unit; ``None`` where no bound applies (no target, or none in the figure's unit)."""
+    if target is None:
+        return None
+    bounds = _BOUND.findall(target)
+    chosen = [b for b in bounds if b[2] and unit.split()[0] == b[2]]
+    if not chosen:
+        chosen = [b for b in bounds if not b[2]] if len(bounds) == 1 else []
+    if not chosen:
+        return None
+    sign, number, _ = chosen[0]
+    limit = float(number)
+    return {"<=": value <= limit, ">=": value >= limit, "<": value < limit,
+            ">": value > limit}[sign]  # fmt: skip
+
+
 def _target(targets: dict[str, str], path: tuple[str, ...]) -> str | None:
     """The target of the figure at ``path``: its own, else that of a key above it."""
     for k in range(len(path), 0, -1):
@@ -268,14 +291,15 @@ def document(
         "",
         "## Figures",
         "",
-        "| benchmark | figure | median | unit | target | run |",
-        "|---|---|---|---|---|---|",
+        "| benchmark | figure | median | unit | target | met | run |",
+        "|---|---|---|---|---|---|---|",
     ]
     for run, line in enumerate(lines, start=1):
         for f in figures(line, run):
+            verdict = {True: "yes", False: "**no**", None: "-"}[met(f.target, f.value, f.unit)]
             out.append(
                 f"| {f.bench} | `{f.name}` | {_number(f.value)} | {f.unit} | "
-                f"{_cell(f.target)} | {f.run} |"
+                f"{_cell(f.target)} | {verdict} | {f.run} |"
             )
     out += [
         "",
@@ -303,6 +327,24 @@ def document(
             f"{_cell(system)} | {_cell(python)} | {_cell(numpy)} | {_cell(pybullet)} |"
         )
     return "\n".join(out) + "\n"
+
+
+def replace_lines(lines: Sequence[dict], new: Sequence[dict]) -> list[dict]:
+    """``lines`` with each benchmark that ``new`` measured again replaced by its new
+    line(s), in its old place; benchmarks new to ``lines`` follow at the end."""
+    fresh: dict[str, list[dict]] = {}
+    for line in new:
+        fresh.setdefault(line["bench"], []).append(line)
+    out, placed = [], set()
+    for line in lines:
+        bench = line["bench"]
+        if bench not in fresh:
+            out.append(line)
+        elif bench not in placed:
+            out += fresh[bench]
+            placed.add(bench)
+    out += [line for bench, group in fresh.items() if bench not in placed for line in group]
+    return out
 
 
 def write_page(lines: Sequence[dict], out: str | os.PathLike, *, lines_path: str) -> Path:
