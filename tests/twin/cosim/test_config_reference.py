@@ -37,7 +37,16 @@ def test_every_key_of_the_page_is_a_setting_toml_accepts_with_its_default():
         for setting in section.settings:
             if setting.type != "table" and setting.default != "unset":
                 text = f"{header}{setting.key} = {setting.default}\n"
-                from_toml(text, source="the reference")  # the default reads back
+                read = from_toml(text, source="the reference")
+                # the default as written on the page reads back as the default
+                path = (*section.path, setting.key)
+                assert _at(read, path) == _at(CosimConfig(), path), (path, setting.default)
+
+
+def _at(config, path):
+    for name in path:
+        config = getattr(config, name)
+    return config
 
 
 def test_a_field_without_description_is_named():
