@@ -122,8 +122,15 @@ def test_twin_render_writes_one_frame_and_a_label_panel(scene_store, tmp_path, c
     args = ["render", *scene_args(scene_store), "--t", "0.2", "--out", str(out), "--labels"]
     assert main(args) == 0
     picture = cv2.imread(str(out))
-    assert picture.shape == (960, 1280, 3)
+    assert picture.shape[0] > 960 and picture.shape[1] > 1280  # 2 x 2 panels with labels
     assert "1 vehicles in view" in capsys.readouterr().out
+    # any mount can be named, not only the rig's cameras
+    rear = ["render", *scene_args(scene_store), "--camera", "rear", "--out", str(out)]
+    assert main(rear) == 0
+    assert "camera rear" in capsys.readouterr().out
+    assert cv2.imread(str(out)).shape == (480, 640, 3)
+    assert main([*rear[:-2], "--camera", "roof", "--out", str(out)]) == 2
+    assert "unknown camera(s) ['roof']" in capsys.readouterr().err
     assert main(["render", *scene_args(scene_store), "--t", "99", "--out", str(out)]) == 2
     assert "--t must be in" in capsys.readouterr().err
 

@@ -160,7 +160,11 @@ def _register_render(commands) -> None:
     add_config(p)
     add_data(p)
     p.add_argument("--t", type=float, default=0.0, help="time of the frame [s after t0]")
-    p.add_argument("--camera", default=None, help="camera name (default: the rig's first)")
+    p.add_argument(
+        "--camera", default=None,
+        help="camera mount: front, rear, left, right, dashcam or one of camera.mounts "
+        "(default: the rig's first, front)",
+    )  # fmt: skip
     p.add_argument(
         "--renderer", choices=["auto", "tiny", "egl"], default=None,
         help="pybullet's renderer: tiny (CPU), egl (GPU, headless) or auto (EGL where it "
@@ -182,6 +186,8 @@ def _render(args) -> int:
     values = parse_assignments(args.assignments)
     if args.renderer is not None:
         values.setdefault("camera", {})["renderer"] = args.renderer
+    if args.camera is not None:  # any mount, unless --set gave the rig
+        values.setdefault("camera", {}).setdefault("cameras", [args.camera])
     config = override(config, values, source="command line")
     frame = render_at(config, open_data(args.data), args.t, camera=args.camera)
     out = frame_picture(frame, args.out, labels=args.labels)
