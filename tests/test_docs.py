@@ -3,6 +3,7 @@ page points outside the repository to the team's shared folder), and the README 
 short."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -44,6 +45,20 @@ def test_no_page_points_to_the_shared_folder():
         if any(outside in line for outside in OUTSIDE)
     ]
     assert not found, "pages pointing outside the repository:\n" + "\n".join(found)
+
+
+def test_no_table_cell_holds_a_pipe_in_code():
+    """GitHub splits a table row at a pipe even inside code, MkDocs does not, and an
+    escaped pipe shows its backslash in MkDocs: tables say {a,b} instead."""
+    found = [
+        f"{page.relative_to(ROOT)}:{number}: {span}"
+        for page in _pages()
+        for number, line in enumerate(page.read_text().splitlines(), start=1)
+        if line.startswith("|")
+        for span in re.findall(r"`([^`]*)`", line)
+        if "|" in span
+    ]
+    assert not found, "pipes inside code in tables:\n" + "\n".join(found)
 
 
 def test_the_readme_is_at_most_200_lines():
