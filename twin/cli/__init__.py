@@ -1,8 +1,10 @@
 """The ``twin`` command line: one module per command group, the options they share in
 :mod:`twin.cli.options`.
 
-A problem with what the user asked for (a :class:`~twin.core.errors.TwinError`) is one
-line on stderr, ``twin: error: ...``, and exit status 2, as argparse's own errors are.
+A problem with what the user asked for (a :class:`~twin.core.errors.TwinError`), or a
+fault of the machine the user can fix (a read-only folder, a full disk:
+:mod:`twin.core.faults`), is one line on stderr, ``twin: error: ...``, and exit status
+2, as argparse's own errors are.
 Values read from the command line are checked where they are read
 (:mod:`twin.cli.options`), so any other exception is a bug in the twin: its traceback,
 a line asking to report it, and exit status 70.
@@ -15,6 +17,7 @@ import traceback
 
 from twin import __version__
 from twin.cli import bench, calibrate, data, dataset, evaluate, export, maps, run, train
+from twin.core import faults
 from twin.core.errors import TwinError
 
 EXIT_USER_ERROR = 2  # as argparse's own errors
@@ -46,7 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("twin: interrupted; nothing partial was left behind", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except Exception:
+    except Exception as error:
+        if faults.is_machine_fault(error):
+            print(f"twin: error: {faults.describe(error)}", file=sys.stderr)
+            return EXIT_USER_ERROR
         traceback.print_exc()
         print(BUG_HINT, file=sys.stderr)
         return EXIT_BUG

@@ -58,14 +58,22 @@ class AtomicFolder:
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
             return
-        self.check_replaceable()
-        if self.out.exists():
-            old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
-            os.rename(self.out, old)
-            os.rename(self.tmp, self.out)
-            shutil.rmtree(old)
-        else:
-            os.rename(self.tmp, self.out)
+        try:
+            self.check_replaceable()
+            if self.out.exists():
+                old = self.out.parent / f".{self.out.name}.old-{os.getpid()}"
+                os.rename(self.out, old)
+                try:
+                    os.rename(self.tmp, self.out)
+                except BaseException:
+                    os.rename(old, self.out)  # the earlier folder back under its name
+                    raise
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.rename(self.tmp, self.out)
+        except BaseException:  # a full disk or a read-only folder at the last step
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            raise
 
 
 @contextmanager
