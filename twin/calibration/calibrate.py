@@ -110,6 +110,12 @@ def calibrate(
     """
     named = roads is not None
     roads = [Road.parse(r) for r in (roads if named else store.roads)]
+    if not roads:
+        raise CalibrationDataError(
+            f"{store.path}: the store holds no trajectories, so there is no following to "
+            "calibrate the drivers on (was every document of its day files rejected? "
+            "twin data info says)"
+        )
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -146,9 +152,11 @@ def _calibrate_road(store, road, window, settings, model, progress):
     )
     bar = None
     if progress:
-        from tqdm import tqdm
+        from twin.core.progress import progress_bar
 
-        bar = tqdm(total=max(np.unique(runs.tid).size, 1), desc=f"fit {road.value}", unit="veh")
+        bar = progress_bar(
+            total=max(np.unique(runs.tid).size, 1), desc=f"fit {road.value}", unit="veh"
+        )
 
     def advance(done, total):
         if bar is not None:

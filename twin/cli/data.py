@@ -1,6 +1,5 @@
 """``twin data``: I-24 MOTION data: ingest, inspect, synthesize, plot, waves."""
 
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -60,10 +59,8 @@ def _ingest(args) -> int:
         options = IngestOptions(margin=args.margin, bucket=args.bucket)
     except ValueError as error:  # IngestOptions names the bad --margin or --bucket
         raise UsageError(str(error)) from None
-    report = ingest(args.files, args.out, options, progress=not args.quiet)
+    ingest(args.files, args.out, options, progress=not args.quiet)
     print(TrajectoryStore(args.out).describe())
-    if report.documents_kept == 0:
-        print("twin: warning: no document was kept", file=sys.stderr)
     return 0
 
 
@@ -79,6 +76,7 @@ def _info(args) -> int:
     from twin.data.store import is_store
 
     store = open_store(args.store)
+    store.verify()
     print(store.describe())
     print(describe_calibration(read_calibration(store)))
     if args.store is None:
@@ -177,7 +175,7 @@ def _synth_config(args):
     if args.minutes is not None:
         changes["minutes"] = args.minutes
     if args.start is not None:
-        changes["start"] = unix_time(args.start)
+        changes["start"] = unix_time(args.start, "--start")
     try:
         return replace(synth.ALL_PRESETS[args.preset], **changes)
     except ValueError as error:  # SynthConfig names the value it cannot take
@@ -199,7 +197,7 @@ def _plot(args) -> int:
 
     road = checked_road(args.road)
     store = open_store(args.store)
-    start = unix_time(args.start)
+    start = unix_time(args.start, "--start")
     if start is None:
         start = store.time_range(road)[0]
     out = time_space_plot(store, road, start, args.minutes, args.out)
@@ -258,7 +256,7 @@ def _waves(args) -> int:
         raise UsageError("twin data waves needs --out DIR (or --tables DIR to read tables)")
     road = checked_road(args.road)
     store = open_store(args.store)
-    start = unix_time(args.start)
+    start = unix_time(args.start, "--start")
     lanes = wa.analyse_store(store, road, start, args.minutes, progress=not args.quiet)
     first = start if start is not None else store.time_range(road)[0]
     meta = {

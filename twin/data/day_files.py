@@ -4,6 +4,7 @@ non-standard ``NaN`` and ``Infinity`` tokens some writers emit read as ``null``.
 
 import contextlib
 import gzip
+import zlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import BinaryIO
@@ -35,8 +36,18 @@ def documents(path: Path, on_read: Callable[[int], object]) -> Iterator:
 
     Raises:
         DataFormatError: naming the file and the byte position, when the file is not
-            a JSON array or breaks off.
+            a JSON array or breaks off, and the file when its gzip data do.
     """
+    try:
+        yield from _documents(path, on_read)
+    except (EOFError, gzip.BadGzipFile, zlib.error) as error:
+        raise DataFormatError(
+            f"{path}: the gzip data are truncated or corrupt ({error}); an interrupted "
+            "download or copy leaves a file like this: fetch it again"
+        ) from None
+
+
+def _documents(path: Path, on_read: Callable[[int], object]) -> Iterator:
     with open(path, "rb") as file, _decompressed(file) as raw:
         head = raw.read(READ_CHUNK)
         stripped = head.lstrip()

@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
-from tqdm import tqdm
 
 from twin.core import i24
+from twin.core.errors import DataFormatError
 from twin.core.i24 import Road
+from twin.core.progress import progress_bar
 from twin.data.day_files import documents
 from twin.data.store import (
     SAMPLE_SCHEMA,
@@ -153,8 +154,9 @@ def ingest(
         The counts of what was read, kept and rejected.
 
     Raises:
-        DataFormatError: a file is not a JSON array of documents, or is truncated;
-            the message names the file and the position.
+        DataFormatError: a file is not a JSON array of documents, or is truncated
+            (the message names the file and the position), or no document is valid
+            (nothing is written).
         StoreError: ``out`` exists and is not a store (it is never overwritten).
         FileNotFoundError: a source is missing.
     """
@@ -172,17 +174,19 @@ def ingest(
         trajectories = _TrajectoryTable()
         seen: set[str] = set()
         total = sum(p.stat().st_size for p in paths)
-        with tqdm(
-            total=total,
-            unit="B",
-            unit_scale=True,
-            desc="ingest",
-            disable=None if progress else True,
-            leave=False,
+        with progress_bar(
+            progress=progress, total=total, unit="B", unit_scale=True, desc="ingest", leave=False
         ) as bar:
             for source_index, path in enumerate(paths):
                 for doc in documents(path, bar.update):
                     _ingest_document(doc, source_index, options, report, seen, spill, trajectories)
+        if report.documents_kept == 0:  # an empty store would replace a good one
+            reasons = ", ".join(f"{k} {v}" for k, v in sorted(report.documents_rejected.items()))
+            raise DataFormatError(
+                f"{', '.join(map(str, paths))}: no valid I-24 MOTION document among "
+                f"{report.documents_read} read ({reasons or 'none rejected'}); nothing was "
+                f"written{f' and the store at {out} is kept as it was' if out.exists() else ''}"
+            )
         spill.flush()
         lane_counts = _write_samples(writer, spill)
         writer.write_table("trajectories.parquet", trajectories.to_arrow())

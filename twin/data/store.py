@@ -150,12 +150,16 @@ class TrajectoryStore:
     @cached_property
     def trajectories(self) -> pd.DataFrame:
         """One row per trajectory, indexed by tid (columns as ``TRAJECTORY_SCHEMA``)."""
-        return pq.read_table(self.path / "trajectories.parquet").to_pandas().set_index("tid")
+        path = self.path / "trajectories.parquet"
+        with _damaged(path):
+            return pq.read_table(path).to_pandas().set_index("tid")
 
     @cached_property
     def trajectory_arrays(self) -> dict[str, np.ndarray]:
         """The trajectory table as numpy arrays indexed by tid (for vectorised lookups)."""
-        table = pq.read_table(self.path / "trajectories.parquet")
+        path = self.path / "trajectories.parquet"
+        with _damaged(path):
+            table = pq.read_table(path)
         arrays = {
             name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names
         }
@@ -183,7 +187,8 @@ class TrajectoryStore:
             for i, (lo, hi) in enumerate(self._row_group_spans(road))
             if hi >= t_min and lo <= t_max
         ]
-        table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
+        with _damaged(self.path / f"samples_{road.value}.parquet"):
+            table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
         columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
         keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
         if tids is not None:  # before the sort, which dominates for a few trajectories
@@ -245,8 +250,37 @@ class TrajectoryStore:
 
     def _file(self, road: Road) -> pq.ParquetFile:
         if road not in self._files:
-            self._files[road] = pq.ParquetFile(self.path / f"samples_{road.value}.parquet")
+            path = self.path / f"samples_{road.value}.parquet"
+            with _damaged(path):
+                self._files[road] = pq.ParquetFile(path)
         return self._files[road]
+
+    def verify(self) -> None:
+        """Read every Parquet file's footer and check its rows against the metadata, so
+        that a damaged store is found before it is used.
+
+        Raises:
+            StoreError: naming the file that cannot be read or holds other rows than
+                the metadata says.
+        """
+        path = self.path / "trajectories.parquet"
+        with _damaged(path):
+            rows = pq.ParquetFile(path).metadata.num_rows
+        expected = sum(info["trajectories"] for info in self.metadata["roads"].values())
+        if rows != expected:
+            raise StoreError(
+                f"{path}: {rows:,} trajectories where the metadata says {expected:,}; the "
+                "store is damaged: ingest the data again"
+            )
+        for road in self.roads:
+            path = self.path / f"samples_{road.value}.parquet"
+            rows = self._file(road).metadata.num_rows
+            expected = self.metadata["roads"][road.value]["samples"]
+            if rows != expected:
+                raise StoreError(
+                    f"{path}: {rows:,} samples where the metadata says {expected:,}; the "
+                    "store is damaged: ingest the data again"
+                )
 
     def _row_group_spans(self, road: Road) -> list[tuple[float, float]]:
         meta = self._file(road).metadata
@@ -292,3 +326,17 @@ class TrajectoryStore:
                 f"outside margin {part['outside_margin']:,}; rejected: {rejected}"
             )
         return "\n".join(lines)
+
+
+@contextmanager
+def _damaged(path: Path):
+    """Name ``path`` in the error when pyarrow cannot read it (a truncated or corrupt
+    file: pyarrow's own message names neither the file nor the remedy)."""
+    try:
+        yield
+    except (pa.ArrowException, OSError) as error:
+        first = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise StoreError(
+            f"{path}: not a readable Parquet file ({first}); the store is damaged: ingest "
+            "the data again"
+        ) from None
