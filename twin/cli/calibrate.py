@@ -56,7 +56,7 @@ def _calibrate(args) -> int:
 
     roads = [checked_road(road) for road in args.road] if args.road is not None else None
     store = open_store(args.store)
-    t_from, t_until = unix_time(args.t_from), unix_time(args.t_until)
+    t_from, t_until = unix_time(args.t_from, "--from"), unix_time(args.t_until, "--until")
     if t_from is not None and t_until is not None and not t_from < t_until:
         raise UsageError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
     from twin.traffic.models import car_following_model

@@ -141,11 +141,12 @@ def add_map(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="terrain seed of the cached map")
 
 
-def unix_time(text: str | None) -> float | None:
-    """A time option as unix seconds (None stays None).
+def unix_time(text: str | None, option: str = "--time") -> float | None:
+    """The time option ``option`` as unix seconds (None stays None).
 
     Raises:
-        UsageError: ``text`` is neither unix seconds nor ISO 8601 with an offset.
+        UsageError: naming ``option``, when ``text`` is neither unix seconds (1970 to
+            2100) nor ISO 8601 with an offset.
     """
     from twin.core.timeutil import parse_time
 
@@ -154,7 +155,7 @@ def unix_time(text: str | None) -> float | None:
     try:
         return parse_time(text)
     except ValueError as error:
-        raise UsageError(str(error)) from None
+        raise UsageError(f"{option}: {error}") from None
 
 
 def checked_road(text: str) -> str:

@@ -7,6 +7,7 @@ import numpy as np
 
 #: I-24 MOTION recordings (Nov-Dec 2022) are in US Central Standard Time.
 CST = timezone(timedelta(hours=-6), "CST")
+LATEST = 4102444800.0  # [s] unix time of 2100-01-01: later is no I-24 recording
 
 
 def parse_time(value: str | float) -> float:
@@ -40,6 +41,16 @@ def parse_time(value: str | float) -> float:
             t = parsed.timestamp()
     if not math.isfinite(t):
         raise ValueError(f"time {value!r} is not a finite number")
+    if not 0.0 <= t < LATEST:
+        hint = (
+            f"; it looks like milliseconds: give seconds, {t / 1000.0:.3f}"
+            if LATEST * 1000.0 > t >= 1e11
+            else ""
+        )
+        raise ValueError(
+            f"time {value!r} is outside 1970 to 2100 in unix seconds{hint} (or ISO 8601, "
+            "e.g. 2022-11-30T06:45:50-06:00)"
+        )
     return t
 
 
