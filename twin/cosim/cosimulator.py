@@ -318,17 +318,17 @@ class Cosimulator:
     def run(self, progress: bool = False, on_step: Callable[["Cosimulator"], None] | None = None):
         """Reset (if not done yet) and step to the end, with a progress bar if asked;
         ``on_step(self)`` is called after each step (and after a reset made here)."""
-        from tqdm import tqdm
+        from twin.core.progress import progress_bar
 
         if self.log is None:
             self.reset()
             if on_step is not None:
                 on_step(self)
-        with tqdm(
+        with progress_bar(
+            progress=progress,
             total=self.config.steps,
             initial=self.step_index,
             unit="step",
-            disable=None if progress else True,
             desc=f"scenario {self.config.scenario}",
         ) as bar:
             while not self.done:

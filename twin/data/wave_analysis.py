@@ -408,9 +408,9 @@ def analyse_store(
     out = {}
     lanes = i24.LANES
     if progress:
-        from tqdm import tqdm
+        from twin.core.progress import progress_bar
 
-        lanes = tqdm(lanes, desc="lanes", unit="lane", leave=False)
+        lanes = progress_bar(lanes, desc="lanes", unit="lane", leave=False)
     for lane in lanes:
         rows = samples["lane"] == lane
         if not rows.any():

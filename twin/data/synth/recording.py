@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import orjson
-from tqdm import tqdm
 
 from twin.core import i24
+from twin.core.progress import progress_bar
 from twin.data.synth.config import SynthConfig
 from twin.data.synth.simulation import Simulation
 from twin.traffic.drivers import DriverTraits
@@ -41,11 +41,8 @@ def synthesize(config: SynthConfig, *, progress: bool = False) -> SynthResult:
     lo, hi = config.x_record
     rec_vid, rec_step, rec_x, rec_y = [], [], [], []
     record_from = math.floor((config.start - t0) / config.dt) - 1
-    for k in tqdm(
-        range(n_steps),
-        desc=f"synth {config.road.value}",
-        disable=None if progress else True,
-        leave=False,
+    for k in progress_bar(
+        range(n_steps), progress=progress, desc=f"synth {config.road.value}", leave=False
     ):
         sim.t = t0 + k * config.dt
         while events and config.anchor + events[0].t <= sim.t:
@@ -120,7 +117,7 @@ def write_i24_json(result: SynthResult, path: str | os.PathLike, *, progress: bo
         with open(tmp, "wb") as out:
             out.write(b"[\n")
             for n, i in enumerate(
-                tqdm(order, desc="write", disable=None if progress else True, leave=False)
+                progress_bar(order, progress=progress, desc="write", leave=False)
             ):
                 t, x, y = result.tracks[i]
                 x_ft = np.round(i24.x_feet(x, road), 2)
