@@ -39,6 +39,7 @@ from mapgen.vehicles import ModelLevel, write_vehicle_models
 from twin.core import i24
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import MapError
+from twin.core.locks import build_lock
 from twin.core.paths import asset, cache_dir
 
 FORMAT = "i24-twin-map"
@@ -138,9 +139,11 @@ def default_map(seed: int = DEFAULT_SEED, *, progress: bool = False) -> MapBundl
     """The map for ``seed``, built on first use and cached under the twin's cache folder."""
     folder = cache_dir() / f"map-{map_key(seed)}"
     if not is_map(folder):
-        if progress:
-            print(f"building the map (seed {seed}) into {folder}")
-        return build_map(folder, seed=seed)
+        with build_lock(folder):  # another process may be building it
+            if not is_map(folder):
+                if progress:
+                    print(f"building the map (seed {seed}) into {folder}")
+                return build_map(folder, seed=seed)
     return load_map(folder)
 
 

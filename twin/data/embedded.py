@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from twin.core.errors import StoreError
+from twin.core.locks import build_lock
 from twin.core.paths import asset, cache_dir
 from twin.data import day_files, synth
 from twin.data import ingest as ingest_module
@@ -84,7 +85,9 @@ def embedded_store(
         )
     folder = embedded_folder(name, seed)
     if not is_store(folder):
-        build_default_store(folder, seed=seed, progress=progress, presets=EMBEDDED[name][1])
+        with build_lock(folder):  # another process may be building it
+            if not is_store(folder):
+                build_default_store(folder, seed=seed, progress=progress, presets=EMBEDDED[name][1])
     return TrajectoryStore(folder)
 
 

@@ -34,6 +34,7 @@ from twin.calibration.calibrate import read_calibration
 from twin.core.atomic import atomic_file, remove_stale
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
+from twin.core.locks import output_lock
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.store import TrajectoryStore
@@ -220,41 +221,42 @@ def evaluate(
         )  # fmt: skip
     bundle = bundle or default_map(progress=progress)
     specs = draw_specs(config, store, bundle)
-    _claim(out, config, store, bundle)
-    results = out / RESULTS
-    results.mkdir(exist_ok=True)
-    remove_stale(results)
-    jobs = [
-        (config, spec, arm, where(store, bundle))
-        for spec in specs
-        for arm in config.arms
-        if not _result_path(out, spec.index, arm[0]).is_file()
-    ]
-    with tqdm(
-        total=len(jobs),
-        unit="episode",
-        disable=None if progress else True,
-        desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.arms)} to run",
-    ) as bar:
+    with output_lock(out, "twin eval"):
+        _claim(out, config, store, bundle)
+        results = out / RESULTS
+        results.mkdir(exist_ok=True)
+        remove_stale(results)
+        jobs = [
+            (config, spec, arm, where(store, bundle))
+            for spec in specs
+            for arm in config.arms
+            if not _result_path(out, spec.index, arm[0]).is_file()
+        ]
+        with tqdm(
+            total=len(jobs),
+            unit="episode",
+            disable=None if progress else True,
+            desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.arms)} to run",
+        ) as bar:
 
-        def save(k: int, row: dict) -> None:
-            _, spec, arm, _ = jobs[k]
-            with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
-                tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
-            bar.update(1)
+            def save(k: int, row: dict) -> None:
+                _, spec, arm, _ = jobs[k]
+                with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
+                    tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
+                bar.update(1)
 
-        run_jobs(
-            _run_one,
-            jobs,
-            engine=engine,
-            workers=workers,
-            ray_address=ray_address,
-            on_done=save,
-            describe=lambda job: f"episode {job[1].index} ({job[2][0]})",
-            error_type=EvaluationError,
-        )
-    summary = assemble(out, config, specs, extension)
-    return EvalResult(out, summary, len(jobs), time.perf_counter() - start)
+            run_jobs(
+                _run_one,
+                jobs,
+                engine=engine,
+                workers=workers,
+                ray_address=ray_address,
+                on_done=save,
+                describe=lambda job: f"episode {job[1].index} ({job[2][0]})",
+                error_type=EvaluationError,
+            )
+        summary = assemble(out, config, specs, extension)
+        return EvalResult(out, summary, len(jobs), time.perf_counter() - start)
 
 
 def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[EpisodeSpec]:
@@ -394,7 +396,7 @@ def assemble(
     rows, flows = [], {label: [] for label, _, _ in config.arms}
     for spec in specs:
         for label, _, _ in config.arms:
-            row = json.loads(_result_path(out, spec.index, label).read_text())
+            row = _read_result(_result_path(out, spec.index, label))
             flows[label].append(row.pop("lane_flows", None))  # nested: summed, not a column
             rows.append(row)
     frame = pd.DataFrame(rows)
@@ -416,6 +418,25 @@ def assemble(
     with atomic_file(out / "fidelity.png") as tmp:
         _plot(frame, config, tmp, lane_flows)
     return summary
+
+
+def _read_result(path: Path) -> dict:
+    """One episode's row, as it was written.
+
+    Raises:
+        EvaluationError: naming the file when it is not the JSON object it was written
+            as (damaged after it was written: the twin writes it whole or not at all).
+    """
+    try:
+        row = json.loads(path.read_text())
+    except ValueError as error:
+        row = error
+    if not isinstance(row, dict):
+        raise EvaluationError(
+            f"{path} is damaged ({row if isinstance(row, ValueError) else 'not an object'}); "
+            "remove it and run the same command again to redo that episode"
+        )
+    return row
 
 
 def summarise(frame, config: EvalConfig) -> dict:

@@ -26,11 +26,14 @@ from sensors.camera import CameraRig, Frame
 from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
 from twin import __version__
+from twin.calibration.calibrate import CALIBRATION, read_calibration
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
+from twin.core.locks import build_lock
 from twin.core.paths import cache_dir
 from twin.core.timeutil import steps_per_sample
 from twin.cosim import plots
+from twin.cosim.behaviour import AUTO
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
@@ -110,6 +113,7 @@ class RunResult:
     metrics: dict
     ego_speed: np.ndarray  # [m/s] the simulated ego, one value per second
     ego_controller: str = ""  # what drove the ego ("": the traffic manager, as the others)
+    behaviour_note: str = ""  # why ``auto`` chose a calibrated behaviour, and how not to
 
 
 #: What each entry of a run folder holds, in the order ``twin run`` lists them.
@@ -144,9 +148,9 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
     if not path.exists():
         raise StoreError(f"--data {path}: no such file or folder")
     if path.is_dir():
-        if not is_store(path):
+        if not is_store(path) and not (path / "metadata.json").exists():
             raise StoreError(f"--data {path} is a folder but not an i24-twin store")
-        return TrajectoryStore(path)
+        return TrajectoryStore(path)  # a damaged store's error names the file
     if path.suffix.lower() != ".json":
         raise StoreError(f"--data {path}: expected a store folder or an I-24 MOTION .json file")
     digest = hashlib.sha256()
@@ -155,7 +159,9 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
             digest.update(block)
     folder = cache_dir() / f"store-{digest.hexdigest()[:16]}"
     if not is_store(folder):
-        ingest([path], folder, progress=progress)
+        with build_lock(folder):  # another process may be ingesting it
+            if not is_store(folder):
+                ingest([path], folder, progress=progress)
     return TrajectoryStore(folder)
 
 
@@ -203,7 +209,19 @@ def run_episode(
             else (type(controller))
         )
         name = f"{kind.__module__}:{kind.__qualname__}"
-    return RunResult(folder.out, figures, ego, name)
+    return RunResult(folder.out, figures, ego, name, _behaviour_note(config, store, figures))
+
+
+def _behaviour_note(config: CosimConfig, store: TrajectoryStore, figures: dict) -> str:
+    """Where ``auto`` took the store's calibration, which one and how to run without it
+    (calibrating a store changes what ``twin run`` on it does from then on)."""
+    if config.behaviour != AUTO or figures["behaviour"] == "paper":
+        return ""
+    doc = read_calibration(store)
+    return (
+        f"auto chose {figures['behaviour']}: the data hold a calibration ({CALIBRATION} "
+        f"made {doc['created']}); --behaviour paper drives as the paper does"
+    )
 
 
 def render_at(
@@ -335,6 +353,7 @@ def summary(result: RunResult) -> str:
     lines = [
         f"scenario {m['scenario']}, behaviour {m['behaviour']}, the ego driven by "
         f"{result.ego_controller or 'the traffic manager'}",
+        *([result.behaviour_note] if result.behaviour_note else []),
         f"ego {ego['record_id']} (lane {ego['selected']['lane']}, x {ego['selected']['x_m']:.0f} m)"
         f" speed each second [m/s]: {profile}",
         f"ego vs recording: speed RMSE {ego.get('speed_rmse_mps', float('nan')):.2f} m/s, "

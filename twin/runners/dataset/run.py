@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from twin.core.atomic import AtomicFolder, remove_stale
+from twin.core.locks import output_lock
 from twin.data.store import TrajectoryStore
 from twin.runners.dataset.assemble import assemble
 from twin.runners.dataset.config import (
@@ -75,9 +76,8 @@ def generate(
             episodes are kept; rerun to resume).
         SamplingError: episodes cannot be drawn from the data.
     """
-    from tqdm import tqdm
-
     from mapgen.build import default_map
+    from twin.core.progress import progress_bar
 
     start = time.perf_counter()
     if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 1:
@@ -90,36 +90,37 @@ def generate(
     config = resolved_renderer(config)
     bundle = bundle or default_map(progress=progress)
     specs = draw_episodes(config, store, bundle, episodes)
-    claim_folder(out, config, store, bundle)
-    remove_stale(out / EPISODES)
-    todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
-    cameras = len(config.cosim.camera.cameras)
-    render_start = time.perf_counter()
-    with tqdm(
-        total=len(todo) * config.frames_per_episode * cameras,
-        unit="frame",
-        disable=None if progress else True,
-        desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
-    ) as bar:
-        progress_bar = _Progress(bar, config.frames_per_episode * cameras)
-        if not todo:
-            rendered = 0
-        elif engine == "ray":
-            rendered = _run_ray(
-                config, todo, store, bundle, out, workers, ray_address, progress_bar
-            )
-        else:
-            rendered = _run_local(config, todo, store, bundle, out, workers, progress_bar)
-    render_s = time.perf_counter() - render_start
-    manifest = assemble(out, config, specs)
-    return DatasetResult(
-        folder=out,
-        manifest=manifest,
-        episodes_rendered=len(todo),
-        samples_rendered=rendered,
-        render_s=render_s,
-        total_s=time.perf_counter() - start,
-    )
+    with output_lock(out, "twin dataset"):
+        claim_folder(out, config, store, bundle)
+        remove_stale(out / EPISODES)
+        todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
+        cameras = len(config.cosim.camera.cameras)
+        render_start = time.perf_counter()
+        with progress_bar(
+            progress=progress,
+            total=len(todo) * config.frames_per_episode * cameras,
+            unit="frame",
+            desc=f"dataset {out.name}: {len(todo)} of {episodes} episodes to render",
+        ) as bar:
+            frames_done = _Progress(bar, config.frames_per_episode * cameras)
+            if not todo:
+                rendered = 0
+            elif engine == "ray":
+                rendered = _run_ray(
+                    config, todo, store, bundle, out, workers, ray_address, frames_done
+                )
+            else:
+                rendered = _run_local(config, todo, store, bundle, out, workers, frames_done)
+        render_s = time.perf_counter() - render_start
+        manifest = assemble(out, config, specs)
+        return DatasetResult(
+            folder=out,
+            manifest=manifest,
+            episodes_rendered=len(todo),
+            samples_rendered=rendered,
+            render_s=render_s,
+            total_s=time.perf_counter() - start,
+        )
 
 
 # -- engines (twin.runners.engines) ----------------------------------------------------------
