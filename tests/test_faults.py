@@ -113,7 +113,10 @@ def assert_one_line(capsys, *naming: str) -> str:
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
-    return make_store(tmp_path_factory.mktemp("faults"), SCENE)
+    """The two-vehicle store, with a run folder of it beside (``export`` reads it)."""
+    store = make_store(tmp_path_factory.mktemp("faults"), SCENE)
+    assert main(_run_args(store.path, store.path.parent / "run")) == 0
+    return store
 
 
 def _run_args(data: Path, out: Path) -> list[str]:
@@ -126,14 +129,24 @@ def _run_args(data: Path, out: Path) -> list[str]:
 
 def writer(command: str, where: Path, scene, wave) -> tuple[list[str], Path]:
     """A command that writes, as its arguments and the output it writes into ``where``,
-    on the stores ``scene`` (two vehicles) and ``wave`` (seven minutes of preset B)."""
+    on the stores ``scene`` (two vehicles, with a run folder beside it) and ``wave``
+    (seven minutes of preset B)."""
     if command == "run":
         return _run_args(scene.path, where / "run"), where / "run"
-    names = {"data ingest": "store", "data plot": "ts.png", "data waves": "waves",
-             "render": "f.png", "eval": "eval", "map export": "i24.xodr"}  # fmt: skip
+    if command == "bench report":
+        lines = where.parent / "lines.jsonl"
+        lines.write_text(json.dumps({"bench": "query", "snapshot_median_us": 30.0}) + "\n")
+        out = where / "benchmarks.md"
+        return ["bench", "report", str(lines), "--lines", str(where / "b.jsonl"), "--out",
+                str(out)], out  # fmt: skip
+    names = {"data ingest": "store", "data synth": "a.json", "data plot": "ts.png",
+             "data waves": "waves", "render": "f.png", "eval": "eval", "dataset": "dataset",
+             "map build": "map", "map export": "i24.xodr", "map preview": "map.png",
+             "export": "sumo", "train": "train"}  # fmt: skip
     out = where / names[command]
     argv = {
         "data ingest": ["data", "ingest", str(scene.path.parent / "day.json"), "--quiet"],
+        "data synth": ["data", "synth", "--preset", "A", "--minutes", "0.5", "--quiet"],
         "data plot": ["data", "plot", str(wave.path), "--start", WHEN, "--minutes", "1"],
         "data waves": ["data", "waves", str(wave.path), "--road", "westbound", "--quiet"],
         "render": ["render", "--data", str(scene.path), "--set", "road=westbound",
@@ -141,12 +154,24 @@ def writer(command: str, where: Path, scene, wave) -> tuple[list[str], Path]:
         "eval": ["eval", "--data", str(wave.path), "--episodes", "1", "--duration", "5",
                  "--congested-share", "0", "--behaviour", "paper", "--world", "kinematic",
                  "--workers", "1", "--quiet"],
+        "dataset": ["dataset", "--data", str(wave.path), "--episodes", "1",
+                    "--frames-per-episode", "1", "--workers", "1", "--quiet",
+                    "--set", 'sampling.roads=["westbound"]'],
+        "map build": ["map", "build"],
         "map export": ["map", "export"],
+        "map preview": ["map", "preview"],
+        "export": ["export", str(scene.path.parent / "run"), "--format", "sumo"],
+        "train": ["train", "--data", str(wave.path), "--iterations", "1", "--directions", "1",
+                  "--top", "1", "--episodes", "1", "--duration", "5", "--workers", "1",
+                  "--quiet"],
     }[command]  # fmt: skip
     return [*argv, "--out", str(out)], out
 
 
-WRITERS = ("data ingest", "data plot", "data waves", "eval", "map export", "render", "run")
+#: Every command that writes a file or a folder.
+WRITERS = ("bench report", "data ingest", "data plot", "data synth", "data waves", "dataset",
+           "eval", "export", "map build", "map export", "map preview", "render", "run",
+           "train")  # fmt: skip
 
 
 @pytest.mark.parametrize("command", WRITERS)
@@ -244,7 +269,7 @@ def test_a_damaged_store_is_named_by_the_file(damage, names, command, scene, tmp
     before = digest(store)
     argv = ["data", "info", str(store)] if command == "info" else _run_args(store, tmp_path / "run")
     assert main(argv) == EXIT_USER_ERROR
-    assert_one_line(capsys, names)
+    assert_one_line(capsys, str(store / names))
     assert digest(store) == before
 
 
@@ -261,7 +286,7 @@ def test_a_bad_config_file_is_named(text, says, scene, tmp_path, capsys):
     config.write_text(text)
     argv = [*_run_args(scene.path, tmp_path / "run"), "--config", str(config)]
     assert main(argv) == EXIT_USER_ERROR
-    assert_one_line(capsys, says)
+    assert_one_line(capsys, str(config), says)
     assert not (tmp_path / "run").exists()
 
 
@@ -272,13 +297,14 @@ def test_a_damaged_evaluation_folder_is_named_and_kept(damage, scene, wave_store
     assert main(argv) == 0
     capsys.readouterr()
     if damage == "eval.json":
-        (out / "eval.json").write_text('{"format": "i24-twin-eval", "conf')
+        damaged = out / "eval.json"
+        damaged.write_text('{"format": "i24-twin-eval", "conf')
     else:
-        (result,) = (out / "results").glob("*.json")
-        result.write_text(result.read_text()[:20])
+        (damaged,) = (out / "results").glob("*.json")
+        damaged.write_text(damaged.read_text()[:20])
     before = digest(out)
     assert main(argv) == EXIT_USER_ERROR
-    assert_one_line(capsys, damage)
+    assert_one_line(capsys, str(damaged))
     assert digest(out) == before
 
 
@@ -339,7 +365,7 @@ def test_a_run_says_when_a_calibration_chose_its_behaviour(wave_store, tmp_path,
 # -- a kill in the middle of a write, then the same command again ------------------------------
 
 
-KILLED = ("data ingest", "eval", "map build")
+KILLED = ("data ingest", "dataset", "eval", "map build")
 
 
 def _killed_args(command: str, where: Path, wave) -> list[str]:
@@ -347,7 +373,7 @@ def _killed_args(command: str, where: Path, wave) -> list[str]:
         return ["data", "ingest", str(wave.path.parent / "wave.json"), "--out", str(where / "s")]
     if command == "map build":
         return ["map", "build", "--out", str(where / "map")]
-    return writer("eval", where, wave, wave)[0]
+    return writer(command, where, wave, wave)[0]
 
 
 @pytest.mark.slow
@@ -365,7 +391,7 @@ def test_a_killed_write_leaves_the_earlier_output_and_the_rerun_completes(
     time.sleep(float(rng.uniform(0.5, 2.0)))  # somewhere in the middle of the work
     process.send_signal(signal.SIGKILL)
     process.wait()
-    if command != "eval":  # an evaluation keeps its finished episodes: it resumes
+    if command not in ("eval", "dataset"):  # these keep finished episodes: they resume
         assert digest(out) == before
     done = subprocess.run(twin, capture_output=True, text=True, env=ENV, check=False)
     assert done.returncode == 0, done.stderr
@@ -423,14 +449,14 @@ def test_a_run_waits_while_another_process_builds_what_it_needs(scene, tmp_path)
     assert (tmp_path / "run" / "metrics.json").is_file()
 
 
-def test_a_second_evaluation_into_the_same_folder_is_refused(scene, wave_store, tmp_path, capsys):
+@pytest.mark.parametrize("command", ["eval", "dataset"])
+def test_a_second_command_on_the_same_out_is_refused(command, scene, wave_store, tmp_path, capsys):
     from twin.core.locks import output_lock
 
-    argv = writer("eval", tmp_path, scene, wave_store)[0]
-    out = tmp_path / "eval"
-    with output_lock(out, "twin eval"):  # as another process running now would
+    argv, out = writer(command, tmp_path, scene, wave_store)
+    with output_lock(out, f"twin {command}"):  # as another process running now would
         assert main(argv) == EXIT_USER_ERROR
-    line = assert_one_line(capsys, str(out), "being written by twin eval (pid")
+    line = assert_one_line(capsys, str(out), f"being written by twin {command} (pid")
     assert "choose another --out" in line
     assert not out.exists()
     assert main(argv) == 0  # once the other has finished

@@ -38,7 +38,8 @@ def _fail_with(monkeypatch, error: BaseException) -> None:
         (["data", "ingest", "missing.json", "--out", "s"], "input file not found: missing.json"),
         (
             ["data", "synth", "--preset", "A", "--out", "day.json", "--start", "06:45"],
-            "time '06:45' is neither unix seconds nor ISO 8601 (e.g. 2022-11-30T06:45:50-06:00)",
+            "--start: time '06:45' is neither unix seconds nor ISO 8601 "
+            "(e.g. 2022-11-30T06:45:50-06:00)",
         ),
         (
             ["data", "synth", "--preset", "A", "--out", "day.json", "--minutes", "-1"],
