@@ -14,11 +14,17 @@ side:
 OpenDRIVE   twin                          type       outer road mark
 ==========  ============================  =========  =================================
 +-1         the paved median strip        median     solid yellow
-+-2         lane -1, the HOV lane         HOV        solid solid white (no crossing)
++-2         lane -1, the HOV lane         driving    solid solid white (no crossing)
 +-3, +-4    lanes -2, -3                  driving    broken white, 10 ft on 30 ft off
 +-5         lane -4                       driving    solid white (the edge line)
 +-6         the outer paved shoulder      shoulder   none
 ==========  ============================  =========  =================================
+
+The HOV lane is a ``driving`` lane, so that every reader drives it (netconvert's
+default import, CARLA, whose road model has no HOV type), with its restriction where
+readers look for it: a lane ``rule`` ``car pool`` (OpenDRIVE 1.6's value for it), an
+``access`` record that denies trucks (Tennessee keeps heavy trucks out of the leftmost
+lane; the twin's class table does too) and ``userData`` naming it the HOV lane.
 
 Lane widths are 12 ft (3.6576 m); the shoulder 10 ft. The elevation profile is the
 map's (``grade_elevation.csv`` through the map build), one linear ``elevation``
@@ -40,13 +46,14 @@ from twin.core.atomic import atomic_file
 from twin.core.i24 import LANE_WIDTH
 
 XODR = "i24.xodr"  # its name in a map folder (twin map build)
+HOV_ID = 2  # [-] |OpenDRIVE lane id| of the HOV lane (the twin's lane -1)
 SHOULDER_WIDTH = 3.048  # [m] 10 ft
 MARK_WIDTH = 0.1524  # [m] 6 in
 DASH, GAP = 3.048, 9.144  # [m] 10 ft painted, 30 ft gap
 BARRIER = {"width": 0.6096, "height": 1.0668}  # [m] the concrete median barrier
 LANES = (  # (OpenDRIVE |id|, type, width, outer mark, twin name)
     (1, "median", LANE_WIDTH, ("solid", "yellow"), "the paved median strip"),
-    (2, "HOV", LANE_WIDTH, ("solid solid", "white"), "lane -1 (HOV)"),
+    (2, "driving", LANE_WIDTH, ("solid solid", "white"), "lane -1 (HOV)"),
     (3, "driving", LANE_WIDTH, ("broken", "white"), "lane -2"),
     (4, "driving", LANE_WIDTH, ("broken", "white"), "lane -3"),
     (5, "driving", LANE_WIDTH, ("solid", "white"), "lane -4"),
@@ -125,8 +132,10 @@ def opendrive(bundle) -> ET.ElementTree:
             ET.SubElement(lane, "link")
             ET.SubElement(lane, "width", sOffset="0", a=_f(width), b="0", c="0", d="0")
             _road_mark(lane, mark, color)
-            if kind in ("driving", "HOV"):
+            if kind == "driving":
                 ET.SubElement(lane, "speed", sOffset="0", max="70", unit="mph")
+            if number == HOV_ID:
+                _hov_restriction(lane)
     center = ET.SubElement(section, "center")
     middle = ET.SubElement(center, "lane", id="0", type="none", level="false")
     ET.SubElement(middle, "link")
@@ -145,6 +154,15 @@ def write_opendrive(bundle, path: str | Path) -> Path:
     with atomic_file(path) as tmp:
         opendrive(bundle).write(tmp, encoding="utf-8", xml_declaration=True)
     return path
+
+
+def _hov_restriction(lane) -> None:
+    """The HOV lane's rule in the forms readers know: OpenDRIVE 1.6's lane rule value
+    ``car pool``, an access record denying trucks, and the twin's own ``userData``."""
+    ET.SubElement(lane, "access", sOffset="0", rule="deny", restriction="truck")
+    ET.SubElement(lane, "rule", sOffset="0", value="car pool")
+    ET.SubElement(lane, "userData", code="i24-twin:restriction",
+                  value="HOV: high-occupancy vehicles only; no heavy trucks")  # fmt: skip
 
 
 def _road_mark(lane, mark: str, color: str) -> None:

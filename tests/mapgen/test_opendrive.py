@@ -54,6 +54,13 @@ def test_the_file_describes_the_twins_road(xodr, built_map):
             assert (road_mark.get("type"), road_mark.get("color")) == (mark, color)
         hov = lanes[sign * 2].find("roadMark")
         assert hov.get("type") == "solid solid" and hov.get("laneChange") == "none"
+        # the HOV lane is a driving lane whose restriction is kept where readers look
+        hov_lane = lanes[sign * 2]
+        assert hov_lane.get("type") == "driving"
+        assert hov_lane.find("rule").get("value") == "car pool"
+        access = hov_lane.find("access")
+        assert (access.get("rule"), access.get("restriction")) == ("deny", "truck")
+        assert "HOV" in hov_lane.find("userData").get("value")
     objects = road.find("objects")
     kinds = [o.get("type") for o in objects.findall("object")]
     assert kinds.count("barrier") == 1 and "overpass" in {o.get("subtype") for o in objects}
@@ -65,6 +72,26 @@ def test_the_file_describes_the_twins_road(xodr, built_map):
 def test_the_export_is_the_same_bit_for_bit(xodr, built_map, tmp_path):
     again = write_opendrive(built_map, tmp_path / "again.xodr")
     assert again.read_bytes() == xodr.read_bytes()
+
+
+def test_netconvert_drives_four_lanes_each_way_with_its_default_options(xodr, tmp_path):
+    """netconvert imports only lanes it can drive unless told otherwise: the HOV lane is
+    one of them, so each carriageway has the twin's four lanes, lane -1 (HOV) included."""
+    sumo = pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
+    from pathlib import Path
+
+    net = tmp_path / "default.net.xml"
+    done = subprocess.run(
+        [str(Path(sumo.SUMO_HOME) / "bin" / "netconvert"), "--opendrive-files", str(xodr),
+         "--output-file", str(net)],
+        capture_output=True, text=True, env={"SUMO_HOME": sumo.SUMO_HOME},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    edges = [e for e in ET.parse(net).getroot().findall("edge") if e.get("function") is None]
+    assert [len(edge.findall("lane")) for edge in edges] == [4, 4]
+    for edge in edges:  # the access record keeps trucks out of the HOV lane (index 3)
+        hov = edge.findall("lane")[3].get("allow").split()
+        assert "hov" in hov and "passenger" in hov and "truck" not in hov
 
 
 def test_netconvert_reads_it_as_the_twins_lanes(xodr, built_map, tmp_path):
