@@ -124,8 +124,9 @@ def opendrive(bundle) -> ET.ElementTree:
 
     lanes = ET.SubElement(road, "lanes")
     section = ET.SubElement(lanes, "laneSection", s="0")
-    for side, sign in (("left", 1), ("right", -1)):
-        group = ET.SubElement(section, side)
+    groups = {side: ET.SubElement(section, side) for side in ("left", "center", "right")}
+    for side, sign in (("left", 1), ("right", -1)):  # the schema's order: left, center, right
+        group = groups[side]
         ordered = LANES if sign < 0 else tuple(reversed(LANES))
         for number, kind, width, (mark, color), _ in ordered:
             lane = ET.SubElement(group, "lane", id=str(sign * number), type=kind, level="false")
@@ -136,8 +137,7 @@ def opendrive(bundle) -> ET.ElementTree:
                 ET.SubElement(lane, "speed", sOffset="0", max="70", unit="mph")
             if number == HOV_ID:
                 _hov_restriction(lane)
-    center = ET.SubElement(section, "center")
-    middle = ET.SubElement(center, "lane", id="0", type="none", level="false")
+    middle = ET.SubElement(groups["center"], "lane", id="0", type="none", level="false")
     ET.SubElement(middle, "link")
     _road_mark(middle, "none", "standard")
 

@@ -39,7 +39,9 @@ def test_glb_passes_the_khronos_validator(built_map, tmp_path):
     if module is None:
         if os.environ.get("CI"):
             pytest.fail("gltf-validator is not installed; .ci/run installs it with npm")
-        pytest.skip("npm package gltf-validator not installed (see README, Tests)")
+        pytest.skip(
+            "npm package gltf-validator not installed (see docs/getting-started.md, The tests)"
+        )
     script = tmp_path / "validate.js"
     script.write_text(VALIDATOR_SCRIPT)
     result = subprocess.run(
