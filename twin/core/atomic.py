@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from twin.core import faults
 from twin.core.errors import TwinError
 
 
@@ -57,6 +58,8 @@ class AtomicFolder:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
+            if isinstance(exc, OSError) and exc.filename is None:  # a full disk's write
+                raise faults.at(exc, self.out) from exc
             return
         try:
             self.check_replaceable()
@@ -87,16 +90,31 @@ def atomic_file(out: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp
         os.replace(tmp, out)
+    except OSError as error:
+        if error.filename is None:  # a full disk's write names no file
+            raise faults.at(error, out) from error
+        raise
     finally:
         tmp.unlink(missing_ok=True)
 
 
 def remove_stale(parent: Path, name: str = "*") -> None:
-    """Remove the temporary folders that writers of ``parent/name`` (a glob) left
-    behind when they were killed (their process is gone)."""
+    """Remove what writers of ``parent/name`` (a glob) left behind when they were killed
+    (their process is gone): temporary folders and files, and put back an earlier
+    output that a writer killed between its two renames had moved aside."""
     for stale in Path(parent).glob(f".{name}.partial-*"):
-        if stale.is_dir() and not _pid_alive(stale.name.rsplit("-", 1)[-1]):
-            shutil.rmtree(stale, ignore_errors=True)
+        if not _pid_alive(stale.name.split(".partial-", 1)[1].split(".", 1)[0]):
+            if stale.is_dir():
+                shutil.rmtree(stale, ignore_errors=True)
+            else:
+                stale.unlink(missing_ok=True)
+    for old in Path(parent).glob(f".{name}.old-*"):
+        if not _pid_alive(old.name.rsplit("-", 1)[-1]):
+            out = old.with_name(old.name[1:].rsplit(".old-", 1)[0])
+            if out.exists():
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                os.rename(old, out)
 
 
 def marked_as(folder: Path, marker: str, fmt: str) -> bool:

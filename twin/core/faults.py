@@ -2,7 +2,11 @@
 files (a read-only folder, a full disk, no permission) as one line that names the path
 the user gave and the cause, and what to do. The command line prints it instead of a
 traceback; every writer of the twin writes under a temporary name and renames, so such a
-fault leaves earlier outputs as they were."""
+fault leaves earlier outputs as they were.
+
+An error counts as the machine's only when it names a file: the writers re-raise a full
+disk's path-less ``write`` error with the output they were writing (:func:`at`), and a
+path-less permission error (from a socket, a signal) stays a bug with its traceback."""
 
 import errno
 import re
@@ -17,45 +21,57 @@ REMEDIES = {
     errno.EPERM: "operation not permitted",
     errno.ENOSPC: "no space left on the device",
     errno.EDQUOT: "the disk quota is exceeded",
-    errno.EMFILE: "too many open files",
     errno.ENAMETOOLONG: "the file name is too long",
 }
-_PARTIAL = re.compile(r"^\.(?P<name>.+?)\.(?:(?:partial|old)-\d+|lock)(?P<suffix>\.[^./]*)?$")
+#: A writer's temporary name beside its output: ``.NAME.partial-PID[.EXT]``,
+#: ``.NAME.old-PID``; and a lock, ``.NAME.lock`` (the last part of a path only).
+_TEMPORARY = re.compile(r"^\.(?P<name>.+?)\.(?:partial|old)-\d+(?P<suffix>\.[^./]*)?$")
+_LOCK = re.compile(r"^\.(?P<name>.+)\.lock$")
 
 
 def is_machine_fault(error: BaseException) -> bool:
-    """Whether ``error`` is a fault of the machine the user can fix."""
-    return isinstance(error, OSError) and error.errno in REMEDIES
+    """Whether ``error`` is a fault of the machine the user can fix: an ``OSError`` of
+    :data:`REMEDIES` that names a file."""
+    return isinstance(error, OSError) and error.errno in REMEDIES and error.filename is not None
+
+
+def at(error: OSError, path: Path) -> OSError:
+    """``error`` naming ``path`` when it names no file (a full disk's ``write``, or
+    pyarrow's I/O errors, carry no file name)."""
+    if error.filename is not None:
+        return error
+    return OSError(error.errno, error.strerror or str(error), str(path))
 
 
 def describe(error: OSError) -> str:
     """One line: the path the user knows (the final name of a temporary one), the
     cause, and what to do."""
-    path = _shown(error.filename) if error.filename is not None else None
+    path = _shown(error.filename)
     cause = REMEDIES.get(error.errno, error.strerror or str(error))
-    where = f"cannot write {path}: " if path is not None else ""
-    advice = "nothing partial was left behind and earlier outputs are as they were"
-    if path is not None and _inside(path, cache_dir()):
-        advice = (
-            "the cache is there; set I24_TWIN_CACHE to a writable folder with a few GB "
-            f"free ({advice})"
+    if _inside(path, cache_dir()) or _inside(cache_dir(), path):
+        return (
+            f"{path}: {cause}; the twin's cache is there: set I24_TWIN_CACHE to a writable "
+            "folder with a few GB free"
         )
-    elif error.errno in (errno.ENOSPC, errno.EDQUOT):
-        advice = f"free some space or choose another --out ({advice})"
-    elif error.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
-        advice = f"choose another --out ({advice})"
-    return f"{where}{cause}; {advice}"
+    if error.errno in (errno.ENOSPC, errno.EDQUOT):
+        return (
+            f"{path}: {cause}; free some space or write elsewhere (outputs are written "
+            "whole or not at all: earlier ones are as they were)"
+        )
+    return f"{path}: {cause}"
 
 
 def _shown(filename) -> Path:
-    """``filename`` with each writer's temporary name or lock in it replaced by the name
-    of the output it stands for (``.run.partial-123`` for ``run``, ``.x.partial-123.png``
-    for ``x.png``, ``.map-1f.lock`` for ``map-1f``): the path the user knows."""
-    path = Path(str(filename))
+    """``filename`` with the writers' temporary names in it replaced by the names of the
+    outputs they stand for (``.run.partial-123`` for ``run``, ``.x.partial-123.png`` for
+    ``x.png``), and a lock by its output (``.map-1f.lock`` for ``map-1f``): the path
+    the user knows."""
     parts = []
-    for part in path.parts:
-        match = _PARTIAL.match(part)
+    for part in Path(str(filename)).parts:
+        match = _TEMPORARY.match(part)
         parts.append(part if match is None else match["name"] + (match["suffix"] or ""))
+    if parts and (lock := _LOCK.match(parts[-1])) is not None:
+        parts[-1] = lock["name"]
     return Path(*parts)
 
 
