@@ -47,7 +47,7 @@ from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
 from twin.core.timeutil import format_local
-from twin.data.store import TrajectoryStore
+from twin.data.store import TrajectoryStore, damaged_file
 from twin.traffic.mobil import MOBILParams
 from twin.traffic.models import car_following_model
 from twin.traffic.models.base import CarFollowingModel
@@ -390,7 +390,8 @@ def read_fits(store: TrajectoryStore):
         import pandas as pd
 
         return pd.DataFrame()
-    return pq.read_table(path).to_pandas()
+    with damaged_file(path, "the calibration is damaged: run twin calibrate again"):
+        return pq.read_table(path).to_pandas()
 
 
 def describe_calibration(doc: dict | None) -> str:

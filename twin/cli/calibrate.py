@@ -67,4 +67,8 @@ def _calibrate(args) -> int:
     pictures = draw_lane_flows(store, doc)
     print(describe_calibration(doc))
     print(f"written: {', '.join(map(str, [path, *pictures]))}")
+    print(
+        f"twin run on {store.path} now drives its visible vehicles calibrated (behaviour "
+        "auto); --behaviour paper drives as the paper does"
+    )
     return 0

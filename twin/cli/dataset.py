@@ -76,6 +76,10 @@ def _dataset_config(args):
             text = args.config.read_text()
         except OSError as error:
             raise ConfigError(f"cannot read {args.config}: {error.strerror}") from None
+        except UnicodeDecodeError as error:
+            raise ConfigError(
+                f"{args.config} is not a TOML text file (not UTF-8: {error.reason})"
+            ) from None
         config = load_dataset_config(text, source=str(args.config))
     flags = {"seed": args.seed, "frames_per_episode": args.frames_per_episode}
     values = {k: v for k, v in flags.items() if v is not None}

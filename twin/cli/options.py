@@ -141,7 +141,7 @@ def add_map(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="terrain seed of the cached map")
 
 
-def unix_time(text: str | None, option: str = "--time") -> float | None:
+def unix_time(text: str | None, option: str) -> float | None:
     """The time option ``option`` as unix seconds (None stays None).
 
     Raises:

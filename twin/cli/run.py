@@ -116,7 +116,7 @@ def _run_config(args):
         "road": args.road,
         "lane": args.lane,
         "x": args.x,
-        "time": unix_time(args.time),
+        "time": unix_time(args.time, "--time"),
         "t_max": args.duration,
         "dt": args.dt,
         "world": args.world,

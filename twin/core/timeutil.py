@@ -8,6 +8,7 @@ import numpy as np
 #: I-24 MOTION recordings (Nov-Dec 2022) are in US Central Standard Time.
 CST = timezone(timedelta(hours=-6), "CST")
 LATEST = 4102444800.0  # [s] unix time of 2100-01-01: later is no I-24 recording
+EARLIEST_MS = 1e11  # [ms] 1973-03-03 in milliseconds: a larger "time" is likely milliseconds
 
 
 def parse_time(value: str | float) -> float:
@@ -41,17 +42,25 @@ def parse_time(value: str | float) -> float:
             t = parsed.timestamp()
     if not math.isfinite(t):
         raise ValueError(f"time {value!r} is not a finite number")
-    if not 0.0 <= t < LATEST:
-        hint = (
-            f"; it looks like milliseconds: give seconds, {t / 1000.0:.3f}"
-            if LATEST * 1000.0 > t >= 1e11
-            else ""
-        )
-        raise ValueError(
-            f"time {value!r} is outside 1970 to 2100 in unix seconds{hint} (or ISO 8601, "
-            "e.g. 2022-11-30T06:45:50-06:00)"
-        )
+    check_unix(t, repr(value))
     return t
+
+
+def check_unix(t: float, shown: str | None = None) -> None:
+    """Check that ``t`` is unix seconds between 1970 and 2100.
+
+    Raises:
+        ValueError: naming the value (as ``shown``) and, where it would be a time of
+            1973 to 2100 in milliseconds, saying so and giving the seconds.
+    """
+    if 0.0 <= t < LATEST:
+        return
+    in_ms = EARLIEST_MS <= t < LATEST * 1000.0
+    hint = f"; it looks like milliseconds: give seconds, {t / 1000.0:.3f}" if in_ms else ""
+    raise ValueError(
+        f"time {shown or t!r} is outside 1970 to 2100 in unix seconds{hint} (or ISO 8601, "
+        "e.g. 2022-11-30T06:45:50-06:00)"
+    )
 
 
 def format_local(t: float, *, tenths: bool = False) -> str:

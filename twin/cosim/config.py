@@ -15,7 +15,7 @@ from sensors.camera import CameraError, CameraSettings, check_rig
 from twin.core import i24
 from twin.core.errors import TwinError
 from twin.core.i24 import SCENARIO_TIME, Road
-from twin.core.timeutil import steps_per_sample
+from twin.core.timeutil import check_unix, steps_per_sample
 from twin.cosim.behaviour import AUTO, BEHAVIOURS
 from twin.physics.states import MAX_SPEED
 from twin.physics.worlds import DEFAULT_DT, check_world
@@ -140,6 +140,10 @@ class CosimConfig:
                 raise ConfigError(f"{name} must be a number, got {value!r}")
             if not math.isfinite(value):
                 raise ConfigError(f"{name} must be finite, got {value!r}")
+        try:
+            check_unix(self.time)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
         positive = ("t_max", "w_visible", "w_ghost", "spawn_decel", "ghost_log_rate")
         for name in positive:
             if not numbers[name] > 0:
@@ -296,6 +300,8 @@ def load_config(path: str | Path, *, base: CosimConfig | None = None) -> CosimCo
         text = path.read_text()
     except OSError as error:
         raise ConfigError(f"cannot read configuration {path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{path} is not a TOML text file (not UTF-8: {error.reason})") from None
     return from_toml(text, source=str(path), base=base)
 
 

@@ -181,17 +181,27 @@ def ingest(
                 for doc in documents(path, bar.update):
                     _ingest_document(doc, source_index, options, report, seen, spill, trajectories)
         if report.documents_kept == 0:  # an empty store would replace a good one
-            reasons = ", ".join(f"{k} {v}" for k, v in sorted(report.documents_rejected.items()))
-            raise DataFormatError(
-                f"{', '.join(map(str, paths))}: no valid I-24 MOTION document among "
-                f"{report.documents_read} read ({reasons or 'none rejected'}); nothing was "
-                f"written{f' and the store at {out} is kept as it was' if out.exists() else ''}"
-            )
+            raise DataFormatError(_nothing_kept(paths, out, report))
         spill.flush()
         lane_counts = _write_samples(writer, spill)
         writer.write_table("trajectories.parquet", trajectories.to_arrow())
         writer.write_metadata(_metadata(paths, options, report, trajectories, lane_counts))
     return report
+
+
+def _nothing_kept(paths: list[Path], out: Path, report: IngestReport) -> str:
+    """Why an ingest kept no document: the rejections, or the margin."""
+    reasons = ", ".join(f"{k} {v}" for k, v in sorted(report.documents_rejected.items()))
+    why = f"no valid I-24 MOTION document among {report.documents_read} read"
+    if report.documents_outside_margin:
+        why = (
+            f"no document within the margin ({report.documents_outside_margin} of "
+            f"{report.documents_read} lie wholly beyond it: a larger --margin keeps them)"
+        )
+    elif reasons:
+        why += f" (rejected: {reasons})"
+    kept = f" and the store at {out} is kept as it was" if out.exists() else ""
+    return f"{', '.join(map(str, paths))}: {why}; nothing was written{kept}"
 
 
 def _ingest_document(doc, source_index, options, report, seen, spill, trajectories):

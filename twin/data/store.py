@@ -25,7 +25,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from twin.core import i24
+from twin.core import faults, i24
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
@@ -121,6 +121,8 @@ class TrajectoryStore:
             self.metadata = json.loads(meta.read_text())
         except ValueError as error:
             raise StoreError(f"{meta} is not valid JSON: {error}") from None
+        if not isinstance(self.metadata, dict):
+            raise StoreError(f"{meta} is damaged (not a JSON object); ingest the data again")
         if self.metadata.get("format") != FORMAT:
             raise StoreError(
                 f"{self.path} is not an i24-twin store (format {self.metadata.get('format')!r})"
@@ -130,6 +132,8 @@ class TrajectoryStore:
                 f"{self.path} has store version {self.metadata.get('version')}, this twin reads "
                 f"version {FORMAT_VERSION}: ingest the data again"
             )
+        if not isinstance(self.metadata.get("roads"), dict):
+            raise StoreError(f"{meta} is damaged (no roads table); ingest the data again")
         for name in ["trajectories.parquet"] + [
             f"samples_{r}.parquet" for r in self.metadata["roads"]
         ]:
@@ -151,14 +155,14 @@ class TrajectoryStore:
     def trajectories(self) -> pd.DataFrame:
         """One row per trajectory, indexed by tid (columns as ``TRAJECTORY_SCHEMA``)."""
         path = self.path / "trajectories.parquet"
-        with _damaged(path):
+        with damaged_file(path):
             return pq.read_table(path).to_pandas().set_index("tid")
 
     @cached_property
     def trajectory_arrays(self) -> dict[str, np.ndarray]:
         """The trajectory table as numpy arrays indexed by tid (for vectorised lookups)."""
         path = self.path / "trajectories.parquet"
-        with _damaged(path):
+        with damaged_file(path):
             table = pq.read_table(path)
         arrays = {
             name: table.column(name).to_numpy(zero_copy_only=False) for name in table.column_names
@@ -187,7 +191,7 @@ class TrajectoryStore:
             for i, (lo, hi) in enumerate(self._row_group_spans(road))
             if hi >= t_min and lo <= t_max
         ]
-        with _damaged(self.path / f"samples_{road.value}.parquet"):
+        with damaged_file(self.path / f"samples_{road.value}.parquet"):
             table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
         columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
         keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
@@ -251,7 +255,7 @@ class TrajectoryStore:
     def _file(self, road: Road) -> pq.ParquetFile:
         if road not in self._files:
             path = self.path / f"samples_{road.value}.parquet"
-            with _damaged(path):
+            with damaged_file(path):
                 self._files[road] = pq.ParquetFile(path)
         return self._files[road]
 
@@ -264,7 +268,7 @@ class TrajectoryStore:
                 the metadata says.
         """
         path = self.path / "trajectories.parquet"
-        with _damaged(path):
+        with damaged_file(path):
             rows = pq.ParquetFile(path).metadata.num_rows
         expected = sum(info["trajectories"] for info in self.metadata["roads"].values())
         if rows != expected:
@@ -329,14 +333,13 @@ class TrajectoryStore:
 
 
 @contextmanager
-def _damaged(path: Path):
-    """Name ``path`` in the error when pyarrow cannot read it (a truncated or corrupt
-    file: pyarrow's own message names neither the file nor the remedy)."""
+def damaged_file(path: Path, remedy: str = "the store is damaged: ingest the data again"):
+    """Name ``path`` and ``remedy`` in the error when pyarrow cannot read it (a
+    truncated or corrupt file: pyarrow's own message names neither)."""
     try:
         yield
     except (pa.ArrowException, OSError) as error:
+        if isinstance(error, OSError) and error.errno in faults.REMEDIES:
+            raise faults.at(error, path) from error  # the machine's fault, not damage
         first = str(error).splitlines()[0] if str(error) else type(error).__name__
-        raise StoreError(
-            f"{path}: not a readable Parquet file ({first}); the store is damaged: ingest "
-            "the data again"
-        ) from None
+        raise StoreError(f"{path}: not a readable Parquet file ({first}); {remedy}") from None
