@@ -45,14 +45,13 @@ def build_lock(target: Path) -> Iterator[None]:
 
 @contextmanager
 def output_lock(out: Path, command: str) -> Iterator[None]:
-    """Hold the lock of the output folder ``out`` for ``command`` (``twin eval``);
-    refuse when another process holds it.
+    """Hold the lock of the output folder ``out`` (which exists: claimed by the command)
+    for ``command`` (``twin eval``); refuse when another process holds it.
 
     Raises:
         BusyError: naming ``out``, the other process and what to do.
     """
     path = lock_path(out)
-    path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a+") as file:
         try:
             fcntl.flock(file, fcntl.LOCK_EX | fcntl.LOCK_NB)

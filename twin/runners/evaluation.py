@@ -206,9 +206,8 @@ def evaluate(
         BehaviourError: a behaviour needs a calibration the store lacks.
         SamplingError: no episode can be drawn from the data in the window.
     """
-    from tqdm import tqdm
-
     from mapgen.build import default_map
+    from twin.core.progress import progress_bar
 
     start = time.perf_counter()
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
@@ -221,10 +220,11 @@ def evaluate(
         )  # fmt: skip
     bundle = bundle or default_map(progress=progress)
     specs = draw_specs(config, store, bundle)
+    _claim(out, config, store, bundle)  # checks --out before anything is made beside it
     with output_lock(out, "twin eval"):
-        _claim(out, config, store, bundle)
         results = out / RESULTS
         results.mkdir(exist_ok=True)
+        remove_stale(out)  # what a killed run left: its summaries and pictures, its results
         remove_stale(results)
         jobs = [
             (config, spec, arm, where(store, bundle))
@@ -232,10 +232,10 @@ def evaluate(
             for arm in config.arms
             if not _result_path(out, spec.index, arm[0]).is_file()
         ]
-        with tqdm(
+        with progress_bar(
+            progress=progress,
             total=len(jobs),
             unit="episode",
-            disable=None if progress else True,
             desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.arms)} to run",
         ) as bar:
 
@@ -429,12 +429,13 @@ def _read_result(path: Path) -> dict:
     """
     try:
         row = json.loads(path.read_text())
+        problem = None if isinstance(row, dict) else "not a JSON object"
     except ValueError as error:
-        row = error
-    if not isinstance(row, dict):
+        problem = str(error)
+    if problem is not None:
         raise EvaluationError(
-            f"{path} is damaged ({row if isinstance(row, ValueError) else 'not an object'}); "
-            "remove it and run the same command again to redo that episode"
+            f"{path} is damaged ({problem}); remove it and run the same command again to "
+            "redo that episode"
         )
     return row
 

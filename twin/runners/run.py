@@ -188,6 +188,7 @@ def run_episode(
     folder = AtomicFolder(Path(out), recognise=is_run, kind="run folder")
     folder.check_replaceable()
     with Cosimulator(config, traffic, bundle, controller=controller) as sim, folder:
+        note = _behaviour_note(config, store, sim.behaviour.name)  # the calibration used
         setup = time.perf_counter()
         sim.reset()
         start = time.perf_counter()
@@ -209,17 +210,18 @@ def run_episode(
             else (type(controller))
         )
         name = f"{kind.__module__}:{kind.__qualname__}"
-    return RunResult(folder.out, figures, ego, name, _behaviour_note(config, store, figures))
+    return RunResult(folder.out, figures, ego, name, note)
 
 
-def _behaviour_note(config: CosimConfig, store: TrajectoryStore, figures: dict) -> str:
+def _behaviour_note(config: CosimConfig, store: TrajectoryStore, behaviour: str) -> str:
     """Where ``auto`` took the store's calibration, which one and how to run without it
-    (calibrating a store changes what ``twin run`` on it does from then on)."""
-    if config.behaviour != AUTO or figures["behaviour"] == "paper":
+    (calibrating a store changes what ``twin run`` on it does from then on); read as
+    the run starts, with the calibration it drives by."""
+    if config.behaviour != AUTO or behaviour == "paper":
         return ""
     doc = read_calibration(store)
     return (
-        f"auto chose {figures['behaviour']}: the data hold a calibration ({CALIBRATION} "
+        f"auto chose {behaviour}: the data hold a calibration ({CALIBRATION} "
         f"made {doc['created']}); --behaviour paper drives as the paper does"
     )
 

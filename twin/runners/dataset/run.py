@@ -90,8 +90,9 @@ def generate(
     config = resolved_renderer(config)
     bundle = bundle or default_map(progress=progress)
     specs = draw_episodes(config, store, bundle, episodes)
+    claim_folder(out, config, store, bundle)  # checks --out before anything is made beside it
     with output_lock(out, "twin dataset"):
-        claim_folder(out, config, store, bundle)
+        remove_stale(out)  # what a killed run left: its labels and manifests, its episodes
         remove_stale(out / EPISODES)
         todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
         cameras = len(config.cosim.camera.cameras)
