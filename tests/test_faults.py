@@ -23,7 +23,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
@@ -50,9 +49,12 @@ def digest(root: Path) -> dict[str, str]:
 class Fault:
     """The file system under ``root`` failing with ``code``, as Python sees it.
 
-    ``EROFS`` (a read-only target): no folder, file or rename can be made in it.
-    ``ENOSPC`` (a full disk): folders can be made, but no file written and no finished
-    file committed (renamed from a writer's temporary name).
+    ``EROFS`` (a read-only target) or ``EACCES`` (no permission): no folder, file or
+    rename can be made in it.
+    ``ENOSPC`` (a full disk): folders and files can be made, but writing to a file fails
+    as a real full disk's ``write`` does (an error that names no file), and no finished
+    file is committed (renamed from a writer's temporary name).
+    Lock files are exempt: they exist already, and opening one writes nothing.
     """
 
     def __init__(self, monkeypatch, root: Path, code: int):
@@ -61,7 +63,7 @@ class Fault:
         real_rename, real_replace = os.rename, os.replace
 
         def inside(path) -> bool:
-            if isinstance(path, int):
+            if isinstance(path, int) or str(path).endswith(".lock"):
                 return False
             try:
                 Path(os.path.abspath(path)).relative_to(self.root)
@@ -73,9 +75,11 @@ class Fault:
             raise OSError(code, os.strerror(code), str(path))
 
         def open_(file, mode="r", *args, **kwargs):
-            if inside(file) and any(c in mode for c in "wax+"):
+            if not (inside(file) and any(c in mode for c in "wax+")):
+                return real_open(file, mode, *args, **kwargs)
+            if code != errno.ENOSPC:
                 refuse(file)
-            return real_open(file, mode, *args, **kwargs)
+            return _Full(real_open(file, mode, *args, **kwargs), code)
 
         def mkdir(path, *args, **kwargs):
             if code != errno.ENOSPC and inside(path):
@@ -98,6 +102,25 @@ class Fault:
         monkeypatch.setattr(os, "mkdir", mkdir)
         monkeypatch.setattr(os, "rename", moves(real_rename))
         monkeypatch.setattr(os, "replace", moves(real_replace))
+
+
+class _Full:
+    """A file on a full disk: it opens, and every write fails without naming it."""
+
+    def __init__(self, file, code: int):
+        self._file, self._code = file, code
+
+    def write(self, data):
+        raise OSError(self._code, os.strerror(self._code))
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._file.close()
+
+    def __getattr__(self, name):
+        return getattr(self._file, name)
 
 
 def assert_one_line(capsys, *naming: str) -> str:
@@ -263,6 +286,8 @@ def test_a_damaged_store_is_named_by_the_file(damage, names, command, scene, tmp
     path = store / damage
     if damage == "calibration.json":
         path.write_text('{"format": "i24-twin-calibration", "roads": {')
+    elif damage == "metadata.json" and command == "run":  # JSON, but not the store's
+        path.write_text("[]")
     else:
         raw = path.read_bytes()
         path.write_bytes(raw[: len(raw) // 2])
@@ -277,13 +302,14 @@ def test_a_damaged_store_is_named_by_the_file(damage, names, command, scene, tmp
     ("text", "says"),
     [
         ('road = "westbound"\nlane = ', "run.toml"),
+        ("\udcff", "not a TOML text file (not UTF-8"),
         ("lane = -7\n", "lane"),
         ("[traffic]\nhov_share = nan\n", "hov_share"),
     ],
 )
 def test_a_bad_config_file_is_named(text, says, scene, tmp_path, capsys):
     config = tmp_path / "run.toml"
-    config.write_text(text)
+    config.write_bytes(text.encode("utf-8", "surrogateescape"))
     argv = [*_run_args(scene.path, tmp_path / "run"), "--config", str(config)]
     assert main(argv) == EXIT_USER_ERROR
     assert_one_line(capsys, str(config), says)
@@ -313,6 +339,10 @@ def test_a_time_in_milliseconds_is_named_as_such(scene, tmp_path, capsys):
     argv[argv.index("--time") + 1] = "1669812350000"
     assert main(argv) == EXIT_USER_ERROR
     assert_one_line(capsys, "--time", "1669812350000", "milliseconds", "1669812350.000")
+    # the same time given as a setting, not as the option
+    del argv[argv.index("--time") : argv.index("--time") + 2]
+    assert main([*argv, "--set", "time=1669812350000"]) == EXIT_USER_ERROR
+    assert_one_line(capsys, "1669812350000", "milliseconds", "1669812350.000")
 
 
 def test_calibrating_a_store_without_trajectories_says_why(tmp_path, capsys):
@@ -337,12 +367,17 @@ def test_no_progress_bar_is_written_into_a_log(wave_store, tmp_path):
     log = tmp_path / "log.txt"
     store = tmp_path / "store"
     shutil.copytree(wave_store.path, store)
-    for argv in (["calibrate", str(store)], _run_args(store,
-                                                           tmp_path / "run")[:-1]):  # fmt: skip
+    commands = (
+        ["calibrate", str(store)],
+        ["data", "waves", str(store), "--road", "westbound", "--out", str(tmp_path / "w")],
+        _run_args(store, tmp_path / "run")[:-1],  # without --quiet
+    )
+    for argv in commands:
         with open(log, "w") as err:
-            subprocess.run([sys.executable, "-m", "twin", *argv], stderr=err, env=ENV,
-                           stdout=subprocess.DEVNULL, cwd=tmp_path, check=False)  # fmt: skip
+            done = subprocess.run([sys.executable, "-m", "twin", *argv], stderr=err, env=ENV,
+                                  stdout=subprocess.DEVNULL, cwd=tmp_path, check=False)  # fmt: skip
         text = log.read_text()
+        assert done.returncode == 0, text
         assert "\r" not in text and "it/s" not in text and "%|" not in text, text
 
 
@@ -376,26 +411,40 @@ def _killed_args(command: str, where: Path, wave) -> list[str]:
     return writer(command, where, wave, wave)[0]
 
 
+def _kill_while_writing(twin: list[str], where: Path) -> None:
+    """Start ``twin`` and kill it once a writer's temporary file or folder is there."""
+    process = subprocess.Popen(twin, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV)
+    deadline = time.monotonic() + 120.0
+    while not any(where.rglob(".*.partial-*")):
+        assert process.poll() is None, "it finished before anything was written"
+        assert time.monotonic() < deadline, "nothing was written in 120 s"
+        time.sleep(0.02)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("command", KILLED)
 def test_a_killed_write_leaves_the_earlier_output_and_the_rerun_completes(
     command, scene, wave_store, tmp_path
 ):
+    """Killed while it writes: an output written whole before is as it was (ingest, map
+    build); a resumable folder (eval, dataset) resumes. Then the same command completes
+    and nothing of the killed writer is left anywhere."""
     argv = _killed_args(command, tmp_path, wave_store)
     twin = [sys.executable, "-m", "twin", *argv]
-    assert subprocess.run(twin, capture_output=True, env=ENV, check=False).returncode == 0
     out = Path(argv[argv.index("--out") + 1])
-    before = digest(out)
-    rng = np.random.default_rng(KILLED.index(command))
-    process = subprocess.Popen(twin, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV)
-    time.sleep(float(rng.uniform(0.5, 2.0)))  # somewhere in the middle of the work
-    process.send_signal(signal.SIGKILL)
-    process.wait()
-    if command not in ("eval", "dataset"):  # these keep finished episodes: they resume
+    resumable = command in ("eval", "dataset")
+    if not resumable:
+        assert subprocess.run(twin, capture_output=True, env=ENV, check=False).returncode == 0
+    before = digest(out) if out.exists() else None
+    _kill_while_writing(twin, tmp_path)
+    if not resumable:
         assert digest(out) == before
     done = subprocess.run(twin, capture_output=True, text=True, env=ENV, check=False)
     assert done.returncode == 0, done.stderr
-    assert not list(out.parent.glob(".*.partial-*")), "a killed writer's leftovers remain"
+    assert not list(tmp_path.rglob(".*.partial-*")), "a killed writer's leftovers remain"
+    assert not list(tmp_path.rglob(".*.old-*"))
     if command == "data ingest":
         assert digest(out) == before  # the same inputs give the same bytes
 
@@ -418,6 +467,8 @@ def test_two_first_runs_at_once_build_the_cache_once(scene, tmp_path):
                                      text=True))  # fmt: skip
     results = [run.communicate() for run in runs]
     assert [run.returncode for run in runs] == [0, 0], results
+    # one waited for the other's build (of the day file's store, or of the map)
+    assert any("waiting for another twin process to finish" in err for _, err in results)
     cache = sorted(p.name for p in (tmp_path / "cache").iterdir() if not p.name.startswith("."))
     assert len([n for n in cache if n.startswith("map-")]) == 1
     assert len([n for n in cache if n.startswith("store-")]) == 1
@@ -454,9 +505,12 @@ def test_a_second_command_on_the_same_out_is_refused(command, scene, wave_store,
     from twin.core.locks import output_lock
 
     argv, out = writer(command, tmp_path, scene, wave_store)
-    with output_lock(out, f"twin {command}"):  # as another process running now would
+    assert main(argv) == 0  # a folder another command is now extending
+    capsys.readouterr()
+    before = digest(out)
+    with output_lock(out, f"twin {command}"):  # as that command, running now, holds it
         assert main(argv) == EXIT_USER_ERROR
     line = assert_one_line(capsys, str(out), f"being written by twin {command} (pid")
     assert "choose another --out" in line
-    assert not out.exists()
+    assert digest(out) == before
     assert main(argv) == 0  # once the other has finished
