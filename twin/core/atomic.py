@@ -7,13 +7,34 @@ and never destroys the previous one.
 
 import json
 import os
+import re
 import shutil
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from twin.core import faults
 from twin.core.errors import TwinError
+
+#: A writer's temporary name beside its output: ``.NAME.partial-PID[.EXT]`` while it
+#: writes, ``.NAME.old-PID`` for the earlier output it moves aside to replace it.
+TEMPORARY = re.compile(
+    r"^\.(?P<name>.+?)\.(?P<kind>partial|old)-(?P<pid>\d+)(?P<suffix>\.[^./]*)?$"
+)
+
+
+def naming(error: OSError, path: Path) -> OSError:
+    """``error`` naming ``path`` when it names no file (a full disk's ``write``, and
+    pyarrow's I/O errors, carry no file name): the output that was being written."""
+    if error.filename is not None:
+        return error
+    return OSError(error.errno, error.strerror or str(error), str(path))
+
+
+def output_name(name: str) -> str | None:
+    """The output a writer's temporary ``name`` stands for (``.x.partial-12.png`` for
+    ``x.png``), or None when ``name`` is not one."""
+    match = TEMPORARY.match(name)
+    return None if match is None else match["name"] + (match["suffix"] or "")
 
 
 class AtomicFolder:
@@ -59,7 +80,7 @@ class AtomicFolder:
         if exc_type is not None:
             shutil.rmtree(self.tmp, ignore_errors=True)
             if isinstance(exc, OSError) and exc.filename is None:  # a full disk's write
-                raise faults.at(exc, self.out) from exc
+                raise naming(exc, self.out) from exc
             return
         try:
             self.check_replaceable()
@@ -92,7 +113,7 @@ def atomic_file(out: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp, out)
     except OSError as error:
         if error.filename is None:  # a full disk's write names no file
-            raise faults.at(error, out) from error
+            raise naming(error, out) from error
         raise
     finally:
         tmp.unlink(missing_ok=True)
@@ -102,19 +123,17 @@ def remove_stale(parent: Path, name: str = "*") -> None:
     """Remove what writers of ``parent/name`` (a glob) left behind when they were killed
     (their process is gone): temporary folders and files, and put back an earlier
     output that a writer killed between its two renames had moved aside."""
-    for stale in Path(parent).glob(f".{name}.partial-*"):
-        if not _pid_alive(stale.name.split(".partial-", 1)[1].split(".", 1)[0]):
-            if stale.is_dir():
-                shutil.rmtree(stale, ignore_errors=True)
-            else:
-                stale.unlink(missing_ok=True)
-    for old in Path(parent).glob(f".{name}.old-*"):
-        if not _pid_alive(old.name.rsplit("-", 1)[-1]):
-            out = old.with_name(old.name[1:].rsplit(".old-", 1)[0])
-            if out.exists():
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                os.rename(old, out)
+    for stale in sorted(Path(parent).glob(f".{name}.*-*")):
+        match = TEMPORARY.match(stale.name)
+        if match is None or _pid_alive(match["pid"]):
+            continue
+        out = stale.with_name(output_name(stale.name))
+        if match["kind"] == "old" and not out.exists():
+            os.rename(stale, out)
+        elif stale.is_dir():
+            shutil.rmtree(stale, ignore_errors=True)
+        else:
+            stale.unlink(missing_ok=True)
 
 
 def marked_as(folder: Path, marker: str, fmt: str) -> bool:

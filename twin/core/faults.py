@@ -5,13 +5,15 @@ traceback; every writer of the twin writes under a temporary name and renames, s
 fault leaves earlier outputs as they were.
 
 An error counts as the machine's only when it names a file: the writers re-raise a full
-disk's path-less ``write`` error with the output they were writing (:func:`at`), and a
+disk's path-less ``write`` error with the output they were writing
+(:func:`twin.core.atomic.naming`), and a
 path-less permission error (from a socket, a signal) stays a bug with its traceback."""
 
 import errno
 import re
 from pathlib import Path
 
+from twin.core.atomic import output_name
 from twin.core.paths import cache_dir
 
 #: Faults of the machine a user can fix (space, permissions, a read-only mount), by errno.
@@ -23,9 +25,7 @@ REMEDIES = {
     errno.EDQUOT: "the disk quota is exceeded",
     errno.ENAMETOOLONG: "the file name is too long",
 }
-#: A writer's temporary name beside its output: ``.NAME.partial-PID[.EXT]``,
-#: ``.NAME.old-PID``; and a lock, ``.NAME.lock`` (the last part of a path only).
-_TEMPORARY = re.compile(r"^\.(?P<name>.+?)\.(?:partial|old)-\d+(?P<suffix>\.[^./]*)?$")
+#: A lock beside its output, ``.NAME.lock`` (:func:`twin.core.locks.lock_path`).
 _LOCK = re.compile(r"^\.(?P<name>.+)\.lock$")
 
 
@@ -33,14 +33,6 @@ def is_machine_fault(error: BaseException) -> bool:
     """Whether ``error`` is a fault of the machine the user can fix: an ``OSError`` of
     :data:`REMEDIES` that names a file."""
     return isinstance(error, OSError) and error.errno in REMEDIES and error.filename is not None
-
-
-def at(error: OSError, path: Path) -> OSError:
-    """``error`` naming ``path`` when it names no file (a full disk's ``write``, or
-    pyarrow's I/O errors, carry no file name)."""
-    if error.filename is not None:
-        return error
-    return OSError(error.errno, error.strerror or str(error), str(path))
 
 
 def describe(error: OSError) -> str:
@@ -66,10 +58,7 @@ def _shown(filename) -> Path:
     outputs they stand for (``.run.partial-123`` for ``run``, ``.x.partial-123.png`` for
     ``x.png``), and a lock by its output (``.map-1f.lock`` for ``map-1f``): the path
     the user knows."""
-    parts = []
-    for part in Path(str(filename)).parts:
-        match = _TEMPORARY.match(part)
-        parts.append(part if match is None else match["name"] + (match["suffix"] or ""))
+    parts = [output_name(part) or part for part in Path(str(filename)).parts]
     if parts and (lock := _LOCK.match(parts[-1])) is not None:
         parts[-1] = lock["name"]
     return Path(*parts)

@@ -26,7 +26,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from twin.core import faults, i24
-from twin.core.atomic import AtomicFolder, marked_as
+from twin.core.atomic import AtomicFolder, marked_as, naming
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
 from twin.core.timeutil import format_local, local_days
@@ -340,6 +340,6 @@ def damaged_file(path: Path, remedy: str = "the store is damaged: ingest the dat
         yield
     except (pa.ArrowException, OSError) as error:
         if isinstance(error, OSError) and error.errno in faults.REMEDIES:
-            raise faults.at(error, path) from error  # the machine's fault, not damage
+            raise naming(error, path) from error  # the machine's fault, not damage
         first = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise StoreError(f"{path}: not a readable Parquet file ({first}); {remedy}") from None
