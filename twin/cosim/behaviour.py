@@ -115,6 +115,7 @@ class Behaviour:
         self.planned: PlannedChanges | None = None
         self.strategic_flows: dict | None = None
         self.keep_out: list = []  # lanes kept out of (calibrated): lane_flows.keep_out
+        self.calibrated_at: str | None = None  # when the calibration driven by was made
         if self.name == "paper":
             return
         doc = read_calibration(store)
@@ -131,6 +132,7 @@ class Behaviour:
                 f"the run drives {car_following}: add --set traffic.car_following={fitted} "
                 f"(or calibrate again with --model {car_following})"
             )
+        self.calibrated_at = doc["created"]
         section = doc["roads"][self.road.value]
         car = section["car_following"]
         if not car.get("not_calibrated"):

@@ -26,14 +26,14 @@ from sensors.camera import CameraRig, Frame
 from sensors.replay import FrameTraffic
 from sensors.writer import FrameWriter
 from twin import __version__
-from twin.calibration.calibrate import CALIBRATION, read_calibration
+from twin.calibration.calibrate import CALIBRATION
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import StoreError
 from twin.core.locks import build_lock
 from twin.core.paths import cache_dir
 from twin.core.timeutil import steps_per_sample
 from twin.cosim import plots
-from twin.cosim.behaviour import AUTO
+from twin.cosim.behaviour import AUTO, Behaviour
 from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
@@ -188,7 +188,7 @@ def run_episode(
     folder = AtomicFolder(Path(out), recognise=is_run, kind="run folder")
     folder.check_replaceable()
     with Cosimulator(config, traffic, bundle, controller=controller) as sim, folder:
-        note = _behaviour_note(config, store, sim.behaviour.name)  # the calibration used
+        note = _behaviour_note(config, sim.behaviour)
         setup = time.perf_counter()
         sim.reset()
         start = time.perf_counter()
@@ -213,16 +213,15 @@ def run_episode(
     return RunResult(folder.out, figures, ego, name, note)
 
 
-def _behaviour_note(config: CosimConfig, store: TrajectoryStore, behaviour: str) -> str:
-    """Where ``auto`` took the store's calibration, which one and how to run without it
-    (calibrating a store changes what ``twin run`` on it does from then on); read as
-    the run starts, with the calibration it drives by."""
-    if config.behaviour != AUTO or behaviour == "paper":
+def _behaviour_note(config: CosimConfig, behaviour: Behaviour) -> str:
+    """Where ``auto`` took the store's calibration, which one (the one the run drives
+    by) and how to run without it: calibrating a store changes what ``twin run`` on it
+    does from then on."""
+    if config.behaviour != AUTO or behaviour.name == "paper":
         return ""
-    doc = read_calibration(store)
     return (
-        f"auto chose {behaviour}: the data hold a calibration ({CALIBRATION} "
-        f"made {doc['created']}); --behaviour paper drives as the paper does"
+        f"auto chose {behaviour.name}: the data hold a calibration ({CALIBRATION} "
+        f"made {behaviour.calibrated_at}); --behaviour paper drives as the paper does"
     )
 
 
