@@ -224,7 +224,6 @@ def evaluate(
     with output_lock(out, "twin eval"):
         results = out / RESULTS
         results.mkdir(exist_ok=True)
-        remove_stale(out)  # what a killed run left: its summaries and pictures, its results
         remove_stale(results)
         jobs = [
             (config, spec, arm, where(store, bundle))

@@ -14,7 +14,7 @@ import json
 import tomllib
 from pathlib import Path
 
-from twin.core.atomic import atomic_file
+from twin.core.atomic import atomic_file, remove_stale
 from twin.core.errors import TwinError
 
 
@@ -65,6 +65,7 @@ def claim(
                 f"({'; '.join(differ[:5])}); what it holds would not match. Use another "
                 f"--out, or the same settings to resume it{hint}"
             )
+        remove_stale(out)  # what a killed run left in it: its summaries, pictures, labels
         return
     out.mkdir(parents=True, exist_ok=True)
     for name, text in (files or {}).items():

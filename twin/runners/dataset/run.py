@@ -92,7 +92,6 @@ def generate(
     specs = draw_episodes(config, store, bundle, episodes)
     claim_folder(out, config, store, bundle)  # checks --out before anything is made beside it
     with output_lock(out, "twin dataset"):
-        remove_stale(out)  # what a killed run left: its labels and manifests, its episodes
         remove_stale(out / EPISODES)
         todo = [s for s in specs if not is_episode(episode_folder(out, s.index))]
         cameras = len(config.cosim.camera.cameras)
