@@ -75,6 +75,18 @@ def at_least_one(text: str) -> int:
     return value
 
 
+def positive_float(text: str) -> float:
+    """A number option that must be finite and > 0 (argparse names the option when it
+    is not)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0.0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
 def add_set(parser: argparse.ArgumentParser, help: str) -> None:
     """``--set KEY=VALUE`` (repeatable), collected in ``args.assignments``."""
     parser.add_argument(

@@ -29,16 +29,12 @@ import pandas as pd
 
 from mapgen.opendrive import write_opendrive
 from twin.core.atomic import AtomicFolder
-from twin.core.errors import TwinError
 from twin.core.i24 import VEHICLE_CLASSES, Road
+from twin.export.episode import ExportError, read_episode
 
 FCD_PERIOD = 0.1  # [s]
 EDGES = {Road.EASTBOUND: "-1", Road.WESTBOUND: "1"}  # netconvert's ids of the two sides
 HEAVY = {"semi", "truck"}
-
-
-class ExportError(TwinError):
-    """A run cannot be exported: not a run folder, or SUMO is missing."""
 
 
 def sumo_home() -> Path:
@@ -69,15 +65,10 @@ def export_run(run: Path, out: Path, bundle) -> dict:
     Raises:
         ExportError: ``run`` is not a run folder, or SUMO is missing or fails.
     """
-    from twin.cosim.config import load_config
-    from twin.runners.run import is_run
-
-    run, out = Path(run), Path(out)
-    if not is_run(run):
-        raise ExportError(f"{run} is not a run folder (twin run --out makes one)")
+    out = Path(out)
+    episode = read_episode(run)
     home = sumo_home()
-    config = load_config(run / "config.toml")
-    rows = pd.read_parquet(run / "trajectories.parquet")
+    config, rows = episode.config, episode.rows
     road_model = bundle.road
     recognise = lambda p: (p / "i24.sumocfg").is_file()  # noqa: E731
     with AtomicFolder(out, recognise=recognise, kind="SUMO export", error=ExportError) as folder:
