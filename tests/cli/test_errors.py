@@ -2,6 +2,7 @@
 status 2, a bug with its traceback and a request to report it with status 70, an
 interrupt with status 130."""
 
+import os
 import subprocess
 import sys
 import traceback
@@ -10,7 +11,7 @@ import pytest
 
 import twin.cli.data
 from twin import __version__
-from twin.cli import EXIT_BUG, EXIT_INTERRUPTED, EXIT_USER_ERROR, main
+from twin.cli import EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_INTERRUPTED, EXIT_USER_ERROR, main
 
 BUG_LINE = (
     f"twin: internal error: this is a bug in i24-twin {__version__}; "
@@ -130,6 +131,21 @@ def test_the_exit_status_reaches_the_shell():
     assert done.stderr.splitlines() == [
         "twin: error: no embedded data 'nosuch': choose one of embedded:default, embedded:morning"
     ]
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly(wave_store):
+    """``twin data info | head -1``: the reader leaves before the twin writes; the twin
+    stops with SIGPIPE's status, as other tools do, not with a bug's traceback."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run(
+            [sys.executable, "-m", "twin", "data", "info", str(wave_store.path)],
+            stdout=write, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (EXIT_BROKEN_PIPE, "")
 
 
 def test_repeats_below_one_are_refused_by_every_benchmark(capsys):

@@ -11,6 +11,7 @@ a line asking to report it, and exit status 70.
 """
 
 import argparse
+import os
 import re
 import sys
 import traceback
@@ -23,6 +24,7 @@ from twin.core.errors import TwinError
 EXIT_USER_ERROR = 2  # as argparse's own errors
 EXIT_BUG = 70  # EX_SOFTWARE of sysexits.h: an internal software error
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports it
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away
 BUG_HINT = (
     f"twin: internal error: this is a bug in i24-twin {__version__}; "
     "please report it with the command and the traceback above"
@@ -33,8 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``twin`` command ``argv`` (default: the process's arguments).
 
     Returns:
-        The exit status: 0, ``EXIT_USER_ERROR``, ``EXIT_BUG`` or ``EXIT_INTERRUPTED``
-        (argparse exits with 2 itself on an option it rejects).
+        The exit status: 0, ``EXIT_USER_ERROR``, ``EXIT_BUG``, ``EXIT_INTERRUPTED`` or
+        ``EXIT_BROKEN_PIPE`` (argparse exits with 2 itself on an option it rejects).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -49,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("twin: interrupted; nothing partial was left behind", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # twin ... | head: stop quietly, as other command-line tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error at exit
+        return EXIT_BROKEN_PIPE
     except Exception as error:
         if faults.is_machine_fault(error):
             print(f"twin: error: {faults.describe(error)}", file=sys.stderr)
