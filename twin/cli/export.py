@@ -34,6 +34,12 @@ def register(commands) -> None:
         "ego did and is left to your controller (default: trajectory)",
     )  # fmt: skip
     scenario.add_argument(
+        "--late-vehicles", choices=["add", "omit"], default=None,
+        help="add: vehicles that enter the map after time 0 are added when they appear "
+        "(esmini); omit: only the vehicles on the map at time 0, which CARLA ScenarioRunner "
+        "can load (default: add)",
+    )  # fmt: skip
+    scenario.add_argument(
         "--rate", type=positive_float, default=None, metavar="HZ",
         help="trajectory vertices per second [Hz], each a row of the source (default: 10)",
     )  # fmt: skip
@@ -53,6 +59,7 @@ def _export(args) -> int:
 
     scenario_only = {"--trajectories": args.trajectories, "--ego": args.ego,
                      "--rate": args.rate, "--osc-version": args.osc_version,
+                     "--late-vehicles": args.late_vehicles,
                      "--data": args.data}  # fmt: skip
     if args.format == "sumo":
         given = [name for name, value in scenario_only.items() if value is not None]
@@ -76,10 +83,12 @@ def _export(args) -> int:
         trajectories=args.trajectories or "simulated", ego=args.ego or "trajectory",
         rate=args.rate or openscenario.DEFAULT_RATE, data=args.data,
         minor=int((args.osc_version or "1.0").split(".")[1]),
+        late=args.late_vehicles or "add",
     )  # fmt: skip
     folder = Path(done["folder"])
     print(
-        f"wrote {folder}: {done['vehicles']} vehicles, {done['vertices']:,} trajectory vertices "
+        f"wrote {folder}: {done['vehicles']} of the run's {done['of_vehicles']} vehicles, "
+        f"{done['vertices']:,} trajectory vertices "
         f"({done['trajectories']}), {done['duration_s']:g} s, the ego "
         f"{'left to an external controller' if done['ego'] == 'external' else 'on its trajectory'}"
         f"\n  {folder / openscenario.SCENARIO}  the episode (OpenSCENARIO 1.{done['minor']})"

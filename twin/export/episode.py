@@ -12,6 +12,10 @@ import pyarrow.parquet as pq
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
 
+#: the log's columns the exporters read (twin.cosim.log writes them all)
+COLUMNS = ("time", "record_id", "role", "road", "lane", "x", "y", "speed", "heading", "grade",
+           "vehicle_class", "length", "width", "height")  # fmt: skip
+
 
 class ExportError(TwinError):
     """A run cannot be exported: not a run folder, a tool is missing, or bad options."""
@@ -45,7 +49,8 @@ def read_episode(run: Path) -> Episode:
 
     Raises:
         ExportError: ``run`` is not a run folder (``twin run --out`` makes one), or its
-            trajectory log lacks the twin's metadata.
+            trajectory log lacks the twin's metadata or a column, or holds no row.
+        StoreError: the log is not a readable Parquet file.
     """
     from twin.cosim.config import load_config
     from twin.data.store import damaged_file
@@ -56,14 +61,21 @@ def read_episode(run: Path) -> Episode:
         raise ExportError(f"{run} is not a run folder (twin run --out makes one)")
     config = load_config(run / "config.toml")
     log = run / "trajectories.parquet"
-    with damaged_file(log):
+    again = f"run it again: twin run --config {run / 'config.toml'} --out {run}"
+    with damaged_file(log, f"the run is damaged; {again}"):
         metadata = (pq.read_schema(log).metadata or {}).get(b"i24_twin")
         rows = pd.read_parquet(log)
     try:
         facts = json.loads(metadata)
         t0, road, ego = float(facts["t0"]), Road.parse(facts["road"]), str(facts["ego_record_id"])
-    except (TypeError, ValueError, KeyError) as error:
-        raise ExportError(f"{log}: not a twin run's trajectory log ({error!r})") from None
+    except (TypeError, ValueError, KeyError):
+        raise ExportError(
+            f"{log} lacks the twin's metadata (t0, road, ego_record_id): not the trajectory "
+            f"log of a twin run, or a damaged one; {again}"
+        ) from None
+    missing = [name for name in COLUMNS if name not in rows.columns]
+    if missing:
+        raise ExportError(f"{log} lacks the columns {', '.join(missing)}; {again}")
     if rows.empty:
         raise ExportError(f"{log} holds no rows: nothing to export")
     return Episode(run, config, rows, t0, road, ego, float(rows["time"].max()))

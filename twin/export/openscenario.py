@@ -14,7 +14,9 @@ the other tools that read the standard.
   so that a player puts every vehicle where the run had it, when it had it. A vehicle
   that is not on the map at time 0 is removed in the ``Init`` and added
   (``AddEntityAction``) when it appears; one that leaves before the end is deleted
-  (``DeleteEntityAction``).
+  (``DeleteEntityAction``). With ``late="omit"`` only the vehicles on the map at time 0
+  are written, each for its first stay, so that nothing is added: CARLA ScenarioRunner
+  cannot load a file whose vehicles are added (``docs/export.md``).
 
 The trajectories are the run's (``simulated``: the twin's for the ego and the visible
 vehicles, the recording for the ghosts, as the run had them) or the recording's
@@ -31,7 +33,8 @@ Conventions of the file (the standard's): a vehicle's position is its reference 
 the centre of its rear axle on the road surface; its ``BoundingBox`` centre is given from
 there. Headings are world yaw counter-clockwise from east; pitch is positive nose down
 (ISO 8855), so an uphill grade is a negative pitch. Times are seconds since the run's t0.
-OpenSCENARIO 1.0 is written because CARLA ScenarioRunner reads no other version.
+OpenSCENARIO 1.0 is written by default because CARLA ScenarioRunner reads no other
+version; ``minor`` chooses 1.1 to 1.3.
 """
 
 import math
@@ -53,6 +56,7 @@ EGO = "hero"  # CARLA's role name of the vehicle a user drives; esmini takes any
 SCENARIO, NETWORK = "i24.xosc", "i24.xodr"
 TRAJECTORIES = ("simulated", "recorded")
 EGO_MODES = ("trajectory", "external")
+LATE = ("add", "omit")
 MINORS = (0, 1, 2, 3)  # OpenSCENARIO 1.0 to 1.3 (scenariogeneration writes each)
 DEFAULT_RATE = 10.0  # [Hz] trajectory vertices per second
 GAP = 0.5  # [s] a longer pause in a vehicle's rows splits its trajectory (it left and came back)
@@ -60,8 +64,10 @@ GAP = 0.5  # [s] a longer pause in a vehicle's rows splits its trajectory (it le
 #: rigid body, so it is a truck, not a tractor with a semitrailer entity)
 CATEGORY = {"sedan": "car", "midsize": "car", "pickup": "car", "van": "van", "semi": "truck",
             "truck": "truck", "motorcycle": "motorbike"}  # fmt: skip
-#: Performance limits wide enough never to clip a recorded motion (players such as esmini
-#: clamp the speed and accelerations they move an entity with to these)
+#: Performance limits above any recorded or simulated driving (players such as esmini may
+#: clamp the motion they give an entity to these). A hand-over between the twin and the
+#: recording can move a vehicle metres within one step; that jump is the run's, kept as a
+#: short segment between two vertices, not driving.
 MAX_SPEED, MAX_ACCEL, MAX_DECEL = 70.0, 15.0, 15.0  # [m/s], [m/s^2], [m/s^2]
 #: The controller the external ego gets: each player reads its own property
 EXTERNAL = {"module": "external_control", "esminiController": "ExternalController"}
@@ -94,6 +100,7 @@ def export_openscenario(
     rate: float = DEFAULT_RATE,
     data=None,
     minor: int = 0,
+    late: str = "add",
 ) -> dict:
     """Write run folder ``run`` as OpenSCENARIO into ``out`` (atomically).
 
@@ -108,10 +115,13 @@ def export_openscenario(
         data: the recorded data the run was made from (``--data`` of ``twin run``;
             None: the embedded store), read only for ``recorded``.
         minor: the OpenSCENARIO version 1.``minor`` to write (0 to 3).
+        late: ``add`` (vehicles that are not on the map at time 0 are added when they
+            appear) or ``omit`` (only the vehicles on the map at time 0, each for its
+            first stay: a file CARLA ScenarioRunner can load).
 
     Returns:
-        What was written: folder, vehicles, vertices, duration_s, trajectories, ego,
-        minor.
+        What was written: folder, vehicles (in the file), of_vehicles (of the run),
+        vertices, duration_s and the options.
 
     Raises:
         ExportError: not a run folder, an unknown option, the run's vehicles are not in
@@ -121,6 +131,8 @@ def export_openscenario(
         raise ExportError(f"--trajectories {trajectories!r}: choose one of {TRAJECTORIES}")
     if ego not in EGO_MODES:
         raise ExportError(f"--ego {ego!r}: choose one of {EGO_MODES}")
+    if late not in LATE:
+        raise ExportError(f"--late-vehicles {late!r}: choose one of {LATE}")
     if minor not in MINORS:
         raise ExportError(f"OpenSCENARIO 1.{minor}: the export writes 1.0 to 1.{MINORS[-1]}")
     if not (math.isfinite(rate) and rate > 0.0):
@@ -137,15 +149,16 @@ def export_openscenario(
         tracks = _recorded(episode, vehicles, road_model, data)
     tracks = _decimate(tracks, rate)
     tracks = _reference_points(tracks, vehicles, episode.road, road_model)
-    scenario = _scenario(xosc, episode, vehicles, tracks, trajectories, ego, minor)
+    options = {"trajectories": trajectories, "ego": ego, "rate": rate, "late": late,
+               "minor": minor}  # fmt: skip
+    scenario, written, vertices = _scenario(xosc, episode, vehicles, tracks, options)
     recognise = lambda p: (p / SCENARIO).is_file()  # noqa: E731
     kind = "OpenSCENARIO export"
     with AtomicFolder(Path(out), recognise=recognise, kind=kind, error=ExportError) as folder:
         write_opendrive(bundle, folder.tmp / NETWORK)
         scenario.write_xml(str(folder.tmp / SCENARIO))
-    return {"folder": str(out), "vehicles": len(vehicles), "vertices": len(tracks),
-            "duration_s": episode.duration, "trajectories": trajectories, "ego": ego,
-            "minor": minor}  # fmt: skip
+    return {"folder": str(out), "vehicles": written, "of_vehicles": len(vehicles),
+            "vertices": vertices, "duration_s": episode.duration, **options}  # fmt: skip
 
 
 # -- the vehicles and their trajectories ------------------------------------------------
@@ -277,50 +290,61 @@ def _reference_points(
 # -- the scenario -----------------------------------------------------------------------
 
 
-def _scenario(xosc, episode: Episode, vehicles, tracks, trajectories: str, ego: str, minor: int):
-    """The OpenSCENARIO document (scenariogeneration objects)."""
-    entities = xosc.Entities()
+def _scenario(xosc, episode: Episode, vehicles, tracks, options: dict):
+    """The OpenSCENARIO document (scenariogeneration objects), the number of vehicles
+    and of trajectory vertices in it. ``options``: trajectories, ego, rate, late, minor
+    (as the export's)."""
+    minor, slack = options["minor"], 0.5 / options["rate"]  # half a vertex period
+    entities, init = xosc.Entities(), xosc.Init()
+    act = xosc.Act("episode", _at(xosc, "episode starts", 0.0))
+    written = vertices = 0
     for rid, v in vehicles.iterrows():
-        entities.add_scenario_object(v["name"], _vehicle(xosc, rid, v, minor))
-    init = xosc.Init()
-    story_act = xosc.Act("episode", _at(xosc, "episode starts", 0.0))
-    for rid, v in vehicles.iterrows():
-        pieces = [p for _, p in tracks[tracks["record_id"] == rid].groupby("piece", sort=True)]
-        if not pieces:  # never on the map (recorded: outside it throughout the episode)
-            init.add_global_action(xosc.DeleteEntityAction(v["name"]))
-            continue
         name = v["name"]
-        if name == EGO and ego == "external":
+        pieces = [p for _, p in tracks[tracks["record_id"] == rid].groupby("piece", sort=True)]
+        at_start = bool(pieces) and pieces[0]["time"].iloc[0] <= slack
+        if options["late"] == "omit":  # only vehicles on the map at time 0, one stay each
+            if not at_start:
+                continue
+            pieces = pieces[:1]
+        entities.add_scenario_object(name, _vehicle(xosc, rid, v, minor))
+        written += 1
+        if not at_start:  # on the map later (or never, recorded: outside it throughout)
+            init.add_global_action(xosc.DeleteEntityAction(name))
+        if not pieces:
+            continue
+        if name == EGO and options["ego"] == "external":
             _external_ego(xosc, init, pieces[0].iloc[0], minor)
             continue
+        if at_start:
+            init.add_init_action(name, xosc.TeleportAction(_position(xosc, pieces[0].iloc[0])))
+        vertices += sum(len(piece) for piece in pieces)
         group = xosc.ManeuverGroup(f"{name} drives")
         group.add_actor(name)
         maneuver = xosc.Maneuver(f"{name} trajectory")
-        if pieces[0]["time"].iloc[0] > 0.0:
-            init.add_global_action(xosc.DeleteEntityAction(name))  # on the map later
-        else:
-            init.add_init_action(name, xosc.TeleportAction(_position(xosc, pieces[0].iloc[0])))
         for k, piece in enumerate(pieces):
-            _piece_events(xosc, maneuver, name, k, piece, episode.duration)
+            added = k > 0 or not at_start
+            leaves = piece["time"].iloc[-1] < episode.duration - slack
+            _piece_events(xosc, maneuver, name, k, piece, added=added, leaves=leaves)
         group.add_maneuver(maneuver)
-        story_act.add_maneuver_group(group)
+        act.add_maneuver_group(group)
     story = xosc.Story("episode")
-    story.add_act(story_act)
-    stop = _at(xosc, "episode ends", episode.duration, trigger="stop")
-    board = xosc.StoryBoard(init, stop)
+    story.add_act(act)
+    board = xosc.StoryBoard(init, _at(xosc, "episode ends", episode.duration, trigger="stop"))
     board.add_story(story)
-    config = episode.config
     when = datetime.fromtimestamp(episode.t0, UTC)
     description = (
-        f"i24-twin run {episode.folder.name}: scenario {config.scenario}, {episode.road.value}, "
-        f"I-24 MOTION at {when:%Y-%m-%d %H:%M:%S} UTC + {episode.duration:g} s; "
-        f"trajectories {trajectories}; ego {'external' if ego == 'external' else 'follows'}"
+        f"i24-twin run {episode.folder.name}: scenario {episode.config.scenario}, "
+        f"{episode.road.value}, I-24 MOTION at {when:%Y-%m-%d %H:%M:%S} UTC + "
+        f"{episode.duration:g} s; trajectories {options['trajectories']}; ego "
+        f"{'external' if options['ego'] == 'external' else 'follows its trajectory'}"
+        f"{'; only the vehicles on the map at time 0' if options['late'] == 'omit' else ''}"
     )
-    return xosc.Scenario(
+    scenario = xosc.Scenario(
         description, f"i24-twin {__version__}", xosc.ParameterDeclarations(), entities,
         board, xosc.RoadNetwork(roadfile=NETWORK), xosc.Catalog(), osc_minor_version=minor,
         creation_date=when.replace(tzinfo=None),  # the recording's time: same run, same file
     )  # fmt: skip
+    return scenario, written, vertices
 
 
 def _vehicle(xosc, rid: str, v, minor: int):
@@ -350,8 +374,8 @@ def _vehicle(xosc, rid: str, v, minor: int):
 def _position(xosc, row):
     """A row's reference point as a ``WorldPosition`` (mm, 0.1 mrad; never -0)."""
     x, y, z = (round(float(row[k]), DIGITS) + 0.0 for k in ("wx", "wy", "wz"))
-    return xosc.WorldPosition(x, y, z, round(float(row["h"]), 4) + 0.0,
-                              round(float(row["p"]), 4) + 0.0, 0.0)  # fmt: skip
+    h = round(float(row["h"]), 4) % round(2.0 * math.pi, 4) + 0.0  # in [0, 2 pi) once rounded
+    return xosc.WorldPosition(x, y, z, h, round(float(row["p"]), 4) + 0.0, 0.0)
 
 
 def _at(xosc, name: str, time: float, *, trigger: str = "start"):
@@ -368,11 +392,13 @@ def _after(xosc, name: str, action: str):
     return xosc.ValueTrigger(name, 0.0, xosc.ConditionEdge.rising, condition)
 
 
-def _piece_events(xosc, maneuver, name: str, k: int, piece: pd.DataFrame, end: float) -> None:
-    """The events of one stretch of a vehicle's trajectory: added (if it appears after
-    time 0 or comes back), following its polyline, deleted (if it leaves before the end)."""
+def _piece_events(
+    xosc, maneuver, name: str, k: int, piece: pd.DataFrame, *, added: bool, leaves: bool
+) -> None:
+    """The events of one stay of a vehicle on the map: added at its first vertex (if it
+    was not there at time 0, or came back), following its polyline, deleted after its
+    last vertex (if it leaves before the end)."""
     times = piece["time"].to_numpy()
-    first, last = float(times[0]), float(times[-1])
     trajectory = xosc.Trajectory(f"{name} {k}", False)
     trajectory.add_shape(
         xosc.Polyline(
@@ -385,21 +411,21 @@ def _piece_events(xosc, maneuver, name: str, k: int, piece: pd.DataFrame, end: f
     )
     event = xosc.Event(f"{name} follows {k}", xosc.Priority.parallel)
     event.add_action(f"{name} follow {k}", follow)
-    if first > 0.0:
+    if added:
         appear = xosc.Event(f"{name} appears {k}", xosc.Priority.parallel)
         appear.add_action(
             f"{name} add {k}", xosc.AddEntityAction(name, _position(xosc, piece.iloc[0]))
         )
-        appear.add_trigger(_at(xosc, f"{name} on the map {k}", first))
+        appear.add_trigger(_at(xosc, f"{name} on the map {k}", float(times[0])))
         maneuver.add_event(appear)
         event.add_trigger(_after(xosc, f"{name} added {k}", f"{name} add {k}"))
     else:
-        event.add_trigger(_at(xosc, f"{name} starts {k}", first))
+        event.add_trigger(_at(xosc, f"{name} starts {k}", 0.0))
     maneuver.add_event(event)
-    if last < end - 1e-6:
+    if leaves:
         leave = xosc.Event(f"{name} leaves {k}", xosc.Priority.parallel)
         leave.add_action(f"{name} delete {k}", xosc.DeleteEntityAction(name))
-        leave.add_trigger(_at(xosc, f"{name} off the map {k}", last))
+        leave.add_trigger(_at(xosc, f"{name} off the map {k}", float(times[-1])))
         maneuver.add_event(leave)
 
 

@@ -16,6 +16,7 @@ import pytest
 from tests.asam_qc import ERROR, WARNING, issues, run_checker
 from twin.cli import main
 from twin.core.i24 import VEHICLE_CLASSES
+from twin.core.vehicle_classes import vehicle_classes
 
 xosc = pytest.importorskip("scenariogeneration.xosc", reason="scenariogeneration is not installed")
 
@@ -55,7 +56,7 @@ def parse(path: Path):
 
 
 def trajectories(scenario) -> dict[str, list[pd.DataFrame]]:
-    """Each entity's polylines from the parsed storyboard: time, world wx, wy, wz, h."""
+    """Each entity's polylines from the parsed storyboard: time, world wx, wy, wz, h, p."""
     found = {}
     for group in scenario.storyboard.stories[0].acts[0].maneuvergroup:
         (actor,) = group.actors.actors
@@ -69,8 +70,8 @@ def trajectories(scenario) -> dict[str, list[pd.DataFrame]]:
                     vertices = zip(line.time, line.positions, strict=True)
                     found.setdefault(actor.entity, []).append(
                         pd.DataFrame(
-                            [(t, p.x, p.y, p.z, p.h) for t, p in vertices],
-                            columns=["time", "wx", "wy", "wz", "h"],
+                            [(t, p.x, p.y, p.z, p.h, p.p) for t, p in vertices],
+                            columns=["time", "wx", "wy", "wz", "h", "p"],
                         )
                     )
     return found
@@ -154,9 +155,17 @@ def test_the_scenario_reads_back_as_the_run(run, road, tmp_path, capsys):
     objects = {o.name: o.entityobject for o in scenario.entities.scenario_objects}
     assert set(objects) == set(rows["name"])
     first = rows.groupby("name").head(1).set_index("name")
+    classes = vehicle_classes()
     for name, vehicle in objects.items():
         row = first.loc[name]
         assert vehicle.name == VEHICLE_CLASSES[int(row["vehicle_class"])]
+        # the reference point on the rear axle, half the twin's wheelbase behind the centre
+        base = classes.column("wheelbase_ratio")[int(row["vehicle_class"])] * row["length"]
+        centre = vehicle.boundingbox.center
+        assert centre.x == pytest.approx(0.5 * base, abs=1e-3)
+        assert centre.z == pytest.approx(0.5 * row["height"], abs=1e-3)
+        assert vehicle.axles.rearaxle.xpos == 0.0
+        assert vehicle.axles.frontaxle.xpos == pytest.approx(base, abs=2e-3)
         size = vehicle.boundingbox.boundingbox  # its Dimensions
         assert size.length == pytest.approx(row["length"], abs=1e-3)
         assert size.width == pytest.approx(row["width"], abs=1e-3)
@@ -175,12 +184,19 @@ def test_the_scenario_reads_back_as_the_run(run, road, tmp_path, capsys):
     assert np.abs(joined["cy"].to_numpy() - want[:, 1]).max() < CM
     yaw = np.angle(np.exp(1j * (joined["h"].to_numpy() - joined["heading"].to_numpy())))
     assert np.abs(yaw).max() < 1e-3
-    # and the vertices span each vehicle's rows at 10 per second
+    # on the road surface, pitched nose down where the road falls ahead (ISO 8855)
+    ground = road.to_road(joined[["wx", "wy", "wz"]].to_numpy()).height
+    assert np.abs(ground).max() < CM
+    assert np.abs(joined["p"] + np.arctan(joined["grade"])).max() < 1e-3
+    # and the vertices span each vehicle's rows at 10 per second: the row nearest each
+    # 0.1 s tick, so never further apart than 0.1 s and the longest step between its rows
     for name, group in rows.groupby("name"):
         times = [p["time"].to_numpy() for p in lines[name]]
         assert times[0][0] == pytest.approx(group["time"].min(), abs=MS)
         assert times[-1][-1] == pytest.approx(group["time"].max(), abs=MS)
-        assert max(np.diff(t).max(initial=0.0) for t in times) <= 0.1 + MS
+        step = np.diff(np.sort(group["time"].to_numpy()))
+        longest = max(np.diff(t).max(initial=0.0) for t in times)
+        assert longest <= 0.1 + step[step < 0.5].max(initial=0.0) + MS
 
 
 def test_between_vertices_the_trajectories_stay_within_a_centimetre_of_the_run(run, road, tmp_path):
@@ -225,9 +241,15 @@ def test_recorded_trajectories_are_the_recordings(run, road, wave_store, tmp_pat
     want = expected_centres(joined.assign(y=joined["y"].astype(float)), road)
     assert np.abs(joined["cx"].to_numpy() - want[:, 0]).max() < CM
     assert np.abs(joined["cy"].to_numpy() - want[:, 1]).max() < CM
-    # the ghosts' rows in the run are the same recording: the two exports agree there
-    ghost_names = set(rows.loc[rows["role"] == "ghost", "record_id"].astype(str)) - {ego}
-    assert ghost_names and ghost_names <= set(lines)
+    # every vehicle of the run, and those on the map from the start are there at time 0
+    # (recorded samples are not on the run's clock: the first is up to a sample late)
+    assert set(lines) == set(names_of(rows, ego))
+    teleported = set(scenario.storyboard.init.initactions)
+    deleted = {a.entityref for a in scenario.storyboard.init.global_actions}
+    for name, pieces in lines.items():
+        assert (name in teleported) == (pieces[0]["time"].iloc[0] <= 0.05)
+        assert (name in deleted) == (name not in teleported)
+    assert "hero" in teleported
 
 
 def test_an_external_ego_starts_as_the_run_and_is_left_to_its_controller(run, road, tmp_path):
@@ -253,6 +275,25 @@ def test_an_external_ego_starts_as_the_run_and_is_left_to_its_controller(run, ro
     assert np.hypot(centre[0] - want[0], centre[1] - want[1]) < CM
 
 
+def test_omitting_late_vehicles_leaves_a_file_without_added_ones(run, tmp_path):
+    """--late-vehicles omit: what CARLA ScenarioRunner can load (it never spawns a vehicle
+    deleted in the Init and does not drive one an AddEntityAction spawns)."""
+    path = export(run, tmp_path / "o", "--late-vehicles", "omit")
+    report = run_checker("qc_openscenario", "xoscBundle", path, tmp_path)
+    assert issues(report, ERROR) == [] and issues(report, WARNING) == []
+    scenario = parse(path)
+    rows = pd.read_parquet(run / "trajectories.parquet")
+    rows["name"] = names_of(rows, facts(run)["ego_record_id"])
+    at_start = set(rows.loc[rows["time"] == 0.0, "name"])
+    assert {o.name for o in scenario.entities.scenario_objects} == at_start
+    assert set(scenario.storyboard.init.initactions) == at_start  # each placed there
+    assert scenario.storyboard.init.global_actions == []  # none deleted in the Init
+    text = path.read_text()
+    assert "AddEntityAction" not in text
+    lines = trajectories(scenario)
+    assert all(len(pieces) == 1 for pieces in lines.values())  # the first stay only
+
+
 def test_the_export_is_deterministic_and_replaces_only_its_own_kind(run, tmp_path):
     a = export(run, tmp_path / "a").read_bytes()
     assert export(run, tmp_path / "a").read_bytes() == a  # replaced, same bytes
@@ -274,6 +315,31 @@ def test_the_export_is_deterministic_and_replaces_only_its_own_kind(run, tmp_pat
 def test_options_of_the_other_format_are_named(run, tmp_path, capsys, options, message):
     assert main(["export", str(run), "--out", str(tmp_path / "o"), *options]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage", ["truncated", "no metadata", "no column"])
+def test_a_damaged_run_log_is_a_named_error(run, tmp_path, capsys, damage):
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    log = copy / "trajectories.parquet"
+    table = pq.read_table(log)
+    if damage == "truncated":
+        log.write_bytes(log.read_bytes()[:1000])
+    elif damage == "no metadata":
+        pq.write_table(table.replace_schema_metadata(None), log)
+    else:
+        pq.write_table(table.drop(["grade"]), log)
+    assert main(["export", str(copy), "--format", "openscenario",
+                 "--out", str(tmp_path / "o")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert str(log) in err and "run it again: twin run --config" in err
+    assert {"truncated": "not a readable Parquet file", "no metadata": "lacks the twin's metadata",
+            "no column": "lacks the columns grade"}[damage] in err  # fmt: skip
+    assert "Traceback" not in err and not (tmp_path / "o").exists()
 
 
 def test_recorded_trajectories_from_other_data_are_a_named_error(run, tmp_path, doc, capsys):
