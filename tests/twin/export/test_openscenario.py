@@ -30,15 +30,6 @@ SEMANTIC = ("reference_control_resolvable_entity_references",
 
 
 @pytest.fixture(scope="module")
-def run(wave_store, tmp_path_factory):
-    out = tmp_path_factory.mktemp("run") / "b"
-    args = ["run", "--scenario", "B", "--data", str(wave_store.path), "--duration", "8",
-            "--out", str(out), "--quiet"]  # fmt: skip
-    assert main(args) == 0
-    return out
-
-
-@pytest.fixture(scope="module")
 def road():
     from mapgen.build import default_map
 

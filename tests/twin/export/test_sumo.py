@@ -10,15 +10,6 @@ import pytest
 from twin.cli import main
 
 
-@pytest.fixture(scope="module")
-def run(wave_store, tmp_path_factory):
-    out = tmp_path_factory.mktemp("run") / "b"
-    args = ["run", "--scenario", "B", "--data", str(wave_store.path), "--duration", "8",
-            "--out", str(out), "--quiet"]  # fmt: skip
-    assert main(args) == 0
-    return out
-
-
 def test_sumo_runs_the_exported_episode_with_every_vehicle(run, tmp_path, capsys):
     sumo = pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
     from pathlib import Path
