@@ -142,9 +142,7 @@ def export_openscenario(
     road_model = bundle.road
     vehicles = _vehicles(episode)
     if trajectories == "simulated":
-        tracks = _simulated(episode)
-        lo, hi = road_model.x_range(episode.road)
-        tracks = tracks[(tracks["x"] >= lo) & (tracks["x"] <= hi)]  # the map's ends
+        tracks = _simulated(episode, road_model)
     else:
         tracks = _recorded(episode, vehicles, road_model, data)
     tracks = _decimate(tracks, rate)
@@ -191,11 +189,11 @@ def _vehicles(episode: Episode) -> pd.DataFrame:
     return table.iloc[order]
 
 
-def _simulated(episode: Episode) -> pd.DataFrame:
-    """The run's own rows: ``record_id``, ``time``, ``x`` (body centre), ``y``,
-    ``heading``, ``pitch`` (nose up), ``speed``, ``role``."""
+def _simulated(episode: Episode, road_model) -> pd.DataFrame:
+    """The run's own rows on the map: ``record_id``, ``time``, ``x`` (body centre),
+    ``y``, ``heading``, ``pitch`` (nose up), ``speed``, ``role``."""
     rows = episode.rows
-    return pd.DataFrame({
+    tracks = pd.DataFrame({
         "record_id": rows["record_id"].astype(str).to_numpy(),
         "time": rows["time"].to_numpy(),
         "x": rows["x"].to_numpy() + 0.5 * rows["length"].to_numpy(np.float64),
@@ -205,6 +203,8 @@ def _simulated(episode: Episode) -> pd.DataFrame:
         "speed": rows["speed"].to_numpy(),
         "role": rows["role"].astype(str).to_numpy(),
     })  # fmt: skip
+    lo, hi = road_model.x_range(episode.road)
+    return tracks[(tracks["x"] >= lo) & (tracks["x"] <= hi)]
 
 
 def _recorded(episode: Episode, vehicles: pd.DataFrame, road_model, data) -> pd.DataFrame:
@@ -298,9 +298,11 @@ def _scenario(xosc, episode: Episode, vehicles, tracks, options: dict):
     entities, init = xosc.Entities(), xosc.Init()
     act = xosc.Act("episode", _at(xosc, "episode starts", 0.0))
     written = vertices = 0
+    stays = {rid: [p for _, p in group.groupby("piece", sort=True)]
+             for rid, group in tracks.groupby("record_id", sort=False)}  # fmt: skip
     for rid, v in vehicles.iterrows():
         name = v["name"]
-        pieces = [p for _, p in tracks[tracks["record_id"] == rid].groupby("piece", sort=True)]
+        pieces = stays.get(rid, [])
         at_start = bool(pieces) and pieces[0]["time"].iloc[0] <= slack
         if options["late"] == "omit":  # only vehicles on the map at time 0, one stay each
             if not at_start:

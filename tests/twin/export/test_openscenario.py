@@ -216,7 +216,8 @@ def test_recorded_trajectories_are_the_recordings(run, road, wave_store, tmp_pat
     lines = trajectories(scenario)
     got = body_centres(scenario, lines)
     rows = pd.read_parquet(run / "trajectories.parquet")
-    ego, t0 = facts(run)["ego_record_id"], facts(run)["t0"]
+    known = facts(run)
+    ego, t0 = known["ego_record_id"], known["t0"]
     ids = wave_store.trajectory_arrays["id"]
     length = {str(r): float(v) for r, v in
               rows.groupby("record_id")["length"].first().items()}  # fmt: skip
