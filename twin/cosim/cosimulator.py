@@ -1,12 +1,12 @@
 """The cosimulator: the paper's ghost-cell loop around an ego (steps 1 to 8 of ``docs/design.md``).
 
 The ego and the recorded vehicles near it (the visible window, ``w_visible`` each side)
-are physics bodies driven by the traffic manager; the recorded vehicles beyond them
-(the ghost windows, ``w_ghost`` further each side) are never spawned: they are reloaded
-from the data every step and are the boundary condition of the visible traffic. The
-lead visible vehicle of each lane ahead of the ego takes the speed of the ghost ahead
-of it, and every visible vehicle respects the ghosts as obstacles, so a recorded wave
-reaches the ego through the simulated vehicles.
+are simulated; the recorded vehicles beyond them (the ghost windows, ``w_ghost``
+further each side) are never spawned: they are reloaded from the recording every step
+and are the boundary condition of the visible traffic. The lead visible vehicle of
+each lane ahead of the ego takes the speed of the ghost ahead of it, and every visible
+vehicle respects the ghosts as obstacles, so a recorded wave reaches the ego through
+the simulated vehicles.
 
 Lifecycle::
 
@@ -17,11 +17,14 @@ Lifecycle::
     log = sim.log            # every simulated vehicle every step, ghosts at a lower rate
     sim.close()
 
-The cosimulator orchestrates: the world owns the bodies (``config.world``: the physics
-world or the kinematic one, reached only through :class:`twin.physics.worlds.World`),
-the manager the drivers, the data layer the recording. Vehicles are named by the
-world's ids; the recorded vehicle each one was spawned from is kept beside it (its
-``tid``), for the metrics.
+One traffic logic for both worlds: the loop itself (hand-overs, ghost replay, desired
+speeds, the traffic manager's decisions, the controllers the core knows) is the batched
+core's compiled kernels (:mod:`twin.cosim.core`) with one episode. The kinematic world
+is the core's own integration; in the physics world pybullet integrates what the
+kernels decide (:class:`twin.physics.world.PhysicsWorld`, reached through
+:class:`twin.physics.worlds.World`): every step the bodies' commands go to pybullet,
+its states come back into the core, and the core's spawns and removals become bodies.
+A user's Python controller is called between the decision and the world's step.
 """
 
 import math
@@ -32,22 +35,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.i24 import LANES, lane_of
-from twin.cosim.behaviour import Behaviour, resolve
+from twin.core.i24 import HOV_LANE, N_LANES
 from twin.cosim.config import CosimConfig
+from twin.cosim.core import handover, layout, step as core_step
+from twin.cosim.core.batch import Batch, Shared, controller_kind
 from twin.cosim.log import TrajectoryLog
-from twin.cosim.strategic_targets import StrategicTargets
-from twin.cosim.windows import Ghosts, ScenarioError, Windows, no_ghosts, road_limits
-from twin.data.empirical import EmpiricalTraffic, RecordedVehicle, Snapshot
-from twin.physics.states import MAX_SPEED, SpawnStates
-from twin.physics.worlds import make_world
-from twin.traffic.controller_api import EgoController, load_controller
-from twin.traffic.manager import TrafficManager
-from twin.traffic.scene import Obstacles, centre_y
+from twin.cosim.windows import Ghosts, Windows
+from twin.data.empirical import EmpiricalTraffic, RecordedVehicle
+from twin.physics.states import SpawnStates, VehicleStates, quaternion_of
+from twin.traffic.controller_api import load_controller
+from twin.traffic.controlled import apply_controllers
+from twin.traffic.kernels import state as kinds
 
-AV_STREAM = 0x41565F  # seeds the AV draws apart from the run's other random choices
-LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
-CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
+CLEARANCE_SPEED = handover.CLEARANCE_SPEED
 
 
 @dataclass
@@ -60,9 +60,10 @@ class Counters:
     skipped_overlap: int = 0  # vehicles refused a spawn: a body was in the way (each is
     # tried again every step while inside the visible window)
     skipped_invalid: int = 0  # spawns refused: recorded state outside the lanes or too fast
+    skipped_full: int = 0  # spawns refused: every vehicle slot of the episode was taken
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
     collisions: list = field(default_factory=list)  # (time [s], id, id) of new contacts
-    off_road: set = field(default_factory=set)  # ids ever outside the four lanes
+    off_road: int = 0  # vehicles ever outside the four lanes
     ended: str = ""  # why the run ended before t_max ("" when it did not)
 
 
@@ -72,9 +73,9 @@ class StepTimes:
 
     steps: int = 0
     total: float = 0.0
-    ghosts: float = 0.0  # step 7 (and 6's lookup): the data reload
+    ghosts: float = 0.0  # steps 5 to 7: the hand-overs and the ghost reload
     physics: float = 0.0
-    manager: float = 0.0
+    manager: float = 0.0  # the traffic's decisions (and the controllers)
 
     def per_step(self) -> dict:
         n = max(self.steps, 1)
@@ -95,9 +96,12 @@ class Cosimulator:
         bundle: the map (``mapgen.build.default_map()``).
         controller: a user's ego controller; default: ``config.ego_controller`` if
             set, else the traffic manager drives the ego.
+        shared: what the core shares between episodes of this configuration (made
+            here when not given; a runner of many episodes makes it once).
 
     Raises:
         ControllerError: ``config.ego_controller`` cannot be imported.
+        BehaviourError: the behaviour needs a calibration the store lacks.
     """
 
     def __init__(
@@ -106,49 +110,46 @@ class Cosimulator:
         traffic: EmpiricalTraffic,
         bundle: MapBundle,
         *,
-        controller: EgoController | None = None,
+        controller=None,
+        shared: Shared | None = None,
     ):
         self.config = config
         self.traffic = traffic
         self.road = config.road
         self.direction = config.road.direction
-        self.behaviour = Behaviour(
-            resolve(config.behaviour, traffic.store, config.road, config.traffic.car_following),
-            traffic.store,
-            config.road,
-            config.seed,
-            config.traffic.car_following,
+        compiled = controller is None and config.ego_controller in _compiled_specs()
+        self.controller = None if compiled else (
+            controller or load_controller(config.ego_controller, config)
         )
-        self.controller = controller or load_controller(config.ego_controller, config)
-        self.world = make_world(config.world, bundle, config.dt)
-        headings = {r: bundle.road.heading(r) for r in (1, -1)}
-        self.manager = TrafficManager(config.traffic, headings)
-        self.targets = StrategicTargets(self.behaviour, self.manager, config.seed)
-        self.manager.set_keep_out(self.direction, self.behaviour.keep_out)
-        self.limits = road_limits(bundle, traffic, config.road)
+        kind = (
+            controller_kind(config.ego_controller, config.controller.emergency_braking)
+            if compiled
+            else (kinds.PYTHON if self.controller is not None else kinds.DRIVER)
+        )
+        self.shared = (shared or Shared.make(traffic.store, bundle, config, traffic=traffic))
+        self.shared = self.shared.with_controllers(kind)
+        self.behaviour = self.shared.behaviour
+        self.batch = Batch(self.shared, 1, log=True)
+        self.state, self.core = self.batch.state, self.batch.core
+        if config.world == "physics":
+            from twin.physics.world import PhysicsConfig, PhysicsWorld
+
+            self.world = PhysicsWorld(bundle, PhysicsConfig(dt=config.dt))
+        else:
+            self.world = CoreWorld(self, bundle)
+        self._heading = {r: bundle.road.heading(r) for r in (1, -1)}
+        self.manager = TrafficView(self)
+        self.limits = self.shared.limits
         self.counters = Counters()
         self.times = StepTimes()
         self.log: TrajectoryLog | None = None
         self.ego: RecordedVehicle | None = None
         self.ego_id = -1
         self.t0 = math.nan
-        self.step_index = 0
         self.windows: Windows | None = None
-        self._tids = np.empty(0, dtype=np.int64)  # recorded tid of each body, by world id
-        self._base_speed = np.empty(0)  # [m/s] each body's own desired speed, by world id
-        self._ghosts = no_ghosts()
-        self._obstacles_now: Obstacles | None = None
-        # per store tid: simulated now / a ghost after the last reload (O(1) lookups)
-        n_tids = len(traffic.store.trajectory_arrays["id"])
-        self._is_sim = np.zeros(n_tids, dtype=bool)
-        self._is_ghost = np.zeros(n_tids, dtype=bool)
-        self._seen = np.zeros(n_tids, dtype=bool)  # in the windows at some step before
-        self._waiting = np.zeros(n_tids, dtype=bool)  # refused a spawn for lack of room
-        self._lead_speed = dict.fromkeys(LANES, math.nan)  # smoothed ghost speed per lane
-        self._just_spawned = (np.empty(0, np.int64), np.empty(0))  # ids, spawn speeds
-        self._touching: set = set()
-        self.av_ids: set[int] = set()  # world ids of the vehicles other than the ego with
-        # the AV controller (config.av_share), kept after they leave the window
+        self._controllers: dict[int, object] = {}  # world id -> Python controller
+        self._bodies = np.empty(0, np.int64)  # ids of the pybullet bodies
+        self._last_collisions = 0
 
     # -- lifecycle --------------------------------------------------------------------
 
@@ -162,9 +163,14 @@ class Cosimulator:
         self.close()
 
     @property
+    def step_index(self) -> int:
+        """Steps taken since the reset."""
+        return int(self.state.episodes.step[0])
+
+    @property
     def done(self) -> bool:
         """True when the episode is over (t_max reached, or ended early)."""
-        return self.step_index >= self.config.steps or bool(self.counters.ended)
+        return self.log is not None and bool(self.state.episodes.done[0])
 
     @property
     def t(self) -> float:
@@ -178,17 +184,67 @@ class Cosimulator:
 
     @property
     def simulated(self) -> np.ndarray:
-        """(trajectories,) bool by store index: the recorded vehicles simulated now
-        (read-only)."""
-        view = self._is_sim.view()
-        view.flags.writeable = False
-        return view
+        """(trajectories,) bool by store index: the recorded vehicles simulated now."""
+        out = np.zeros(len(self.traffic.store.trajectory_arrays["id"]), dtype=bool)
+        bo = self.state.bodies
+        out[self.state.slots.tid[0][bo.valid[0]]] = True
+        return out
+
+    @property
+    def av_ids(self) -> set[int]:
+        """World ids of the vehicles other than the ego driven by the AV controller
+        (``config.av_share``), kept after they leave the window."""
+        return set(self._av_ids)
 
     def records_of(self, ids) -> np.ndarray:
         """The I-24 MOTION ``_id`` of each simulated vehicle ``ids`` (twin ids)."""
-        states = self.world.states()
-        tids = self._tids[np.searchsorted(states.id, np.asarray(ids, np.int64))]
-        return np.asarray(self.traffic.store.trajectory_arrays["id"])[tids]
+        return np.asarray(self.traffic.store.trajectory_arrays["id"])[self.tids_of(ids)]
+
+    def tids_of(self, ids) -> np.ndarray:
+        """(k,) the store tids of the simulated vehicles ``ids`` (twin ids).
+
+        Raises:
+            KeyError: an id that is not simulated now.
+        """
+        slots = self._slots_of(ids)
+        return self.state.slots.tid[0][slots]
+
+    @property
+    def ghosts(self) -> Ghosts:
+        """The ghost set now (store tids, lanes, x, y, speeds, lengths; by x)."""
+        g = self.state.ghosts
+        k = int(g.count[0])
+        rec = self.shared.recording
+        return Ghosts(
+            np.asarray(rec.tid)[g.r[0, :k]].astype(np.int32), g.lane[0, :k].astype(np.int8),
+            g.x[0, :k].copy(), g.y[0, :k].copy(), g.speed[0, :k].copy(), g.length[0, :k].copy(),
+        )  # fmt: skip
+
+    @property
+    def tids(self) -> np.ndarray:
+        """(n,) the store tids of the simulated vehicles, in the order of their ids
+        (``world.ids``)."""
+        return self.tids_of(self.manager.ids)
+
+    def base_speeds(self, ids) -> np.ndarray:
+        """(k,) [m/s] the own desired speeds of vehicles ``ids`` (before step 3's rule)."""
+        return self.state.slots.base_speed[0][self._slots_of(ids)].copy()
+
+    def set_base_speeds(self, ids, speed) -> None:
+        """Set the own desired speeds [m/s] of vehicles ``ids`` (experiments, tests)."""
+        self.state.slots.base_speed[0][self._slots_of(ids)] = speed
+
+    def rules(self, **changes) -> None:
+        """Change settings of the loop the behaviour set (``lead_chases_ghost``, ...;
+        the fields of :data:`twin.cosim.core.step.CoreSettings`), for experiments and
+        tests: the core is packed again with them."""
+        from dataclasses import replace
+
+        self.shared = replace(self.shared, settings=self.shared.settings._replace(**changes))
+        self.core = self.batch.core = layout.pack(
+            self.state, self.shared.settings, self.shared.traffic_settings,
+            self.shared.recording, self.shared.params, self.shared.behaviour_arrays,
+        )  # fmt: skip
 
     def reset(self) -> None:
         """Steps 1 and 2: the ego is the recorded vehicle closest to the requested lane,
@@ -201,117 +257,59 @@ class Cosimulator:
                 outside the map and data.
         """
         cfg = self.config
-        lo, hi = self.limits
-        if not lo <= cfg.x <= hi:
-            raise ScenarioError(
-                f"x = {cfg.x:g} m is outside the range where map and data both exist on "
-                f"{self.road.value} ({lo:.0f} to {hi:.0f} m)"
-            )
-        ego = self.traffic.closest(self.road, cfg.lane, cfg.x, cfg.time)
-        t_last = self.traffic.store.time_range(self.road)[1]
-        if ego.t + cfg.t_max > t_last:
-            raise ScenarioError(
-                f"the episode would run to unix {ego.t + cfg.t_max:.2f} but the data on "
-                f"{self.road.value} end at {t_last:.2f}; start earlier or shorten t_max"
-            )
-        self.ego, self.t0 = ego, ego.t
-        self.traffic.preload(self.road, self.t0, self.t0 + cfg.t_max)
-        self.behaviour.plan(self.traffic.store, self.t0, self.t0 + cfg.t_max)
-        self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
-        ego_state = _recorded_states(
-            self.direction, [ego.x], [ego.y], [ego.speed], [ego.vehicle_class], [ego.length],
-            [ego.width], [ego.height], [ego.tid],
+        placed = self.batch.reset(0, lane=cfg.lane, x=cfg.x, time=cfg.time, seed=cfg.seed)
+        self.t0 = placed.t0
+        rec = self.shared.recording
+        meta = self.traffic.store.trajectory_arrays
+        self.ego = RecordedVehicle(
+            tid=placed.tid, id=str(meta["id"][placed.tid]), road=self.road, t=placed.t0,
+            x=placed.x, y=placed.y, lane=_lane(placed.y), speed=placed.speed,
+            length=float(rec.length[placed.r]), width=float(rec.width[placed.r]),
+            height=float(rec.height[placed.r]), vehicle_class=int(rec.vehicle_class[placed.r]),
         )  # fmt: skip
-        self.ego_id = int(self._spawn(ego_state, desired_speed=cfg.vel_default)[0])
-        self.av_ids.discard(self.ego_id)  # the ego's controller is set next
-        if self.controller is not None:
-            self.manager.set_controller(self.ego_id, self.controller)
-            self.targets.removed([self.ego_id])
-            _bind(self.controller, self)
-        self.windows = Windows.around(ego.x, cfg.w_visible, cfg.w_ghost, self.limits)
-        snap = self._snapshot()
-        bounds = self.windows.bounds(snap.x)
-        visible = np.arange(bounds[1], bounds[2])
-        visible = visible[snap.tid[visible] != ego.tid]
-        self.counters.spawned_initially = self._spawn_recorded(snap, visible)
-        self._seen[snap.tid] = True
-        self._load_ghosts(snap, bounds)
-        states = self.world.states()
-        self._record(states, np.zeros(len(states.id)))
+        self.ego_id = int(self.state.episodes.ego_id[0])
+        self._av_ids: list[int] = []
+        self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
+        self._controllers.clear()
+        self._bodies = np.empty(0, np.int64)
+        self._mirror_bodies()
+        self._take_controllers()
+        self._sync(record_from=0)
 
     def step(self) -> None:
         """Steps 3 to 7: desired speeds, one physics step, despawn, spawn, ghost reload."""
         if self.log is None:
             raise RuntimeError("call reset() before step()")
-        cfg, start = self.config, time.perf_counter()
-        states = self.world.states()
+        if self.done:
+            return
+        start = time.perf_counter()
+        core = self.core
+        kinematic = self.config.world != "physics"
+        if kinematic and not self._controllers:
+            core_step.step_batch(core)
+            tick = time.perf_counter()
+            self.times.physics += tick - start
+        else:
+            core_step.before_world(0, core)
+            self._apply_controllers()
+            tick = time.perf_counter()
+            self.times.manager += tick - start
+            if kinematic:
+                from twin.physics.kernels import integrate
 
-        # 3. desired speeds (and the recorded lane changes due); 4. one step of
-        # manager and physics
-        self._set_desired_speeds(states)
-        if self.targets.on and self.step_index % self.manager.decision_steps == 0:
-            self.targets.update(states)
-        tick = time.perf_counter()
-        commands = self.manager.step(states, self._obstacles_now)
-        self.world.set_controls(commands.id, accel=commands.accel, steer=commands.steer)
-        tock = time.perf_counter()
-        self.world.step()
-        self.times.physics += time.perf_counter() - tock
-        self.times.manager += tock - tick
-        self.step_index += 1
-        states = self.world.states()
-        self._check_spawn_speeds(states, commands)
-        self._check_contacts(states)
-
-        ego_x = float(states.x[states.id == self.ego_id][0])
-        lo, hi = self.limits
-        if not lo <= ego_x <= hi:
-            self.counters.ended = (
-                f"the ego left the range of map and data (x = {ego_x:.1f} m) at "
-                f"{self.sim_time:.2f} s"
-            )
-        self.windows = Windows.around(ego_x, cfg.w_visible, cfg.w_ghost, self.limits)
-
-        # 5. visible vehicles now outside the visible window are removed
-        out = ~self.windows.in_visible(states.x) & (states.id != self.ego_id)
-        if out.any():
-            gone = states.id[out]
-            self.manager.remove(gone)
-            self.world.despawn(gone)
-            keep = np.ones(self._tids.size, dtype=bool)
-            keep[np.searchsorted(states.id, gone)] = False  # _tids follow the world's ids
-            self._is_sim[self._tids[~keep]] = False
-            self._tids = self._tids[keep]
-            self._base_speed = self._base_speed[keep]
-            self.targets.removed(gone)
-            self.counters.despawned += gone.size
-
-        # 6. ghosts now inside the visible window are spawned; 7. the ghost set reloaded
-        tick = time.perf_counter()
-        snap = self._snapshot()
-        bounds = self.windows.bounds(snap.x)
-        # (and the recorded vehicles that first appear inside it: an on-ramp's merges,
-        # tracks that begin there; and those refused for lack of room, tried again
-        # until they fit or leave the window, so that a refusal leaves no lasting hole)
-        inside = snap.tid[bounds[1] : bounds[2]]
-        first_seen = ~(self._seen[inside] | self._is_sim[inside])
-        new = self._is_ghost[inside] | first_seen
-        new |= self._waiting[inside] & ~self._is_sim[inside]
-        entering = new.nonzero()[0] + bounds[1]
-        # a track that begins inside the window and finds a body in its way is not tried
-        # again: in real data it is most often the next fragment of that very vehicle
-        retry = ~first_seen[new.nonzero()[0]]
-        self._seen[snap.tid] = True
-        self.times.ghosts += time.perf_counter() - tick
-        if entering.size:
-            self.counters.spawned += self._spawn_recorded(snap, entering, retry)
-        tick = time.perf_counter()
-        self._load_ghosts(snap, bounds)
-        self.times.ghosts += time.perf_counter() - tick
-
-        if out.any() or entering.size:
-            states = self.world.states()
-        self._record(states, self._accel_of(states, commands))
+                sh = self.shared
+                integrate(0, self.state.bodies, self.state.drivers.accel, self.state.scratch.steer,
+                          sh.settings.profile, sh.settings.dt)  # fmt: skip
+            else:
+                self._physics_step()
+            tock = time.perf_counter()
+            self.times.physics += tock - tick
+            core_step.after_world(0, core)
+            self.times.ghosts += time.perf_counter() - tock
+        self.batch.check(0)
+        self._mirror_bodies()
+        self._take_controllers()
+        self._sync(record_from=self.step_index)
         self.times.steps += 1
         self.times.total += time.perf_counter() - start
 
@@ -337,237 +335,373 @@ class Cosimulator:
                     on_step(self)
                 bar.update(1)
 
-    # -- the paper's steps, in parts --------------------------------------------------
+    # -- the controllers a user wrote ---------------------------------------------------
 
-    def _snapshot(self) -> Snapshot:
-        x0, x1 = self.windows.span
-        return self.traffic.snapshot(self.road, self.t, x0, x1)
-
-    def _load_ghosts(self, snap: Snapshot, bounds: tuple[int, int, int, int]) -> None:
-        """Step 7: the recorded vehicles in the ghost windows that are not simulated."""
-        a, b, c, d = bounds
-        rows = np.concatenate((np.arange(a, b), np.arange(c, d)))
-        rows = rows[~self._is_sim[snap.tid[rows]] & (snap.lane[rows] != 0)]
-        self._is_ghost[self._ghosts.tid] = False
-        self._ghosts = Ghosts.take(snap, rows)
-        self._is_ghost[self._ghosts.tid] = True
-        self._obstacles_now = self._obstacles()
-        if self.step_index % self.config.ghost_log_every == 0:
-            self.log.add_ghosts(self.sim_time, self._ghosts)
-
-    def _obstacles(self) -> Obstacles:
-        """The ghosts as the manager's obstacles (built directly: the store's data were
-        validated at ingest, and ``Obstacles.make``'s checks cost more than the reload)."""
-        g = self._ghosts
-        k = len(g)
-        return Obstacles(
-            road=np.full(k, self.direction, dtype=np.int8),
-            lane=g.lane,
-            x=g.x,
-            length=g.length,
-            speed=g.speed,
-            accel=np.zeros(k),
-        )
-
-    def _set_desired_speeds(self, states) -> None:
-        """Step 3: each vehicle's own desired speed (vel_default in the paper's
-        behaviour) for all but the lead visible vehicle of each lane ahead of the ego,
-        which takes the speed of the ghost ahead of it (its own if none; in the
-        calibrated behaviours the larger of the two, see ``Behaviour.lead_chases_ghost``)."""
-        desired = self._base_speed.copy()
-        lanes = self.manager.lanes(states.id)
-        ego_x = states.x[states.id == self.ego_id][0]
-        ahead = (states.id != self.ego_id) & (states.x > ego_x)
-        g = self._ghosts
-        for lane in LANES:
-            rows = np.flatnonzero(ahead & (lanes == lane))
-            if rows.size == 0:
-                self._lead_speed[lane] = math.nan
+    def _take_controllers(self) -> None:
+        """A Python controller for every vehicle the core gives one and has none yet
+        (the ego's is the run's; an AV's a fresh one of the same specification)."""
+        bo, dr = self.state.bodies, self.state.drivers
+        python = bo.valid[0] & (dr.ctrl[0] % kinds.GUARDED == kinds.PYTHON)
+        for i in np.flatnonzero(python):
+            vid = int(bo.id[0, i])
+            if vid in self._controllers:
                 continue
-            lead = rows[np.argmax(states.x[rows])]
-            beyond = np.flatnonzero((g.lane == lane) & (g.x > states.x[lead]))
-            target = (
-                float(g.speed[beyond[np.argmin(g.x[beyond])]])
-                if beyond.size
-                else float(desired[lead])
-            )
-            if self.behaviour.lead_chases_ghost:
-                target = max(target, float(desired[lead]))
-            desired[lead] = self._smooth(lane, target)
-        self.manager.set_desired_speed(states.id, desired)
+            if vid == self.ego_id:
+                controller = self.controller
+            else:
+                controller = load_controller(self.config.ego_controller, self.config)
+            self._controllers[vid] = controller
+            bind = getattr(controller, "bind", None)
+            if callable(bind):
+                bind(self)
+        for i in np.flatnonzero(bo.valid[0] & self.state.slots.av[0]):
+            vid = int(bo.id[0, i])
+            if vid not in self._av_ids:
+                self._av_ids.append(vid)
+        gone = [vid for vid in self._controllers if vid not in set(bo.id[0][bo.valid[0]].tolist())]
+        for vid in gone:
+            del self._controllers[vid]
 
-    def _smooth(self, lane: int, target: float) -> float:
-        """The optional first-order lag on a lane lead's ghost speed."""
-        tau, previous = self.config.ghost_smoothing, self._lead_speed[lane]
-        if tau > 0 and math.isfinite(previous):
-            target = previous + min(1.0, self.config.dt / tau) * (target - previous)
-        self._lead_speed[lane] = target
-        return target
-
-    def _spawn_recorded(self, snap: Snapshot, rows: np.ndarray, retry=None) -> int:
-        """Step 6 (and 2): spawn the recorded vehicles ``rows`` of ``snap`` where they
-        fit; count the ones skipped, and mark those refused for lack of room to be tried
-        again (where ``retry``, (k,) bool, says so; all by default). Returns how many
-        were spawned."""
-        if rows.size == 0:
-            return 0
-        retry = np.ones(rows.size, dtype=bool) if retry is None else np.asarray(retry, bool)
-        order = np.argsort(snap.x[rows], kind="stable")
-        rows, retry = rows[order], retry[order]
-        valid = np.isin(snap.lane[rows], LANES) & (snap.speed[rows] <= MAX_SPEED)
-        self.counters.skipped_invalid += int(np.count_nonzero(~valid))
-        rows, retry = rows[valid], retry[valid]
-        states = self.world.states()
-        params = self.world.params
-        body = {
-            "x": states.x,
-            "length": params.length,
-            "y": states.y,
-            "width": params.width,
-            "speed": np.maximum(states.speed, 0.0),
-        }
-        # a body changing lanes holds its new lane too: nothing is spawned beside it there
-        changing = self.manager.changing(states.id)
-        if changing.any():
-            body = {name: np.concatenate((v, v[changing])) for name, v in body.items()}
-            body["y"][-int(changing.sum()) :] = centre_y(self.manager.lanes(states.id[changing]))
-        accepted = []
-        for i in rows:
-            if self._fits(snap, i, body):
-                accepted.append(i)
-                for name in body:
-                    body[name] = np.append(body[name], getattr(snap, name)[i])
-        accepted = np.array(accepted, dtype=np.int64)
-        refused_rows = ~np.isin(rows, accepted)
-        refused = snap.tid[rows[refused_rows]]
-        # counted once per vehicle, at its first refusal; tried again each step
-        self.counters.skipped_overlap += int(np.count_nonzero(~self._waiting[refused]))
-        self._waiting[refused[retry[refused_rows]]] = True
-        if not accepted.size:
-            return 0
-        self._waiting[snap.tid[accepted]] = False
-        new = _recorded_states(
-            self.direction, snap.x[accepted], snap.y[accepted], snap.speed[accepted],
-            snap.vehicle_class[accepted], snap.length[accepted], snap.width[accepted],
-            snap.height[accepted], snap.tid[accepted],
-        )  # fmt: skip
-        self._spawn(new, desired_speed=self.config.vel_default)
-        return accepted.size
-
-    def _fits(self, snap: Snapshot, i: int, body: dict) -> bool:
-        """Whether recorded vehicle ``i`` can be spawned among the bodies: no body within
-        :func:`spawn_room` ahead or behind, among those that overlap it laterally."""
-        cfg = self.config
-        x, length, speed = snap.x[i], snap.length[i], snap.speed[i]
-        side = np.abs(body["y"] - snap.y[i]) < 0.5 * (body["width"] + snap.width[i]) + (
-            LATERAL_MARGIN
-        )
-        if not side.any():
-            return True
-        bx, bl, bv = body["x"][side], body["length"][side], body["speed"][side]
-        ahead = bx >= x
-        gap = np.where(ahead, bx - (x + length), x - (bx + bl))
-        closing = np.where(ahead, speed**2 - bv**2, bv**2 - speed**2)
-        rear_speed = np.where(ahead, speed, bv)
-        return bool(np.all(gap >= spawn_room(cfg, rear_speed, closing)))
-
-    def _spawn(self, new: "_Recorded", *, desired_speed: float) -> np.ndarray:
-        ids = self.world.spawn(new.spawn)
-        lanes = lane_of(new.spawn.y)
-        self.manager.add(
-            ids,
-            np.full(ids.size, self.direction),
-            lanes,
-            self.world.params_of(ids),
-            desired_speed=desired_speed,
-        )
-        drivers = self.behaviour.drivers(new.tid, new.spawn.vehicle_class, lanes)
-        base = drivers.pop("desired_speed", np.full(ids.size, desired_speed))
-        if drivers:
-            self.manager.set_params(ids, **drivers)
-        if not self.behaviour.auto_lane_change:
-            self.manager.set_auto_lane_change(ids, False)
-        self.targets.added(ids, new.tid, lanes, new.spawn.x)
-        for i, tid in zip(ids.tolist(), new.tid.tolist(), strict=True):
-            if self._is_av(tid):
-                av = load_controller(self.config.ego_controller, self.config)
-                self.manager.set_controller(i, av)
-                _bind(av, self)
-                self.av_ids.add(i)
-                self.targets.removed([i])  # its controller decides its lane changes
-        self._base_speed = np.concatenate([self._base_speed, base])
-        self._tids = np.concatenate([self._tids, new.tid])
-        self._is_sim[new.tid] = True
-        ids_before, speeds_before = self._just_spawned
-        self._just_spawned = (
-            np.concatenate([ids_before, ids]),
-            np.concatenate([speeds_before, new.spawn.speed]),
-        )
-        return ids
-
-    def _is_av(self, tid: int) -> bool:
-        """Whether recorded vehicle ``tid`` is driven by the AV controller
-        (``config.av_share``): one draw from the seed and the record, whatever the
-        spawn order."""
-        share = self.config.av_share
-        if share <= 0:
-            return False
-        draw = np.random.default_rng([self.config.seed, int(tid), AV_STREAM]).random()
-        return bool(draw < share)
-
-    # -- checks and records -----------------------------------------------------------
-
-    def _check_spawn_speeds(self, states, commands) -> None:
-        """Relative speed error of the vehicles spawned before this step, one step after
-        the impulse: |v - max(v_spawn + a_commanded dt, 0)| / max(v_spawn, 1 m/s)."""
-        ids, spawn_speed = self._just_spawned
-        if ids.size == 0:
+    def _apply_controllers(self) -> None:
+        """The Python controllers' commands (and lane changes asked for)
+        (:func:`twin.traffic.controlled.apply_controllers`)."""
+        if not self._controllers:
             return
-        at = np.searchsorted(states.id, ids)
-        accel = commands.accel[np.searchsorted(commands.id, ids)]
-        expected = np.maximum(spawn_speed + accel * self.config.dt, 0.0)  # brakes hold at 0
-        error = np.abs(states.speed[at] - expected) / np.maximum(spawn_speed, 1.0)
-        self.counters.spawn_speed_error.extend(error.tolist())
-        self._just_spawned = (np.empty(0, np.int64), np.empty(0))
+        st = self.state
+        slots = self._slots_of(list(self._controllers))
+        by_slot = dict(zip(slots.tolist(), self._controllers.values(), strict=True))
+        traffic = kinds.Traffic(st.vehicles, st.obstacles, st.drivers, st.scratch, None,
+                                st.counters, st.actions)  # fmt: skip
+        overrides, refused = apply_controllers(
+            by_slot, traffic, 0, st.bodies.id, st.ghosts.y, self.direction, self.sim_time,
+            self._may_change,
+        )  # fmt: skip
+        st.counters.safety_overrides[0] += overrides
+        st.counters.refused_requests[0] += refused
 
-    def _check_contacts(self, states) -> None:
-        """New body contacts between vehicles are collisions; vehicles outside the four
-        lanes (or on the other road) are off the road."""
+    def _may_change(self, i: int, step: int) -> bool:
+        """Whether slot ``i`` may ever change one lane ``step`` (on the road, the HOV
+        rule)."""
+        dr = self.state.drivers
+        lane = int(dr.lane[0, i])
+        target = lane + step
+        if not -N_LANES <= target <= -1:
+            return False
+        if target == HOV_LANE and not dr.hov_eligible[0, i]:
+            return False
+        return not (HOV_LANE in (target, lane) and not self.config.traffic.hov_openings)
+
+    # -- the physics world under the kernels --------------------------------------------
+
+    def _physics_step(self) -> None:
+        """pybullet integrates the kernels' commands; its states come back into the core,
+        its body contacts become the core's pairs."""
+        st = self.state
+        bo = st.bodies
+        slots = self._slots_of(self._bodies)
+        self.world.set_controls(self._bodies, accel=st.drivers.accel[0, slots],
+                                steer=st.scratch.steer[0, slots])  # fmt: skip
+        self.world.step()
+        states = self.world.states()
+        at = self._slots_of(states.id)
+        bo.x[0, at], bo.y[0, at] = states.x, states.y
+        bo.speed[0, at], bo.yaw_rate[0, at] = states.speed, states.yaw_rate
+        bo.yaw[0, at] = _wrap(states.heading - self._heading[self.direction])
+        bo.lane[0, at] = states.lane
+        bo.drive_power[0, at] = states.drive_power
+        prof = self.shared.settings.profile
+        from twin.physics.kernels import place
+
+        for i in at.tolist():
+            place(0, i, bo, prof)  # the map's grade under it (and the lane)
+        bo.z[0, at] = states.position[:, 2]
+        bo.lane[0, at] = states.lane
         pairs = self.world.vehicle_contacts()
-        touching = set(map(tuple, pairs.tolist()))
-        for a, b in sorted(touching - self._touching):
-            self.counters.collisions.append((self.sim_time, a, b))
-        self._touching = touching
-        off = (states.lane == 0) | (states.road != self.direction)
-        if off.any():
-            self.counters.off_road.update(states.id[off].tolist())
+        k = min(len(pairs), st.pairs.shape[1])
+        if len(pairs):
+            st.pairs[0, :k, 0] = self._slots_of(pairs[:k, 0])
+            st.pairs[0, :k, 1] = self._slots_of(pairs[:k, 1])
+        st.episodes.pair_count[0] = k
 
-    def _accel_of(self, states, commands) -> np.ndarray:
-        """The commanded accelerations in the order of ``states`` (0 for new vehicles)."""
-        accel = np.zeros(states.id.size)
-        if commands.id.size:
-            at = np.minimum(np.searchsorted(commands.id, states.id), commands.id.size - 1)
-            hit = commands.id[at] == states.id
-            accel[hit] = commands.accel[at[hit]]
-        return accel
+    def _mirror_bodies(self) -> None:
+        """Make the physics world's bodies the core's vehicles: remove those the core
+        removed, spawn those it spawned (in id order, so the ids agree)."""
+        if self.config.world != "physics":
+            return
+        bo = self.state.bodies
+        valid = bo.valid[0]
+        ids = bo.id[0][valid]
+        gone = np.setdiff1d(self._bodies, ids)
+        if gone.size:
+            self.world.despawn(gone)
+        new = np.setdiff1d(ids, self._bodies)
+        if new.size:
+            slots = self._slots_of(new)
+            made = self.world.spawn(
+                SpawnStates.make(
+                    self.direction, bo.x[0, slots], bo.y[0, slots], bo.speed[0, slots],
+                    bo.vehicle_class[0, slots], bo.length[0, slots], bo.width[0, slots],
+                    bo.height[0, slots],
+                )
+            )  # fmt: skip
+            if not np.array_equal(made, new):
+                raise RuntimeError(f"the physics world named its bodies {made} where the core has {new}")
+        self._bodies = np.sort(ids)
 
-    def _record(self, states, accel: np.ndarray) -> None:
-        # _tids follow the world's ids, and so do the states
-        self.log.add_vehicles(self.sim_time, states, self._tids, self.ego_id, accel)
-        self.log.add_windows(self.sim_time, self.windows)
+    # -- bookkeeping ------------------------------------------------------------------
+
+    def _slots_of(self, ids) -> np.ndarray:
+        """The core's slots of the simulated vehicles ``ids``.
+
+        Raises:
+            KeyError: an id that is not simulated now.
+        """
+        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
+        bo = self.state.bodies
+        valid = np.flatnonzero(bo.valid[0])
+        order = np.argsort(bo.id[0, valid])
+        sorted_ids = bo.id[0, valid][order]
+        where = np.searchsorted(sorted_ids, ids)
+        found = where < sorted_ids.size
+        found[found] = sorted_ids[where[found]] == ids[found]
+        if not found.all():
+            raise KeyError(f"not a simulated vehicle: {ids[~found].tolist()}")
+        return valid[order][where]
+
+    def _sync(self, record_from: int) -> None:
+        """The log rows, windows and counters of the steps the core took since the last
+        call (one, or the reset's)."""
+        st, ep = self.state, self.state.episodes
+        k = self.step_index
+        lo, hi = ep.windows[0, 0], ep.windows[0, 3]
+        self.windows = Windows(
+            ghost_back=(float(lo), float(ep.windows[0, 1])),
+            visible=(float(ep.windows[0, 1]), float(ep.windows[0, 2])),
+            ghost_front=(float(ep.windows[0, 2]), float(hi)),
+        )
+        append_step(self.log, self.shared, st, 0, k, self.config.dt, self._heading[self.direction])
+        c = self.counters
+        c.spawned, c.spawned_initially = int(ep.spawned[0]), int(ep.spawned_initially[0])
+        c.despawned = int(ep.despawned[0])
+        c.skipped_overlap, c.skipped_invalid = int(ep.skipped_overlap[0]), int(ep.skipped_invalid[0])
+        c.skipped_full, c.off_road = int(ep.skipped_full[0]), int(ep.off_road[0])
+        n = min(int(ep.spawn_error_count[0]), ep.spawn_errors.shape[1])
+        c.spawn_speed_error = ep.spawn_errors[0, :n].tolist()
+        m = min(int(ep.collisions[0]), layout.COLLISIONS_KEPT)
+        c.collisions = [(float(t), int(a), int(b)) for t, a, b in ep.collision_log[0, :m]]
+        if ep.ended[0] == layout.EGO_LEFT and not c.ended:
+            c.ended = (
+                f"the ego left the range of map and data (x = {ep.ended_x[0]:.1f} m) at "
+                f"{self.sim_time:.2f} s"
+            )
 
 
-@dataclass(frozen=True)
-class _Recorded:
-    spawn: SpawnStates
-    tid: np.ndarray
+def _compiled_specs() -> set[str]:
+    from twin.cosim.core.batch import COMPILED
+
+    return set(COMPILED)
 
 
-def _recorded_states(road, x, y, speed, vehicle_class, length, width, height, tid) -> _Recorded:
-    return _Recorded(
-        SpawnStates.make(road, x, y, speed, vehicle_class, length, width, height),
-        np.asarray(tid, dtype=np.int64),
-    )
+def _lane(y: float) -> int:
+    from twin.core.i24 import lane_of
+
+    return int(lane_of(np.array([y]))[0])
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def append_step(log: TrajectoryLog, shared: Shared, state, b: int, k: int, dt: float,
+                road_heading: float) -> None:  # fmt: skip
+    """Append episode ``b``'s log row ``k`` of the core's log to ``log`` (the vehicles
+    in id order, the windows, the ghosts at their rate)."""
+    lg = state.log
+    ids = lg.id[b, k]
+    valid = ids >= 0
+    order = np.argsort(ids[valid], kind="stable")
+    slots = np.flatnonzero(valid)[order]
+    rec = shared.recording
+    tids = np.asarray(rec.tid)[lg.r[b, k, slots]].astype(np.int64)
+    ego = int(state.episodes.ego_id[b])
+    log.add_rows(
+        time=k * dt, id=ids[slots], tid=tids, ego_id=ego, lane=lg.lane[b, k, slots],
+        x=lg.x[b, k, slots], y=lg.y[b, k, slots], z=lg.z[b, k, slots],
+        speed=lg.speed[b, k, slots], accel_cmd=lg.accel_cmd[b, k, slots],
+        heading=road_heading + lg.yaw[b, k, slots], drive_power=lg.drive_power[b, k, slots],
+    )  # fmt: skip
+    w = lg.windows[b, k]
+    log.add_window_bounds(k * dt, *w)
+    if k % lg.ghost_every == 0:
+        row = k // lg.ghost_every
+        n = int(lg.ghost_count[b, row])
+        log.add_ghost_rows(
+            k * dt, np.asarray(rec.tid)[lg.ghost_r[b, row, :n]].astype(np.int32),
+            lg.ghost_lane[b, row, :n], lg.ghost_x[b, row, :n], lg.ghost_y[b, row, :n],
+            lg.ghost_speed[b, row, :n],
+        )  # fmt: skip
+
+
+class TrafficView:
+    """What the traffic manager of a cosimulation answers (its counts, the drivers'
+    lanes and settings), read from the core."""
+
+    def __init__(self, sim: Cosimulator):
+        self._sim = sim
+
+    @property
+    def lane_changes(self) -> int:
+        return int(self._sim.state.counters.lane_changes[0])
+
+    @property
+    def safety_overrides(self) -> int:
+        """Controller steps overridden by emergency braking."""
+        return int(self._sim.state.counters.safety_overrides[0])
+
+    @property
+    def emergency_steps(self) -> int:
+        return int(self._sim.state.counters.emergency_steps[0])
+
+    @property
+    def refused_requests(self) -> int:
+        return int(self._sim.state.counters.refused_requests[0])
+
+    @property
+    def model(self):
+        """The drivers' car-following model (:mod:`twin.traffic.models`)."""
+        from twin.traffic.models import car_following_model
+
+        return car_following_model(self._sim.config.traffic.car_following)
+
+    @property
+    def decision_steps(self) -> int:
+        return int(self._sim.shared.traffic_settings.decision_steps)
+
+    @property
+    def ids(self) -> np.ndarray:
+        bo = self._sim.state.bodies
+        return np.sort(bo.id[0][bo.valid[0]])
+
+    def _column(self, name, ids):
+        return getattr(self._sim.state.drivers, name)[0][self._sim._slots_of(ids)].copy()
+
+    def auto_lane_change(self, ids) -> np.ndarray:
+        """(k,) bool: vehicles ``ids`` change lanes by MOBIL."""
+        return self._column("auto", ids)
+
+    def lanes(self, ids) -> np.ndarray:
+        """(k,) the lanes vehicles ``ids`` drive in or are changing to."""
+        return self._column("lane", ids)
+
+    def changing(self, ids) -> np.ndarray:
+        """(k,) bool: vehicles ``ids`` are changing lanes now."""
+        return self._column("lane_from", ids) != self._column("lane", ids)
+
+    def strategic(self, ids) -> np.ndarray:
+        """(k,) the strategic directions of vehicles ``ids`` (0: none)."""
+        return self._column("strategic", ids)
+
+    def desired_speed(self, ids) -> np.ndarray:
+        """(k,) [m/s] the desired speeds of vehicles ``ids`` now."""
+        slots = self._sim._slots_of(ids)
+        return self._sim.state.drivers.cf[0, slots, 0].copy()
+
+    def params(self, ids) -> dict[str, np.ndarray]:
+        """The driver parameters of vehicles ``ids`` (the model's, MOBIL's, HOV)."""
+        sim = self._sim
+        slots = sim._slots_of(ids)
+        dr = sim.state.drivers
+        model = self.model
+        out = {name: dr.cf[0, slots, j].copy() for j, name in enumerate(model.names)}
+        for name in ("politeness", "threshold", "safe_decel", "keep_right", "hov_eligible"):
+            out[name] = getattr(dr, name)[0, slots].copy()
+        return out
+
+    def force_lane_change(self, vehicle_id: int, direction) -> None:
+        """Ask vehicle ``vehicle_id`` to change one lane (``'left'``/+1, ``'right'``/-1).
+
+        Raises:
+            KeyError: not simulated. ValueError: off the road or against the HOV rule.
+        """
+        from twin.traffic.controller_api import lane_change_direction
+
+        sim = self._sim
+        step = lane_change_direction(direction)
+        (i,) = sim._slots_of([vehicle_id])
+        if step and not sim._may_change(int(i), step):
+            raise ValueError(f"vehicle {vehicle_id} may not change one lane {step:+d} here")
+        sim.state.drivers.requested[0, i] = step
+
+
+class CoreWorld:
+    """The kinematic world of a cosimulation: the core's bodies seen through the
+    :class:`~twin.physics.worlds.World` interface's reading side (states, parameters,
+    contacts, the road)."""
+
+    def __init__(self, sim: Cosimulator, bundle: MapBundle):
+        self._sim = sim
+        self.road = bundle.road
+        self.dt = sim.config.dt
+
+    @property
+    def time(self) -> float:
+        return self._sim.sim_time
+
+    @property
+    def ids(self) -> np.ndarray:
+        return self._sim.manager.ids
+
+    def _slots(self) -> np.ndarray:
+        return self._sim._slots_of(self.ids)
+
+    @property
+    def params(self):
+        return self.params_of(self.ids)
+
+    def params_of(self, ids):
+        from twin.core.vehicle_classes import vehicle_classes
+        from twin.physics.vehicle import VehicleParams
+
+        bo = self._sim.state.bodies
+        s = self._sim._slots_of(ids)
+        return VehicleParams.from_classes(
+            vehicle_classes(), bo.vehicle_class[0, s], bo.length[0, s], bo.width[0, s],
+            bo.height[0, s],
+        )  # fmt: skip
+
+    def states(self) -> VehicleStates:
+        """The vehicles now, by increasing id (a fresh copy)."""
+        bo = self._sim.state.bodies
+        s = self._slots()
+        n = s.size
+        heading = self._sim._heading[self._sim.direction] + bo.yaw[0, s]
+        pitch = np.arctan(bo.grade[0, s])
+        cos_p = np.cos(pitch)
+        forward = np.stack([cos_p * np.cos(heading), cos_p * np.sin(heading), np.sin(pitch)], 1)
+        centre = bo.x[0, s] + 0.5 * bo.length[0, s]
+        ground, _, _ = self.road.to_world(self._sim.direction, centre, bo.y[0, s])
+        position = ground.copy()
+        position[:, 2] = bo.z[0, s]
+        mass = bo.mass[0, s]
+        return VehicleStates(
+            id=bo.id[0, s].copy(), position=position, orientation=quaternion_of(heading, pitch),
+            velocity=forward * bo.speed[0, s, None],
+            angular_velocity=np.stack([np.zeros(n), np.zeros(n), bo.yaw_rate[0, s]], 1),
+            speed=bo.speed[0, s].copy(), yaw_rate=bo.yaw_rate[0, s].copy(), heading=heading,
+            road=np.full(n, self._sim.direction, np.int8), x=bo.x[0, s].copy(),
+            y=bo.y[0, s].copy(), lane=bo.lane[0, s].astype(np.int8),
+            wheel_spin=(bo.speed[0, s] / bo.wheel_radius[0, s])[:, None].repeat(4, 1),
+            load=(mass * 9.81 * cos_p / 4.0)[:, None].repeat(4, 1),
+            contact=np.ones((n, 4), bool), drive_power=bo.drive_power[0, s].copy(),
+        )  # fmt: skip
+
+    def vehicle_contacts(self) -> np.ndarray:
+        st = self._sim.state
+        k = int(st.episodes.pair_count[0])
+        return st.pairs[0, :k].copy()
+
+    def close(self) -> None:
+        """Nothing to release: the core holds the bodies."""
 
 
 def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) -> np.ndarray:
@@ -575,17 +709,11 @@ def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) ->
     ``spawn_clearance_at_rest`` for a rear vehicle at rest growing to ``spawn_clearance``
     at ``CLEARANCE_SPEED`` and above (a standing queue is spawned as recorded, its gaps
     are often under 2 m), plus the difference of braking distances at ``spawn_decel``
-    (``closing`` = v_rear^2 - v_front^2)."""
+    (``closing`` = v_rear^2 - v_front^2). The kernel
+    :func:`twin.cosim.core.handover.spawn_room` decides with it."""
     share = np.clip(np.asarray(rear_speed) / CLEARANCE_SPEED, 0.0, 1.0)
     clearance = cfg.spawn_clearance_at_rest + share * (
         cfg.spawn_clearance - cfg.spawn_clearance_at_rest
     )
     return clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
 
-
-def _bind(controller, sim: "Cosimulator") -> None:
-    """Hand the simulation to a controller that asks for it with a ``bind(sim)``
-    method (e.g. to read the recorded traffic ahead, as a connected vehicle could)."""
-    bind = getattr(controller, "bind", None)
-    if callable(bind):
-        bind(sim)

@@ -80,6 +80,34 @@ class TrajectoryLog:
         v["heading"].append(states.heading)
         v["drive_power"].append(states.drive_power)
 
+    def add_rows(self, *, time, id, tid, ego_id, lane, x, y, z, speed, accel_cmd, heading,
+                 drive_power) -> None:  # fmt: skip
+        """Append vehicles' rows at ``time`` [s since t0] from arrays (n,) (the core's
+        log; ``id`` in increasing order)."""
+        n = np.asarray(id).size
+        v = self._vehicles
+        v["time"].append(np.full(n, time))
+        v["id"].append(np.asarray(id, dtype=np.int64))
+        v["tid"].append(np.asarray(tid, dtype=np.int64))
+        v["role"].append(np.where(np.asarray(id) == ego_id, 0, 1).astype(np.int8))
+        v["lane"].append(np.asarray(lane, dtype=np.int8))
+        for name, value in (("x", x), ("y", y), ("z", z), ("speed", speed),
+                            ("accel_cmd", accel_cmd), ("heading", heading),
+                            ("drive_power", drive_power)):  # fmt: skip
+            v[name].append(np.asarray(value, dtype=np.float64))
+
+    def add_window_bounds(self, time: float, g0: float, x0: float, x1: float, g1: float) -> None:
+        """Append the windows in force at ``time``: rear ghost start, visible start and
+        end, front ghost end [m]."""
+        self._windows.append((time, float(g0), float(x0), float(x1), float(g1)))
+
+    def add_ghost_rows(self, time: float, tid, lane, x, y, speed) -> None:
+        """Append the ghost set at ``time`` from arrays (k,)."""
+        g = self._ghosts
+        g["time"].append(np.full(np.asarray(tid).size, time))
+        for name, value in (("tid", tid), ("lane", lane), ("x", x), ("y", y), ("speed", speed)):
+            g[name].append(np.asarray(value))
+
     def add_windows(self, time: float, windows) -> None:
         """Append the windows (a ``Windows``) in force at ``time`` [s since t0]."""
         self._windows.append(

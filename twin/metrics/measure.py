@@ -162,7 +162,7 @@ def _physics(sim: Cosimulator) -> dict:
             {"time_s": round(t, 3), "ids": [a, b]}
             for t, a, b in counters.collisions[:COLLISIONS_LISTED]
         ],
-        "vehicles_off_road": len(counters.off_road),
+        "vehicles_off_road": counters.off_road,
     }
 
 

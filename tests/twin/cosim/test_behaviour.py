@@ -62,7 +62,7 @@ def test_calibrated_drivers_are_drawn_from_the_calibration(calibrated_store, bui
         assert np.unique(params["comfortable_decel"]).size > 1
         assert np.all(np.abs(decel - dist.mean_log[j]) <= 2 * dist.sd_log[j] + 1e-9)
         # every vehicle keeps its own desired speed (not vel_default)
-        assert np.unique(np.round(sim._base_speed, 6)).size > 1
+        assert np.unique(np.round(sim.base_speeds(ids), 6)).size > 1
     finally:
         sim.close()
     again = _episode(calibrated_store, built_map, "calibrated")
@@ -78,13 +78,13 @@ def test_recorded_drivers_get_their_own_fits_and_no_mobil(calibrated_store, buil
         fits = read_fits(calibrated_store)
         fits = fits[fits["accepted"]].set_index("tid")
         ids = sim.manager.ids
-        tids = sim._tids
+        tids = sim.tids
         own = np.isin(tids, fits.index.to_numpy())
         assert own.sum() >= 3
         params = sim.manager.params(ids[own])
         for name in PARAMS[1:]:
             assert np.allclose(params[name], fits.loc[tids[own], name].to_numpy())
-        assert not sim.manager._d.auto_lane_change.any()
+        assert not sim.manager.auto_lane_change(ids).any()
     finally:
         sim.close()
 

@@ -68,7 +68,7 @@ def test_step2_visible_vehicles_spawn_at_their_recorded_speed_ghosts_do_not(cosi
     for n, speed in ((2, 23.0), (3, 17.0)):
         row = rows_of(sim, tid_of(sim, n))
         assert row["speed"].iloc[0] == pytest.approx(speed, rel=1e-3)
-    assert sorted(sim._ghosts.tid.tolist()) == sorted([tid_of(sim, 4), tid_of(sim, 5)])
+    assert sorted(sim.ghosts.tid.tolist()) == sorted([tid_of(sim, 4), tid_of(sim, 5)])
 
 
 def test_step3_the_lane_lead_takes_its_ghosts_speed_the_others_vel_default(cosim):
@@ -82,7 +82,7 @@ def test_step3_the_lane_lead_takes_its_ghosts_speed_the_others_vel_default(cosim
     ]
     sim = cosim(docs)
     sim.step()
-    ids = dict(zip(sim._tids.tolist(), sim.world.ids.tolist(), strict=True))
+    ids = dict(zip(sim.tids.tolist(), sim.world.ids.tolist(), strict=True))
     desired = {n: float(sim.manager.desired_speed([ids[tid_of(sim, n)]])[0]) for n in (2, 3, 5, 6)}
     assert desired == {2: 30.0, 3: pytest.approx(12.0, abs=1e-6), 5: 30.0, 6: 30.0}
     # and it slows toward it while the ghost is ahead of it (it enters the visible
@@ -103,10 +103,10 @@ def test_a_calibrated_lane_lead_keeps_its_speed_and_is_held_back_by_its_ghost(co
         vehicle(7, -3, EGO_X + 175.0, 26.0),  # its ghost, faster than the lead's own
     ]
     sim = cosim(docs)
-    sim.behaviour.name = "calibrated"  # its drivers are the paper's here: only the rule
-    sim._base_speed[:] = 24.0  # each vehicle's own desired speed
+    sim.rules(lead_chases_ghost=True)  # its drivers are the paper's here: only the rule
+    sim.set_base_speeds(sim.manager.ids, 24.0)  # each vehicle's own desired speed
     sim.step()
-    ids = dict(zip(sim._tids.tolist(), sim.world.ids.tolist(), strict=True))
+    ids = dict(zip(sim.tids.tolist(), sim.world.ids.tolist(), strict=True))
     desired = {n: float(sim.manager.desired_speed([ids[tid_of(sim, n)]])[0]) for n in (3, 5)}
     assert desired == {3: 24.0, 5: pytest.approx(26.0, abs=1e-6)}
     # the slow ghost ahead is its leader: it still slows toward it
@@ -119,12 +119,12 @@ def test_a_calibrated_lane_lead_keeps_its_speed_and_is_held_back_by_its_ghost(co
 def test_ghost_smoothing_lags_the_lead_speed_when_asked(cosim):
     docs = [ego_doc(), vehicle(3, -2, EGO_X + 110.0, 20.0), vehicle(4, -2, EGO_X + 180.0, 12.0)]
     sim = cosim(docs, ghost_smoothing=2.0)
-    lead = sim.world.ids[sim._tids == tid_of(sim, 3)]
+    lead = sim.world.ids[sim.tids == tid_of(sim, 3)]
     sim.step()
     first = float(sim.manager.desired_speed(lead)[0])
     assert first == pytest.approx(12.0)  # the first value is taken as is
     # a new ghost at a different speed is approached with the lag's time constant
-    sim._lead_speed[-2] = 20.0
+    sim.state.episodes.lead_speed[0, 1] = 20.0  # lane -2's smoothed speed
     sim.step()
     assert float(sim.manager.desired_speed(lead)[0]) == pytest.approx(20.0 - 8.0 * 0.01 / 2.0)
 
@@ -133,7 +133,7 @@ def test_step5_a_vehicle_crossing_into_a_ghost_window_is_removed(cosim):
     # 10 m/s faster than the ego (held at 20 m/s): reaches the front ghost window at ~5 s
     sim = cosim([ego_doc(), vehicle(2, -3, EGO_X + 100.0, 30.0)])
     tid = tid_of(sim, 2)
-    step_until(sim, lambda: tid not in sim._tids)
+    step_until(sim, lambda: tid not in sim.tids)
     rows = rows_of(sim, tid)
     ego = sim.log.vehicles().query("role == 0")
     gap = rows["x"].to_numpy() - ego["x"].to_numpy()[: len(rows)]
@@ -142,15 +142,15 @@ def test_step5_a_vehicle_crossing_into_a_ghost_window_is_removed(cosim):
     assert sim.counters.despawned == 1
     assert sim.world.ids.size == 1 and sim.manager.ids.size == 1
     sim.step()
-    assert tid in sim._ghosts.tid  # its recording is now a ghost ahead
+    assert tid in sim.ghosts.tid  # its recording is now a ghost ahead
 
 
 def test_step6_a_ghost_entering_the_visible_window_is_spawned_at_its_recorded_speed(cosim):
     # from the rear ghost window at 30 m/s: enters at ~3 s behind the ego
     sim = cosim([ego_doc(), vehicle(2, -3, EGO_X - 180.0, 30.0)])
     tid = tid_of(sim, 2)
-    assert tid in sim._ghosts.tid
-    step_until(sim, lambda: tid in sim._tids)
+    assert tid in sim.ghosts.tid
+    step_until(sim, lambda: tid in sim.tids)
     row = rows_of(sim, tid).iloc[0]
     recorded_x = EGO_X - 180.0 + 30.0 * row["time"]
     assert row["speed"] == pytest.approx(30.0, rel=1e-3)
@@ -168,8 +168,8 @@ def test_step6_a_vehicle_first_recorded_inside_the_visible_window_is_spawned(cos
     # of the ego, 2 s into the episode (before, it was neither simulated nor a ghost)
     sim = cosim([ego_doc(), vehicle(5, -4, EGO_X + 20.0, 20.0, start=2.0)])
     tid = tid_of(sim, 5)
-    assert tid not in sim._tids and tid not in sim._ghosts.tid
-    step_until(sim, lambda: tid in sim._tids)
+    assert tid not in sim.tids and tid not in sim.ghosts.tid
+    step_until(sim, lambda: tid in sim.tids)
     row = rows_of(sim, tid).iloc[0]
     assert row["time"] == pytest.approx(2.0, abs=0.011)
     assert row["x"] == pytest.approx(EGO_X + 20.0 + 20.0 * row["time"], abs=0.05)
@@ -186,8 +186,8 @@ def test_step6_a_ghost_is_not_spawned_where_a_body_is_in_the_way(cosim):
     sim = cosim(docs)
     for _ in range(100):
         sim.step()
-    assert tid_of(sim, 3) not in sim._tids
-    assert tid_of(sim, 4) in sim._tids
+    assert tid_of(sim, 3) not in sim.tids
+    assert tid_of(sim, 4) in sim.tids
     assert sim.counters.skipped_overlap == 1 and sim.counters.spawned == 1
 
 
@@ -198,8 +198,8 @@ def test_a_vehicle_refused_for_lack_of_room_is_spawned_once_it_fits(cosim):
         [ego_doc(), vehicle(2, -3, EGO_X + 100.0, 20.0), vehicle(3, -3, EGO_X + 106.0, 26.0)]
     )
     tid = tid_of(sim, 3)
-    assert tid not in sim._tids and sim.counters.skipped_overlap == 1
-    step_until(sim, lambda: tid in sim._tids, limit=100)
+    assert tid not in sim.tids and sim.counters.skipped_overlap == 1
+    step_until(sim, lambda: tid in sim.tids, limit=100)
     row = rows_of(sim, tid).iloc[0]
     assert row["x"] == pytest.approx(EGO_X + 106.0 + 26.0 * row["time"], abs=0.05)
     assert sim.counters.skipped_overlap == 1  # counted once, however often it was tried
@@ -216,7 +216,7 @@ def test_a_track_that_begins_on_a_simulated_body_is_not_tried_again(cosim):
     tid = tid_of(sim, 3)
     for _ in range(400):  # 4 s
         sim.step()
-    assert tid not in sim._tids
+    assert tid not in sim.tids
     assert sim.counters.skipped_overlap == 1
 
 
@@ -228,13 +228,13 @@ def test_nothing_is_spawned_beside_a_body_changing_into_its_lane(cosim):
     # was moving into (a side collision in the physics world on preset D)
     sim = cosim([ego_doc(), vehicle(2, -3, EGO_X - 148.0, 20.0),
                  vehicle(3, -4, EGO_X - 152.2, 24.0, start=0.3)])  # fmt: skip
-    changer = int(sim.world.states().id[sim._tids == tid_of(sim, 2)][0])
+    changer = int(sim.world.states().id[sim.tids == tid_of(sim, 2)][0])
     sim.manager.force_lane_change(changer, "right")
     tid = tid_of(sim, 3)
     for _ in range(100):  # 1 s
         sim.step()
         assert sim.manager.changing([changer])[0]
-        assert tid not in sim._tids
+        assert tid not in sim.tids
     assert sim.counters.skipped_overlap == 1
 
 
@@ -246,7 +246,7 @@ def test_step2_a_standing_queue_is_spawned_as_recorded_a_moving_one_with_room(co
         docs.append(vehicle(10 + k, -3, EGO_X + 20.0 + k * (length + 1.0), 0.0))
         docs.append(vehicle(20 + k, -4, EGO_X + 20.0 + k * (length + 1.0), 20.0))
     sim = cosim(docs)
-    spawned = set(sim._tids.tolist())
+    spawned = set(sim.tids.tolist())
     assert all(tid_of(sim, 10 + k) in spawned for k in range(5))
     # at speed the full clearance holds: every other vehicle of the moving queue
     assert sum(tid_of(sim, 20 + k) in spawned for k in range(5)) == 3
@@ -261,10 +261,10 @@ def test_step7_the_ghosts_are_the_recording_now_and_the_managers_obstacles(cosim
     for _ in range(50):
         sim.step()
     # ego at 20 m/s, the ghost at 25: still in the front window, where the data put it
-    (k,) = np.flatnonzero(sim._ghosts.tid == tid_of(sim, 4))
-    assert sim._ghosts.x[k] == pytest.approx(EGO_X + 175.0 + 25.0 * 0.5, abs=0.02)
-    obstacles = sim._obstacles()
-    assert obstacles.lane.tolist() == [-3] and obstacles.speed[0] == pytest.approx(25.0, abs=0.01)
+    (k,) = np.flatnonzero(sim.ghosts.tid == tid_of(sim, 4))
+    assert sim.ghosts.x[k] == pytest.approx(EGO_X + 175.0 + 25.0 * 0.5, abs=0.02)
+    ghosts = sim.ghosts
+    assert ghosts.lane.tolist() == [-3] and ghosts.speed[0] == pytest.approx(25.0, abs=0.01)
 
 
 def test_step8_the_episode_ends_at_t_max_and_every_step_is_logged(cosim):

@@ -1,0 +1,381 @@
+"""Who drives a spawned vehicle, compiled: its driver's parameters (the paper's drivers
+drawn from the class table, or the store's calibrated distributions, or its own fitted
+parameters), its desired speed, its MOBIL settings, its eligibility for the HOV lane,
+whether it is an AV, and its strategic targets (the recording's lane-change flows, or
+its own recorded changes) as :mod:`twin.cosim.behaviour` and
+:mod:`twin.cosim.strategic_targets` describe them.
+
+Every draw is keyed by the run's seed and the vehicle's recorded trajectory (its
+store ``tid``), so a vehicle gets the same driver whenever and in whatever slot it is
+spawned, alone or in a batch (:mod:`twin.core.jit`).
+
+:data:`BehaviourArrays` holds the behaviour as arrays (:func:`behaviour_arrays` makes
+them from a :class:`~twin.cosim.behaviour.Behaviour`).
+"""
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from twin.core.i24 import HOV_LANE, LANE_WIDTH
+from twin.core.jit import kernel, normal, uniform
+from twin.traffic.drivers import CLIP_SD
+from twin.traffic.kernels.lane_change import FIRST_DECISION_STREAM, clear_target
+from twin.traffic.kernels.models import GIPPS
+
+TRAIT_STREAM = 0x54  # the random streams of the draws made at a spawn
+HOV_STREAM = 0x48
+BEHAVIOUR_STREAM = 0x42
+SPEED_STREAM = 0x53
+AV_STREAM = 0x41565F
+STRATEGIC_STREAM = 0x737472
+PAPER, CALIBRATED, RECORDED = 0, 1, 2
+RECORDED_SPAN = 100.0  # [m] a recorded change's urgency grows over this distance
+PLANNED_LATE = 100.0  # [m] a recorded change not started this far past its place is dropped
+BIN_EVENTS = 65536  # events of one strategic draw: one per position bin
+
+BehaviourArrays = namedtuple(
+    "BehaviourArrays",
+    "mode class_v0 class_v0_sd class_time_headway class_max_accel class_hov class_group "
+    "time_headway_sd_log min_gap min_gap_sd max_accel_sd_log decel decel_sd delta "
+    "v0_scale time_headway_scale max_accel_scale hov_share decision_interval auto "
+    "politeness threshold safe_decel keep_right dist_on dist_have dist_mean dist_matrix "
+    "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
+    "lane_speed_sd fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes "
+    "plan_start plan_x plan_time plan_from plan_to hov_openings",
+)
+
+
+# -- a spawned vehicle's driver -------------------------------------------------------------
+
+
+@kernel(inline=True)
+def _z(seed, stream, key, event):
+    """A standard normal draw clipped to +/- CLIP_SD (no driver is absurd)."""
+    return min(max(normal(seed, stream, key, event), -CLIP_SD), CLIP_SD)
+
+
+@kernel
+def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time):
+    """Slot ``i``'s driver for recorded trajectory ``r`` (store tid ``key``) of
+    ``vehicle_class``, spawned in ``lane`` at the manager's clock ``time``."""
+    beh, slots, drivers = core.beh, core.slots, core.traffic.drivers
+    model, vel_default = core.traffic.settings.model, core.settings.vel_default
+    c = vehicle_class
+    # the class table's traits (twin.traffic.drivers.DriverDistribution.draw)
+    v0 = beh.v0_scale * (beh.class_v0[c] + beh.class_v0_sd[c] * _z(seed, TRAIT_STREAM, key, 0))
+    headway = (
+        beh.time_headway_scale * beh.class_time_headway[c]
+        * math.exp(beh.time_headway_sd_log * _z(seed, TRAIT_STREAM, key, 1))
+    )  # fmt: skip
+    min_gap = beh.min_gap + beh.min_gap_sd * _z(seed, TRAIT_STREAM, key, 2)
+    max_accel = (
+        beh.max_accel_scale * beh.class_max_accel[c]
+        * math.exp(beh.max_accel_sd_log * _z(seed, TRAIT_STREAM, key, 3))
+    )  # fmt: skip
+    decel = beh.decel
+    if beh.decel_sd > 0.0:
+        decel += beh.decel_sd * _z(seed, TRAIT_STREAM, key, 4)
+    p = drivers.cf
+    if model == GIPPS:  # twin.traffic.models.gipps.from_traits
+        p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, max_accel, 2.0 * decel
+        p[b, i, 3], p[b, i, 4], p[b, i, 5] = headway * (2.0 / 3.0), min_gap, 0.0
+    else:
+        p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, headway, min_gap
+        p[b, i, 3], p[b, i, 4], p[b, i, 5] = max_accel, decel, beh.delta
+    lucky = uniform(seed, HOV_STREAM, key, 0) < beh.hov_share
+    drivers.hov_eligible[b, i] = lane == HOV_LANE or (beh.class_hov[c] and lucky)
+    drivers.next_decision[b, i] = time + beh.decision_interval * uniform(
+        seed, FIRST_DECISION_STREAM, key, 0
+    )
+    drivers.politeness[b, i] = beh.politeness
+    drivers.threshold[b, i] = beh.threshold
+    drivers.safe_decel[b, i] = beh.safe_decel
+    drivers.keep_right[b, i] = beh.keep_right
+    drivers.auto[b, i] = beh.auto
+    desired = vel_default
+    if beh.mode != PAPER:
+        desired = _behaviour_drivers(b, i, core, seed, key, r, c, lane)
+    slots.base_speed[b, i] = desired
+    p[b, i, 0] = desired
+    drivers.key[b, i] = key
+    drivers.lane[b, i] = lane
+    drivers.lane_from[b, i] = lane
+    drivers.start_x[b, i] = 0.0
+    drivers.start_y[b, i] = (0.5 - lane) * LANE_WIDTH
+    drivers.path_length[b, i] = 1.0
+    drivers.decisions[b, i] = 0
+    drivers.changes[b, i] = 0
+    drivers.requested[b, i] = 0
+    clear_target(drivers.strategic, drivers.strategic_from, drivers.strategic_by, b, i)
+    drivers.accel[b, i] = 0.0
+    drivers.ctrl[b, i] = 0
+
+
+@kernel(inline=True)
+def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
+    """The calibrated (or recorded) parameters of slot ``i``'s driver; returns its own
+    desired speed [m/s] (:meth:`twin.cosim.behaviour.Behaviour.drivers`)."""
+    beh, drivers, vel_default = core.beh, core.traffic.drivers, core.settings.vel_default
+    desired = vel_default
+    if beh.dist_on:
+        group = beh.class_group[c]
+        if not beh.dist_have[group]:
+            group = 0
+        k = beh.dist_columns.size
+        own = beh.mode == RECORDED and beh.fit_ok[r]
+        for d in range(k):
+            if own:
+                value = beh.fits[r, d]
+            else:
+                log = beh.dist_mean[group, d]
+                for j in range(k):
+                    log += beh.dist_matrix[group, d, j] * _z(seed, BEHAVIOUR_STREAM, key, j)
+                log = min(max(log, beh.dist_low[group, d]), beh.dist_high[group, d])
+                value = math.exp(log)
+            if d == beh.desired_dim:
+                if beh.speed_source == 2:
+                    desired = value
+            else:
+                drivers.cf[b, i, beh.dist_columns[d]] = value
+    if beh.speed_source == 1:
+        k = -lane - 1
+        z = _z(seed, SPEED_STREAM, key, 0)
+        desired = max(beh.lane_speed_mean[k] + beh.lane_speed_sd[k] * z, 1.0)
+    return desired
+
+
+@kernel(inline=True)
+def is_av(seed, key, share):
+    """Whether recorded vehicle ``key`` is an AV at ``share`` (one draw per vehicle)."""
+    return share > 0.0 and uniform(seed, AV_STREAM, key, 0) < share
+
+
+# -- strategic targets -----------------------------------------------------------------------
+
+
+@kernel
+def first_target(b, i, core, seed, x):
+    """Slot ``i``'s first strategic target once spawned at back x [m]; its recorded
+    changes are those of the episode's time span."""
+    beh, slots, drivers, ep = core.beh, core.slots, core.traffic.drivers, core.episodes
+    time_from = ep.t0[b]
+    time_to = ep.t0[b] + ep.steps[b] * core.settings.dt
+    slots.tgt_on[b, i] = True
+    slots.tgt_draws[b, i] = 0
+    slots.plan_next[b, i] = 0
+    slots.plan_end[b, i] = 0
+    if beh.mode == RECORDED:
+        r = slots.r[b, i]
+        a, e = beh.plan_start[r], beh.plan_start[r + 1]
+        first = e
+        for k in range(a, e):
+            if beh.plan_x[k] > x - 0.5 * PLANNED_LATE and time_from <= beh.plan_time[k] <= time_to:
+                first = k
+                break
+        slots.plan_next[b, i], slots.plan_end[b, i] = first, e
+    next_target(b, i, core, seed, drivers.lane[b, i], x, time_from, time_to)
+
+
+@kernel
+def update_targets(b, core):
+    """At a decision step: the next target of each vehicle whose target is done (its
+    change started and finished) or given up."""
+    beh, slots, drivers, ep = core.beh, core.slots, core.traffic.drivers, core.episodes
+    valid, x = core.bodies.valid, core.bodies.x
+    seed = ep.seed[b]
+    time_from = ep.t0[b]
+    time_to = ep.t0[b] + ep.steps[b] * core.settings.dt
+    tgt_on, plan_next, plan_end, tgt_lane = slots.tgt_on, slots.plan_next, slots.plan_end, slots.tgt_lane
+    strategic, lanes, lane_from = drivers.strategic, drivers.lane, drivers.lane_from
+    for i in range(valid.shape[1]):
+        if not valid[b, i] or not tgt_on[b, i]:
+            continue
+        if strategic[b, i] != 0 or lane_from[b, i] != lanes[b, i]:
+            continue
+        lane = lanes[b, i]
+        if beh.mode == RECORDED:
+            due = plan_next[b, i] < plan_end[b, i]
+        else:
+            due = lane != tgt_lane[b, i]
+        if due:
+            next_target(b, i, core, seed, lane, x[b, i], time_from, time_to)
+
+
+@kernel
+def next_target(b, i, core, seed, lane, x, time_from, time_to):
+    """Draw (or read from the recording) slot ``i``'s next target from ``lane`` at back
+    x [m], and set it where the rules allow the change."""
+    beh, slots, drivers = core.beh, core.slots, core.traffic.drivers
+    if beh.mode == RECORDED:
+        direction, x_from, x_by = _recorded(b, i, core, lane, x, time_from, time_to)
+    else:
+        direction, x_from, x_by = _draw(b, i, core, seed, lane, x)
+    slots.tgt_lane[b, i] = lane
+    if direction == 0:
+        return
+    target = lane + direction
+    if not -4 <= target <= -1:
+        return
+    if target == HOV_LANE and not drivers.hov_eligible[b, i]:
+        return
+    if (target == HOV_LANE or lane == HOV_LANE) and beh.hov_openings.shape[0] == 0:
+        return
+    drivers.strategic[b, i] = direction
+    drivers.strategic_from[b, i] = x_from
+    drivers.strategic_by[b, i] = x_by
+
+
+@kernel(inline=True)
+def _draw(b, i, core, seed, lane, x):
+    """(direction, x_from, x_by) drawn from the flows for slot ``i`` in ``lane`` at back
+    x, or (0, nan, nan)."""
+    beh, slots = core.beh, core.slots
+    slots.tgt_draws[b, i] += 1
+    k = -lane - 1
+    if not beh.flows_on or not beh.flow_lanes[k]:
+        return 0, math.nan, math.nan
+    edges = beh.flow_edges
+    bins = edges.size - 1
+    first = 0  # bins starting ahead of x
+    while first <= bins and edges[first] <= x:
+        first += 1
+    half = 0.5 * (edges[1] - edges[0])
+    draws = slots.tgt_draws[b, i]
+    key = slots.tid[b, i]
+    for j in range(first, bins):
+        u = uniform(seed, STRATEGIC_STREAM, key, draws * BIN_EVENTS + j)
+        left, right = beh.flow_left[k, j], beh.flow_right[k, j]
+        if u < left + right:
+            return (1 if u < left else -1), edges[j] - half, edges[j + 1]
+    return 0, math.nan, math.nan
+
+
+@kernel(inline=True)
+def _recorded(b, i, core, lane, x, time_from, time_to):
+    """Slot ``i``'s next recorded change that starts from ``lane`` and is not already
+    far behind it, as (direction, x_from, x_by), or (0, nan, nan)."""
+    beh, slots = core.beh, core.slots
+    while slots.plan_next[b, i] < slots.plan_end[b, i]:
+        k = slots.plan_next[b, i]
+        slots.plan_next[b, i] += 1
+        if not time_from <= beh.plan_time[k] <= time_to:
+            continue
+        if beh.plan_from[k] == lane and x <= beh.plan_x[k] + RECORDED_SPAN:
+            direction = 1 if beh.plan_to[k] > beh.plan_from[k] else -1
+            return direction, beh.plan_x[k], beh.plan_x[k] + RECORDED_SPAN
+    return 0, math.nan, math.nan
+
+
+# -- the arrays of a behaviour ---------------------------------------------------------------
+
+
+def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> BehaviourArrays:
+    """The arrays of ``behaviour`` (a :class:`~twin.cosim.behaviour.Behaviour`) for
+    drivers of ``traffic_config`` (a :class:`~twin.traffic.config.TrafficConfig`) on
+    ``recording`` (:class:`~twin.data.recording.RecordingArrays`); ``plan``: the
+    recording's lane changes (:func:`twin.cosim.core.recorded_plan`), for ``recorded``."""
+    from twin.calibration.distributions import CLASS_GROUPS
+    from twin.core.vehicle_classes import vehicle_classes
+    from twin.traffic.models import car_following_model
+
+    classes = vehicle_classes()
+    dist = traffic_config.drivers
+    mobil = traffic_config.mobil
+    model = car_following_model(traffic_config.car_following)
+    mode = {"paper": PAPER, "calibrated": CALIBRATED, "recorded": RECORDED}[behaviour.name]
+    group_of_class = np.zeros(len(classes.frame), np.int64)
+    for g, name in enumerate(("car", "truck"), start=1):
+        group_of_class[list(CLASS_GROUPS[name])] = g
+    names = model.names
+    fitted = tuple(p.name for p in model.fitted)
+    k = len(fitted)
+    mean, matrix = np.zeros((3, k)), np.zeros((3, k, k))
+    low, high, have = np.zeros((3, k)), np.zeros((3, k)), np.zeros(3, bool)
+    for g, name in enumerate(("all", "car", "truck")):
+        d = behaviour.distributions.get(name)
+        if d is None:
+            continue
+        order = [d.names.index(f) for f in fitted]
+        cov = d.correlation * np.outer(d.sd_log, d.sd_log)
+        w, vectors = np.linalg.eigh(cov)
+        full = vectors * np.sqrt(np.maximum(w, 0.0))[None, :]
+        mean[g] = d.mean_log[order]
+        matrix[g] = full[order]
+        low[g] = (d.mean_log - CLIP_SD * d.sd_log)[order]
+        high[g] = (d.mean_log + CLIP_SD * d.sd_log)[order]
+        have[g] = True
+    source = {"paper": 0, "free_flow": 1, "car_following": 2}.get(behaviour.speed_source, 0)
+    if mode == PAPER:
+        source = 0
+    speeds = behaviour.speeds or {}
+    lane_mean, lane_sd = np.zeros(4), np.zeros(4)
+    for j, lane in enumerate((-1, -2, -3, -4)):
+        entry = speeds.get(str(lane)) or speeds.get("all")
+        if entry:
+            lane_mean[j], lane_sd[j] = entry["mean"], entry["sd"]
+    fits, fit_ok = np.zeros((recording.tid.size, k)), np.zeros(recording.tid.size, bool)
+    if behaviour._fits is not None and len(behaviour._fits):
+        table = behaviour._fits
+        local = np.full(int(recording.tid.max(initial=-1)) + 1, -1, np.int64)
+        local[np.asarray(recording.tid)] = np.arange(recording.tid.size)
+        tids = table.index.to_numpy()
+        inside = tids < local.size
+        r = local[tids[inside]]
+        ok = r >= 0
+        fits[r[ok]] = table.loc[tids[inside][ok], list(fitted)].to_numpy()
+        fit_ok[r[ok]] = True
+    flows = behaviour.strategic_flows
+    edges, left, right, lanes = np.zeros(2), np.zeros((4, 1)), np.zeros((4, 1)), np.zeros(4, bool)
+    if flows is not None:
+        from twin.cosim.strategic_targets import _probabilities
+
+        edges = np.asarray(flows["x_edges"], dtype=np.float64)
+        p = _probabilities(flows, edges.size - 1)
+        left, right = np.zeros((4, edges.size - 1)), np.zeros((4, edges.size - 1))
+        for lane, (pl, pr) in p.items():
+            left[-lane - 1], right[-lane - 1] = pl, pr
+            lanes[-lane - 1] = True
+    plan = plan if plan is not None else empty_plan(recording.tid.size)
+    return BehaviourArrays(
+        mode=mode,
+        class_v0=classes.column("desired_speed_mps").astype(float),
+        class_v0_sd=classes.column("desired_speed_sd_mps").astype(float),
+        class_time_headway=classes.column("time_headway_s").astype(float),
+        class_max_accel=classes.column("max_accel_mps2").astype(float),
+        class_hov=classes.column("hov_allowed").astype(np.int64) == 1,
+        class_group=group_of_class,
+        time_headway_sd_log=float(dist.time_headway_sd_log), min_gap=float(dist.min_gap),
+        min_gap_sd=float(dist.min_gap_sd), max_accel_sd_log=float(dist.max_accel_sd_log),
+        decel=float(dist.comfortable_decel), decel_sd=float(dist.comfortable_decel_sd),
+        delta=float(dist.delta), v0_scale=float(dist.desired_speed_scale),
+        time_headway_scale=float(dist.time_headway_scale),
+        max_accel_scale=float(dist.max_accel_scale), hov_share=float(traffic_config.hov_share),
+        decision_interval=float(traffic_config.decision_interval),
+        auto=bool(traffic_config.auto_lane_change and behaviour.auto_lane_change),
+        politeness=float(mobil.politeness if behaviour.politeness is None else behaviour.politeness),
+        threshold=float(mobil.threshold if behaviour.threshold is None else behaviour.threshold),
+        safe_decel=float(mobil.safe_decel), keep_right=float(mobil.keep_right),
+        dist_on=bool(behaviour.distributions), dist_have=have, dist_mean=mean,
+        dist_matrix=matrix, dist_low=low, dist_high=high,
+        dist_columns=np.array([names.index(f) for f in fitted], np.int64),
+        desired_dim=fitted.index("desired_speed"), speed_source=source,
+        lane_speed_mean=lane_mean, lane_speed_sd=lane_sd, fits=fits, fit_ok=fit_ok,
+        flows_on=flows is not None, flow_edges=edges, flow_left=left, flow_right=right,
+        flow_lanes=lanes, plan_start=plan["start"], plan_x=plan["x"], plan_time=plan["time"],
+        plan_from=plan["lane_from"], plan_to=plan["lane_to"],
+        hov_openings=np.array(traffic_config.hov_openings, np.float64).reshape(-1, 2),
+    )  # fmt: skip
+
+
+def empty_plan(trajectories: int) -> dict:
+    """No recorded lane changes for ``trajectories`` trajectories."""
+    return {
+        "start": np.zeros(trajectories + 1, np.int64),
+        "x": np.zeros(0),
+        "time": np.zeros(0),
+        "lane_from": np.zeros(0, np.int64),
+        "lane_to": np.zeros(0, np.int64),
+    }
+

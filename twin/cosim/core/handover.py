@@ -1,0 +1,416 @@
+"""The paper's hand-overs, compiled: the windows around the ego, the visible vehicles
+that leave the visible window (step 5), the recorded vehicles that enter it and are
+spawned where they fit (step 6), and the ghost set reloaded from the recording (step
+7), for one episode of a batch (``docs/cosim.md`` gives the rules).
+
+Every recorded vehicle an episode meets has an entry in its tid table (an
+open-addressing hash by recording index ``r``): simulated now, a ghost after the last
+reload, seen in the windows before, waiting for room to spawn.
+"""
+
+import math
+
+from twin.core.i24 import N_LANES
+from twin.core.jit import kernel
+from twin.cosim.core import drivers as behaviour
+from twin.cosim.core.layout import GHOST, GHOSTS_FULL, SEEN, SIMULATED, SNAPSHOT_FULL, TABLE_FULL, WAITING
+from twin.data.recording import lane_of, window
+from twin.physics.kernels import place
+from twin.traffic.kernels import state as traffic
+from twin.traffic.kernels.lane_change import clear_target
+from twin.traffic.kernels.steering import centre_y
+
+LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
+CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
+MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
+
+
+# -- the tid table ---------------------------------------------------------------------------
+
+
+@kernel(inline=True)
+def entry(keys, flags, slots, b, r, insert):
+    """The table's index of recording index ``r`` in episode ``b`` (inserted where
+    ``insert``), or -1 (absent, or the table is full)."""
+    size = keys.shape[1]
+    h = (r * 2654435761) & (size - 1)
+    for _ in range(size):
+        k = keys[b, h]
+        if k == r:
+            return h
+        if k < 0:
+            if not insert:
+                return -1
+            keys[b, h] = r
+            flags[b, h] = 0
+            slots[b, h] = -1
+            return h
+        h = (h + 1) & (size - 1)
+    return -1
+
+
+@kernel(inline=True)
+def flags_of(keys, flags, slots, b, r):
+    """The flags of ``r`` (0 where absent)."""
+    h = entry(keys, flags, slots, b, r, False)
+    return flags[b, h] if h >= 0 else 0
+
+
+# -- the windows -----------------------------------------------------------------------------
+
+
+@kernel
+def set_windows(b, core, ego_x):
+    """The windows around back x ``ego_x`` [m] (rear ghost start, visible start and end,
+    front ghost end), clipped to the road limits (:class:`twin.cosim.windows.Windows`)."""
+    cs, ep = core.settings, core.episodes
+    lo, hi = cs.limit_lo, cs.limit_hi
+    ep.windows[b, 0] = min(max(ego_x - cs.w_visible - cs.w_ghost, lo), hi)
+    ep.windows[b, 1] = min(max(ego_x - cs.w_visible, lo), hi)
+    ep.windows[b, 2] = min(max(ego_x + cs.w_visible, lo), hi)
+    ep.windows[b, 3] = min(max(ego_x + cs.w_visible + cs.w_ghost, lo), hi)
+
+
+@kernel
+def despawn_outside(b, core):
+    """Step 5: the visible vehicles now outside the visible window (not the ego) are
+    removed; returns how many."""
+    valid, x, ep = core.bodies.valid, core.bodies.x, core.episodes
+    v0, v1, ego = ep.windows[b, 1], ep.windows[b, 2], ep.ego[b]
+    gone = 0
+    for i in range(valid.shape[1]):
+        if valid[b, i] and i != ego and not v0 <= x[b, i] <= v1:
+            remove(b, core, i)
+            gone += 1
+    ep.despawned[b] += gone
+    return gone
+
+
+@kernel
+def remove(b, core, i):
+    """Free slot ``i``: its vehicle is simulated no more."""
+    table, dr = core.table, core.traffic.drivers
+    h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], False)
+    if h >= 0:
+        table.flags[b, h] &= ~SIMULATED
+        table.slot[b, h] = -1
+    core.bodies.valid[b, i] = False
+    core.slots.tgt_on[b, i] = False
+    clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
+
+
+# -- spawning --------------------------------------------------------------------------------
+
+
+@kernel(inline=True)
+def spawn_room(clearance, at_rest, decel, rear_speed, closing):
+    """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
+    ``at_rest`` for a rear vehicle at rest growing to ``clearance`` at CLEARANCE_SPEED,
+    plus the difference of braking distances at ``decel`` (``closing`` = v_rear^2 -
+    v_front^2; :func:`twin.cosim.cosimulator.spawn_room`)."""
+    share = min(max(rear_speed / CLEARANCE_SPEED, 0.0), 1.0)
+    return at_rest + share * (clearance - at_rest) + max(closing, 0.0) / (2.0 * decel)
+
+
+@kernel(inline=True)
+def _clear_of(clearance, at_rest, decel, x, y, speed, length, width, bx, by, bv, blength,
+              bwidth):  # fmt: skip
+    """Whether a spawn at (x, y) is clear of one body (its x, y, speed, size)."""
+    if abs(by - y) >= 0.5 * (bwidth + width) + LATERAL_MARGIN:
+        return True
+    if bx >= x:
+        gap = bx - (x + length)
+        closing, rear = speed * speed - bv * bv, speed
+    else:
+        gap = x - (bx + blength)
+        closing, rear = bv * bv - speed * speed, bv
+    return gap >= spawn_room(clearance, at_rest, decel, rear, closing)
+
+
+@kernel
+def fits(b, core, x, y, speed, length, width):
+    """Whether a recorded vehicle at back x, y [m] can be spawned among the bodies: no
+    body within :func:`spawn_room` ahead or behind among those it overlaps laterally;
+    a body changing lanes holds its new lane too."""
+    bo, dr, cs = core.bodies, core.traffic.drivers, core.settings
+    valid, bx, by, bspeed, blength, bwidth = bo.valid, bo.x, bo.y, bo.speed, bo.length, bo.width
+    lane, lane_from = dr.lane, dr.lane_from
+    c, rest, decel = cs.clearance, cs.clearance_at_rest, cs.spawn_decel
+    for j in range(valid.shape[1]):
+        if not valid[b, j]:
+            continue
+        bv = max(bspeed[b, j], 0.0)
+        if not _clear_of(c, rest, decel, x, y, speed, length, width, bx[b, j], by[b, j], bv,
+                         blength[b, j], bwidth[b, j]):  # fmt: skip
+            return False
+        if lane_from[b, j] != lane[b, j] and not _clear_of(
+            c, rest, decel, x, y, speed, length, width, bx[b, j], centre_y(lane[b, j]), bv,
+            blength[b, j], bwidth[b, j],
+        ):  # fmt: skip
+            return False
+    return True
+
+
+@kernel
+def spawn(b, core, r, x, y, speed, desired_speed, controller):
+    """Spawn recorded trajectory ``r`` into the first free slot at back x, y [m] moving
+    at ``speed`` [m/s], with its driver (``desired_speed`` the ego's), driven by
+    ``controller`` (a ``ctrl`` kind; -1: the driver, or the AV controller where the
+    draw makes it an AV). Returns the slot, or -1 where every slot is taken."""
+    bo, sl, ep, cs, rec = core.bodies, core.slots, core.episodes, core.settings, core.rec
+    dr = core.traffic.drivers
+    i = -1
+    for k in range(bo.valid.shape[1]):
+        if not bo.valid[b, k]:
+            i = k
+            break
+    if i < 0:
+        return -1
+    seed = ep.seed[b]
+    tid = rec.tid[r]
+    bo.valid[b, i] = True
+    bo.id[b, i] = ep.next_id[b]
+    ep.next_id[b] += 1
+    bo.x[b, i], bo.y[b, i], bo.yaw[b, i] = x, y, 0.0
+    bo.speed[b, i], bo.yaw_rate[b, i], bo.drive_power[b, i] = speed, 0.0, 0.0
+    params = core.params
+    for c in range(params.shape[1]):
+        _set_param(b, i, c, bo, params[r, c])
+    place(b, i, bo, cs.profile)
+    sl.r[b, i], sl.tid[b, i] = r, tid
+    sl.just_spawned[b, i] = True
+    sl.spawn_speed[b, i] = speed
+    sl.off_road[b, i] = False
+    sl.av[b, i] = False
+    sl.tgt_on[b, i] = False
+    lane = lane_of(y)
+    behaviour.init_driver(b, i, core, seed, tid, r, rec.vehicle_class[r], lane, ep.step[b] * cs.dt)
+    if controller >= 0:
+        if controller != traffic.DRIVER:
+            dr.ctrl[b, i] = controller
+        if desired_speed > 0.0:
+            sl.base_speed[b, i] = desired_speed
+            dr.cf[b, i, 0] = desired_speed
+    elif behaviour.is_av(seed, tid, cs.av_share):
+        dr.ctrl[b, i] = cs.av_controller
+        sl.av[b, i] = True
+    if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
+        behaviour.first_target(b, i, core, seed, x)
+    table = core.table
+    h = entry(table.key, table.flags, table.slot, b, r, True)
+    if h >= 0:
+        table.flags[b, h] = (table.flags[b, h] | SIMULATED) & ~WAITING
+        table.slot[b, h] = i
+    return i
+
+
+@kernel(inline=True)
+def _set_param(b, i, c, bo, value):
+    """Physical parameter ``c`` (:data:`twin.physics.kernels.PARAMETERS` order) of slot
+    ``i``."""
+    if c == 0:
+        bo.vehicle_class[b, i] = int(value)
+    elif c == 1:
+        bo.length[b, i] = value
+    elif c == 2:
+        bo.width[b, i] = value
+    elif c == 3:
+        bo.height[b, i] = value
+    elif c == 4:
+        bo.mass[b, i] = value
+    elif c == 5:
+        bo.eff_mass[b, i] = value
+    elif c == 6:
+        bo.max_power[b, i] = value
+    elif c == 7:
+        bo.drag_area[b, i] = value
+    elif c == 8:
+        bo.rolling[b, i] = value
+    elif c == 9:
+        bo.mu[b, i] = value
+    elif c == 10:
+        bo.driven_share[b, i] = value
+    elif c == 11:
+        bo.wheelbase[b, i] = value
+    elif c == 12:
+        bo.cg_height[b, i] = value
+    else:
+        bo.wheel_radius[b, i] = value
+
+
+@kernel
+def spawn_recorded(b, core, k, retry):
+    """Step 6 for snapshot row ``k``: spawn it where it fits; a refusal is counted once
+    per vehicle and, where ``retry``, the vehicle waits to be tried again each step.
+    Returns whether it was spawned."""
+    sn, ep, table, rec = core.snap, core.episodes, core.table, core.rec
+    r = sn.r[b, k]
+    x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
+    lane = lane_of(y)
+    if not (-N_LANES <= lane <= -1) or speed > MAX_SPEED:
+        ep.skipped_invalid[b] += 1
+        return False
+    h = entry(table.key, table.flags, table.slot, b, r, True)
+    if h < 0:
+        ep.overflow[b] |= TABLE_FULL
+        return False
+    slot = -1
+    if fits(b, core, x, y, speed, rec.length[r], rec.width[r]):
+        slot = spawn(b, core, r, x, y, speed, 0.0, -1)
+        if slot < 0:
+            ep.skipped_full[b] += 1
+    if slot >= 0:
+        return True
+    if not table.flags[b, h] & WAITING:
+        ep.skipped_overlap[b] += 1
+    if retry:
+        table.flags[b, h] |= WAITING
+    return False
+
+
+# -- the recording around the ego ------------------------------------------------------------
+
+
+@kernel
+def snapshot(b, core, t):
+    """The recorded vehicles in the windows' span at unix ``t`` [s], sorted by x."""
+    sn, ep = core.snap, core.episodes
+    count = window(core.rec, t, ep.windows[b, 0], ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
+                   sn.speed[b])  # fmt: skip
+    if count < 0:
+        ep.overflow[b] |= SNAPSHOT_FULL
+        count = sn.r.shape[1]
+    sn.count[b] = count
+
+
+@kernel(inline=True)
+def _bound(values, count, x, right):
+    """The first index of sorted ``values[:count]`` above ``x`` (at or above where not
+    ``right``)."""
+    lo, hi = 0, count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] < x or (right and values[mid] == x):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel
+def enter_and_reload(b, core, initial):
+    """Steps 6 and 7 on the episode's snapshot: the ghosts now inside the visible window,
+    the tracks first seen inside it and the vehicles waiting for room are spawned
+    (``initial``: the visible set at the reset, the ego's own track left out), then the
+    ghost set is reloaded. Returns how many were spawned."""
+    sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
+    keys, flags, tslot = core.table.key, core.table.flags, core.table.slot
+    sr, sx, sy, sspeed = sn.r, sn.x, sn.y, sn.speed
+    n = sn.count[b]
+    a = _bound(sx[b], n, ep.windows[b, 0], False)
+    v0 = _bound(sx[b], n, ep.windows[b, 1], False)
+    v1 = _bound(sx[b], n, ep.windows[b, 2], True)
+    d = _bound(sx[b], n, ep.windows[b, 3], True)
+    spawned = 0
+    for k in range(v0, v1):
+        r = sr[b, k]
+        if initial:
+            if r == ep.ego_r[b]:
+                continue
+            enter, retry = True, True
+        else:
+            f = flags_of(keys, flags, tslot, b, r)
+            simulated = f & SIMULATED != 0
+            first_seen = f & (SEEN | SIMULATED) == 0
+            enter = f & GHOST != 0 or first_seen or (f & WAITING != 0 and not simulated)
+            # a track beginning inside the window that finds a body in its way is not
+            # tried again: in real data it is most often the next fragment of that vehicle
+            retry = not first_seen
+        if enter and spawn_recorded(b, core, k, retry):
+            spawned += 1
+    overflow = False
+    for k in range(n):
+        h = entry(keys, flags, tslot, b, sr[b, k], True)
+        if h >= 0:
+            flags[b, h] |= SEEN
+        else:
+            overflow = True
+    # 7. the ghost set: the recorded vehicles of the ghost windows not simulated
+    gr, glane, gx, gy, gspeed, glength = gh.r, gh.lane, gh.x, gh.y, gh.speed, gh.length
+    for g in range(gh.count[b]):
+        h = entry(keys, flags, tslot, b, gr[b, g], False)
+        if h >= 0:
+            flags[b, h] &= ~GHOST
+    count = 0
+    capacity = gr.shape[1]
+    for k in range(a, d):
+        if v0 <= k < v1:
+            continue
+        r = sr[b, k]
+        lane = lane_of(sy[b, k])
+        if lane == 0 or flags_of(keys, flags, tslot, b, r) & SIMULATED:
+            continue
+        if count == capacity:
+            ep.overflow[b] |= GHOSTS_FULL
+            break
+        gr[b, count], glane[b, count] = r, lane
+        gx[b, count], gy[b, count] = sx[b, k], sy[b, k]
+        gspeed[b, count], glength[b, count] = sspeed[b, k], rec.length[r]
+        h = entry(keys, flags, tslot, b, r, True)
+        if h >= 0:
+            flags[b, h] |= GHOST
+        count += 1
+    gh.count[b] = count
+    if overflow:
+        ep.overflow[b] |= TABLE_FULL
+    return spawned
+
+
+@kernel
+def lead_speeds(b, core):
+    """Step 3: every vehicle wants its own desired speed, but the lead visible vehicle
+    of each lane ahead of the ego, which takes the speed of the ghost ahead of it (its
+    own if none; the larger of the two where the lead chases its ghost), through the
+    optional first-order lag (the paper's rule; ``docs/cosim.md``)."""
+    bo, sl, ep, gh, cs = core.bodies, core.slots, core.episodes, core.ghosts, core.settings
+    dr = core.traffic.drivers
+    valid, x, ids, lanes = bo.valid, bo.x, bo.id, dr.lane
+    params, base = dr.cf, sl.base_speed
+    glane, gx, gspeed = gh.lane, gh.x, gh.speed
+    n = valid.shape[1]
+    ego = ep.ego[b]
+    ego_x = x[b, ego]
+    leads = ep.leads
+    for k in range(N_LANES):
+        leads[b, k] = -1
+    for i in range(n):
+        if not valid[b, i]:
+            continue
+        params[b, i, 0] = base[b, i]
+        if i == ego or x[b, i] <= ego_x:
+            continue
+        k = -lanes[b, i] - 1
+        lead = leads[b, k]
+        if lead < 0 or x[b, i] > x[b, lead] or (x[b, i] == x[b, lead] and ids[b, i] < ids[b, lead]):
+            leads[b, k] = i
+    for k in range(N_LANES):
+        lead = leads[b, k]
+        if lead < 0:
+            ep.lead_speed[b, k] = math.nan
+            continue
+        lane = -k - 1
+        target = base[b, lead]
+        best = -1
+        for g in range(gh.count[b]):
+            if glane[b, g] == lane and gx[b, g] > x[b, lead]:
+                if best < 0 or gx[b, g] < gx[b, best]:
+                    best = g
+        if best >= 0:
+            target = gspeed[b, best]
+        if cs.lead_chases_ghost:
+            target = max(target, base[b, lead])
+        previous = ep.lead_speed[b, k]
+        if cs.ghost_smoothing > 0.0 and math.isfinite(previous):
+            target = previous + min(1.0, cs.dt / cs.ghost_smoothing) * (target - previous)
+        ep.lead_speed[b, k] = target
+        params[b, lead, 0] = target

@@ -1,0 +1,301 @@
+"""The cosimulation step of a batch of episodes as a chain of compiled kernels (the
+paper's loop, ``docs/cosim.md``), one pure pass per episode::
+
+    lead_speeds      3. desired speeds: lane leads ahead of the ego take their ghost's
+    update_targets      strategic targets (on the decision grid)
+    decide              the traffic manager: car following, lane changes, controllers
+    integrate        4. the kinematic world moves the bodies (or pybullet, outside)
+    after_world         contacts, the spawns' speed check, the ego's range
+    despawn_outside  5. visible vehicles leaving the visible window are removed
+    snapshot         6. the recording in the windows now; entering vehicles spawned
+    enter_and_reload 7. and the ghost set reloaded
+    record              the log row, the AV's fuel
+
+Every kernel takes the packed core (:data:`twin.cosim.core.layout.Core`). Episodes
+never read each other's slots, and every draw is keyed by the episode's seed and the
+vehicle's record, so an episode's rows are the same alone or at any place in a batch
+of any size.
+
+:data:`CoreSettings` holds what every episode of a batch shares (the windows, the
+spawn clearances, the road, the controllers).
+"""
+
+import math
+from collections import namedtuple
+
+from twin.core.jit import kernel
+from twin.cosim.core.drivers import update_targets
+from twin.cosim.core.handover import (
+    despawn_outside,
+    enter_and_reload,
+    lead_speeds,
+    set_windows,
+    snapshot,
+    spawn,
+)
+from twin.cosim.core.layout import COLLISIONS_KEPT, EGO_LEFT, FOLLOWERS, PAIRS_FULL
+from twin.physics.kernels import fuel_rate, integrate, overlaps
+from twin.physics.vehicle import HOLD_SPEED
+from twin.traffic.kernels.decide import decide
+
+CoreSettings = namedtuple(
+    "CoreSettings",
+    "dt limit_lo limit_hi w_visible w_ghost vel_default ghost_smoothing clearance "
+    "clearance_at_rest spawn_decel av_share av_controller ego_controller lead_chases_ghost "
+    "targets kinematic profile fuel",
+)
+
+
+@kernel
+def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
+    """Steps 1 and 2 for episode ``b``: the ego (recorded trajectory ``ego_r`` at back
+    x, y [m] and speed [m/s] at unix ``t0``) and the recorded vehicles of the visible
+    window spawned at their recorded speeds, the ghosts loaded, the first log row."""
+    bo, sl, ep, cs = core.bodies, core.slots, core.episodes, core.settings
+    t = core.traffic
+    valid, order, listed, ctrl = bo.valid, sl.order, sl.listed, t.drivers.ctrl
+    for i in range(valid.shape[1]):
+        valid[b, i] = False
+        order[b, i] = -1
+        listed[b, i] = False
+        ctrl[b, i] = 0
+    keys = core.table.key
+    for h in range(keys.shape[1]):
+        keys[b, h] = -1
+    t.scratch.order_count[b] = 0
+    core.ghosts.count[b] = 0
+    ep.seed[b], ep.t0[b], ep.step[b], ep.steps[b] = seed, t0, 0, steps
+    ep.ended[b], ep.ended_x[b], ep.next_id[b], ep.ego_r[b] = 0, 0.0, 0, ego_r
+    ep.spawned[b], ep.spawned_initially[b], ep.despawned[b] = 0, 0, 0
+    ep.skipped_overlap[b], ep.skipped_invalid[b], ep.skipped_full[b] = 0, 0, 0
+    ep.collisions[b], ep.off_road[b], ep.spawn_error_count[b] = 0, 0, 0
+    ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
+    for k in range(4):
+        ep.lead_speed[b, k] = math.nan
+    c = t.counters
+    c.lane_changes[b], c.emergency_steps[b] = 0, 0
+    c.safety_overrides[b], c.refused_requests[b] = 0, 0
+    ego = spawn(b, core, ego_r, ego_x, ego_y, ego_speed, cs.vel_default, cs.ego_controller)
+    ep.ego[b] = ego
+    ep.ego_id[b] = bo.id[b, ego]
+    set_windows(b, core, ego_x)
+    snapshot(b, core, t0)
+    ep.spawned_initially[b] = enter_and_reload(b, core, True)
+    _followers(b, core)
+    record(b, core, 0)
+    ep.done[b] = steps <= 0
+
+
+@kernel
+def _followers(b, core):
+    """The AV's FOLLOWERS nearest followers in its lane at the start, nearest first
+    (their fuel counts with its own)."""
+    bo, ep = core.bodies, core.episodes
+    valid, lane, x, ids, followers = bo.valid, bo.lane, bo.x, bo.id, ep.followers
+    ego = ep.ego[b]
+    count = 0
+    for _ in range(FOLLOWERS):
+        best = -1
+        for i in range(valid.shape[1]):
+            if not valid[b, i] or i == ego or lane[b, i] != lane[b, ego] or x[b, i] >= x[b, ego]:
+                continue
+            taken = False
+            for k in range(count):
+                if followers[b, k] == ids[b, i]:
+                    taken = True
+            if not taken and (best < 0 or x[b, i] > x[b, best]):
+                best = i
+        if best < 0:
+            break
+        followers[b, count] = ids[b, best]
+        count += 1
+    ep.follower_count[b] = count
+
+
+@kernel
+def before_world(b, core):
+    """Step 3 (desired speeds, strategic targets) and the traffic manager's decisions
+    of episode ``b``: each body's commanded acceleration (``drivers.accel``) and front
+    wheels' angle (the traffic scratch's ``steer``)."""
+    ep, cs = core.episodes, core.settings
+    step = ep.step[b]
+    lead_speeds(b, core)
+    if cs.targets and step % core.traffic.settings.decision_steps == 0:
+        update_targets(b, core)
+    decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
+    speed, before = core.bodies.speed, ep.speed_prev
+    for i in range(speed.shape[1]):
+        before[b, i] = speed[b, i]
+
+
+@kernel
+def after_world(b, core):
+    """After the world's step of episode ``b``: the clock, the contacts (the kinematic
+    world's footprints, else the pairs the world gave), the spawns' speed check, the
+    vehicles off the road, the ego's range, then steps 5 to 7 and the log row."""
+    bo, sl, ep, cs = core.bodies, core.slots, core.episodes, core.settings
+    ep.step[b] += 1
+    step = ep.step[b]
+    _checks(b, bo.valid, bo.speed, bo.lane, sl.just_spawned, sl.spawn_speed, sl.off_road,
+            core.traffic.drivers.accel, ep.spawn_errors, ep.spawn_error_count, ep.off_road,
+            cs.dt)  # fmt: skip
+    if cs.kinematic:
+        count = overlaps(b, bo, sl.order, sl.listed, core.pairs)
+        if count < 0:
+            ep.overflow[b] |= PAIRS_FULL
+            count = core.pairs.shape[1]
+        ep.pair_count[b] = count
+    _contacts(b, core, step * cs.dt)
+    ego_x = bo.x[b, ep.ego[b]]
+    if not cs.limit_lo <= ego_x <= cs.limit_hi and ep.ended[b] == 0:
+        ep.ended[b] = EGO_LEFT
+        ep.ended_x[b] = ego_x
+    set_windows(b, core, ego_x)
+    despawn_outside(b, core)
+    snapshot(b, core, ep.t0[b] + step * cs.dt)
+    ep.spawned[b] += enter_and_reload(b, core, False)
+    ep.fuel[b] = _fuel(b, core)
+    record(b, core, step)
+    ep.done[b] = step >= ep.steps[b] or ep.ended[b] != 0
+
+
+@kernel
+def _checks(b, valid, speed, lane, just_spawned, spawn_speed, off_road, accel, errors,
+            error_count, off_count, dt):  # fmt: skip
+    """The speed error of the vehicles spawned before the step, one step after their
+    impulse (|v - max(v_spawn + a_commanded dt, 0)| / max(v_spawn, 1 m/s); a braking
+    vehicle slower than HOLD_SPEED may also be held at rest, as the physics world's
+    static friction holds it); the vehicles off the four lanes, each counted once."""
+    for i in range(valid.shape[1]):
+        if not valid[b, i]:
+            continue
+        if just_spawned[b, i]:
+            v0 = spawn_speed[b, i]
+            expected = max(v0 + accel[b, i] * dt, 0.0)  # brakes hold at 0
+            error = abs(speed[b, i] - expected)
+            if accel[b, i] <= 0.0 and expected < HOLD_SPEED:  # or static friction holds it
+                error = min(error, abs(speed[b, i]))
+            k = error_count[b]
+            if k < errors.shape[1]:
+                errors[b, k] = error / max(v0, 1.0)
+            error_count[b] = k + 1
+            just_spawned[b, i] = False
+        if lane[b, i] == 0 and not off_road[b, i]:
+            off_road[b, i] = True
+            off_count[b] += 1
+
+
+@kernel
+def _contacts(b, core, time):
+    """New contacts among the pairs now touching (``core.pairs``, slots) are
+    collisions, (time [s], id, id) with the smaller id first, in id order."""
+    ep, ids, pairs = core.episodes, core.bodies.id, core.pairs
+    touching, log = ep.touching, ep.collision_log
+    count = ep.pair_count[b]
+    for k in range(count):  # as ids, smaller first
+        a, c = ids[b, pairs[b, k, 0]], ids[b, pairs[b, k, 1]]
+        pairs[b, k, 0], pairs[b, k, 1] = min(a, c), max(a, c)
+    for k in range(1, count):  # in id order
+        a, c = pairs[b, k, 0], pairs[b, k, 1]
+        j = k - 1
+        while j >= 0 and (pairs[b, j, 0] > a or (pairs[b, j, 0] == a and pairs[b, j, 1] > c)):
+            pairs[b, j + 1, 0] = pairs[b, j, 0]
+            pairs[b, j + 1, 1] = pairs[b, j, 1]
+            j -= 1
+        pairs[b, j + 1, 0], pairs[b, j + 1, 1] = a, c
+    for k in range(count):
+        a, c = pairs[b, k, 0], pairs[b, k, 1]
+        old = False
+        for j in range(ep.touching_count[b]):
+            if touching[b, j, 0] == a and touching[b, j, 1] == c:
+                old = True
+                break
+        if not old:
+            m = ep.collisions[b]
+            if m < COLLISIONS_KEPT:
+                log[b, m, 0], log[b, m, 1], log[b, m, 2] = time, a, c
+            ep.collisions[b] = m + 1
+    keep = min(count, touching.shape[1])
+    for k in range(keep):
+        touching[b, k, 0], touching[b, k, 1] = pairs[b, k, 0], pairs[b, k, 1]
+    ep.touching_count[b] = keep
+
+
+@kernel
+def _fuel(b, core):
+    """[g] the fuel of the AV and its followers over the step (the RAV4 model at each
+    one's speed, measured acceleration and grade; a vehicle new in the step has no
+    acceleration yet)."""
+    bo, ep, cs = core.bodies, core.episodes, core.settings
+    valid, ids, speeds, grade = bo.valid, bo.id, bo.speed, bo.grade
+    just_spawned, before, followers = core.slots.just_spawned, ep.speed_prev, ep.followers
+    coefficients, dt = cs.fuel, cs.dt
+    total = 0.0
+    for i in range(valid.shape[1]):
+        if not valid[b, i]:
+            continue
+        mine = i == ep.ego[b]
+        for k in range(ep.follower_count[b]):
+            if followers[b, k] == ids[b, i]:
+                mine = True
+        if not mine:
+            continue
+        speed = max(speeds[b, i], 0.0)
+        accel = 0.0 if just_spawned[b, i] else (speeds[b, i] - before[b, i]) / dt
+        total += fuel_rate(coefficients, speed, accel, grade[b, i])
+    return total * dt
+
+
+@kernel
+def record(b, core, step):
+    """The log row of step ``step`` (when the batch keeps a log)."""
+    log = core.log
+    if not log.on:
+        return
+    bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
+    valid, ids, lane, x, y, z = bo.valid, bo.id, bo.lane, bo.x, bo.y, bo.z
+    speed, yaw, power, r, new, accel = bo.speed, bo.yaw, bo.drive_power, sl.r, sl.just_spawned, dr.accel
+    lid, lr, llane, lx, ly, lz = log.id, log.r, log.lane, log.x, log.y, log.z
+    lspeed, laccel, lyaw, lpower = log.speed, log.accel_cmd, log.yaw, log.drive_power
+    for i in range(valid.shape[1]):
+        if not valid[b, i]:
+            lid[b, step, i] = -1
+            continue
+        lid[b, step, i] = ids[b, i]
+        lr[b, step, i] = r[b, i]
+        llane[b, step, i] = lane[b, i]
+        lx[b, step, i] = x[b, i]
+        ly[b, step, i] = y[b, i]
+        lz[b, step, i] = z[b, i]
+        lspeed[b, step, i] = speed[b, i]
+        laccel[b, step, i] = 0.0 if new[b, i] else accel[b, i]
+        lyaw[b, step, i] = yaw[b, i]
+        lpower[b, step, i] = power[b, i]
+    windows = core.episodes.windows
+    for k in range(4):
+        log.windows[b, step, k] = windows[b, k]
+    if step % log.ghost_every == 0:
+        row = step // log.ghost_every
+        gh = core.ghosts
+        gr, glane, gx, gy, gspeed = gh.r, gh.lane, gh.x, gh.y, gh.speed
+        log.ghost_count[b, row] = gh.count[b]
+        for g in range(gh.count[b]):
+            log.ghost_r[b, row, g] = gr[b, g]
+            log.ghost_lane[b, row, g] = glane[b, g]
+            log.ghost_x[b, row, g] = gx[b, g]
+            log.ghost_y[b, row, g] = gy[b, g]
+            log.ghost_speed[b, row, g] = gspeed[b, g]
+
+
+@kernel
+def step_batch(core):
+    """One step of every running episode of the batch (the kinematic world)."""
+    done = core.episodes.done
+    bodies, accel, steer = core.bodies, core.traffic.drivers.accel, core.traffic.scratch.steer
+    profile, dt = core.settings.profile, core.settings.dt
+    for b in range(done.size):
+        if done[b]:
+            continue
+        before_world(b, core)
+        integrate(b, bodies, accel, steer, profile, dt)
+        after_world(b, core)

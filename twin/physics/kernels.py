@@ -1,0 +1,317 @@
+"""The kinematic world's motion, the footprint collisions and the fuel model as compiled
+kernels over struct-of-arrays with a leading episode axis (the batched core's
+physics; :mod:`twin.physics.kinematic` is the same model behind the
+:class:`~twin.physics.worlds.World` interface, and its doc gives the model).
+
+* :data:`Bodies` (B, N): each slot's pose and motion in the road frame (``x`` the back
+  centre, ``y``, ``yaw`` against travel, ``speed``, ``yaw_rate``), what the map puts
+  under it (``z`` of the centre of mass, the ``grade`` [-] along travel), its lane, the power its
+  drive delivered over the last step, and its physical parameters (from
+  :class:`~twin.physics.vehicle.VehicleParams`, :func:`body_columns`).
+* :data:`Profile`: the road's elevation profile along the segment and its frame.
+
+:func:`integrate` steps one episode's bodies by dt under their commanded
+accelerations and steering angles; :func:`place` sets ``z``, ``grade`` and ``lane``
+from the pose; :func:`overlaps` finds the footprints that overlap.
+"""
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from twin.core.i24 import LANE_WIDTH, N_LANES, SEGMENT_LENGTH
+from twin.core.jit import kernel
+from twin.physics.energy import RAV4_2019, FuelModel
+from twin.physics.vehicle import (
+    AIR_DENSITY,
+    GRAVITY,
+    POWER_SPEED_MIN,
+    ROLLING_SPEED,
+    VehicleParams,
+)
+
+#: Parameter columns of a body, in :data:`Bodies` after the state's fields.
+PARAMETERS = (
+    "vehicle_class", "length", "width", "height", "mass", "eff_mass", "max_power",
+    "drag_area", "rolling", "mu", "driven_share", "wheelbase", "cg_height", "wheel_radius",
+)  # fmt: skip
+STATE = ("valid", "id", "x", "y", "yaw", "speed", "yaw_rate", "z", "grade", "lane", "drive_power")
+Bodies = namedtuple("Bodies", STATE + PARAMETERS)
+Profile = namedtuple("Profile", "road stations heights slopes spacing")
+
+
+def bodies(b: int, n: int) -> Bodies:
+    """Empty bodies of ``b`` episodes with ``n`` slots."""
+    ints = ("id", "lane", "vehicle_class")
+    return Bodies(
+        **{
+            name: np.zeros((b, n), bool if name == "valid" else (np.int64 if name in ints else float))
+            for name in Bodies._fields
+        }
+    )
+
+
+def body_columns(params: VehicleParams) -> dict[str, np.ndarray]:
+    """(n,) each of :data:`PARAMETERS` of vehicles with ``params``."""
+    return {
+        "vehicle_class": np.asarray(params.vehicle_class, np.int64),
+        "length": params.length,
+        "width": params.width,
+        "height": params.height,
+        "mass": params.mass,
+        "eff_mass": params.effective_mass,
+        "max_power": params.max_power,
+        "drag_area": params.drag_area,
+        "rolling": params.rolling,
+        "mu": params.mu,
+        "driven_share": params.driven.sum(axis=1) / 4.0,
+        "wheelbase": params.mounts[:, 0, 0] - params.mounts[:, 2, 0],
+        "cg_height": params.cg_height,
+        "wheel_radius": params.wheel_radius,
+    }
+
+
+def profile(road_model, road: int) -> Profile:
+    """The elevation profile of the map's ``road_model`` for carriageway ``road`` (+1/-1)."""
+    stations = np.asarray(road_model.profile_s, dtype=np.float64)
+    heights = np.asarray(road_model.profile_z, dtype=np.float64)
+    steps = np.diff(stations)
+    spacing = float(steps[0]) if np.allclose(steps, steps[0], rtol=0, atol=1e-9) else 0.0
+    return Profile(road=int(road), stations=stations, heights=heights, slopes=np.diff(heights) / steps,
+                   spacing=spacing)  # fmt: skip
+
+
+def fuel_coefficients(model: FuelModel = RAV4_2019) -> np.ndarray:
+    """(17,) a fuel model's coefficients in the order :func:`fuel_rate` reads them."""
+    names = ("c0", "c1", "c2", "c3", "p0", "p1", "p2", "q0", "q1", "z0", "z1", "beta0",
+             "idle_speed", "b1", "b2", "b3", "mass")  # fmt: skip
+    return np.array([getattr(model, name) for name in names], dtype=np.float64)
+
+
+@kernel(inline=True)
+def fuel_rate(c, v, a, g):
+    """[g/s] the polynomial fuel model ``c`` (:func:`fuel_coefficients`) at speed ``v``
+    [m/s] >= 0, acceleration ``a`` [m/s^2] and grade ``g`` [-]
+    (:meth:`twin.physics.energy.FuelModel.rate`)."""
+    push = max(a, 0.0) ** 2
+    f = (
+        c[0] + c[1] * v + c[2] * v**2 + c[3] * v**3 + c[4] * a + c[5] * a * v
+        + c[6] * a * v**2 + c[7] * push + c[8] * push * v + c[9] * g + c[10] * g * v
+    )  # fmt: skip
+    return max(f, c[11] if v <= c[12] else 0.0)
+
+
+@kernel(inline=True)
+def lane_of(y):
+    """The lane (-1..-4) of road-frame ``y`` [m], 0 outside the four lanes."""
+    band = y / LANE_WIDTH + 1e-9
+    if not band >= 1.0 or band >= N_LANES + 1.0:
+        return 0
+    return -int(band)
+
+
+@kernel(inline=True)
+def _count_below(stations, spacing, s, inclusive):
+    """How many ``stations`` are below ``s`` (or at it, where ``inclusive``); found
+    directly where they are evenly ``spacing`` apart, else by bisection."""
+    n = stations.size
+    if spacing > 0.0:
+        k = min(max(int(math.floor((s - stations[0]) / spacing)) + 1, 0), n)
+        while k < n and (stations[k] < s or (inclusive and stations[k] == s)):
+            k += 1
+        while k > 0 and not (stations[k - 1] < s or (inclusive and stations[k - 1] == s)):
+            k -= 1
+        return k
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if stations[mid] < s or (inclusive and stations[mid] == s):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel(inline=True)
+def ground(road, stations, heights, slopes, spacing, centre_x):
+    """(height [m], grade [-] along travel) of the pavement of ``road`` (+1, -1) under
+    road-frame ``centre_x``, from the profile (``stations``, ``heights``, ``slopes``,
+    even ``spacing`` or 0; :meth:`mapgen.road.RoadModel.to_world`: it extends flat
+    beyond its ends)."""
+    last = stations.size - 1
+    s = centre_x if road > 0 else SEGMENT_LENGTH - centre_x
+    if s <= stations[0]:
+        height = heights[0]
+    elif s >= stations[last]:
+        height = heights[last]
+    else:
+        j = min(_count_below(stations, spacing, s, True) - 1, last - 1)
+        w = (s - stations[j]) / (stations[j + 1] - stations[j])
+        height = heights[j] + w * (heights[j + 1] - heights[j])
+    if not stations[0] <= s <= stations[last]:
+        return height, 0.0
+    # eastbound drives onto the piece after a profile point, westbound the one before
+    piece = min(max(_count_below(stations, spacing, s, road > 0) - 1, 0), last - 1)
+    slope = slopes[piece]
+    return height, slope if road > 0 else -slope
+
+
+@kernel
+def place(b, i, bodies, prof):
+    """Slot ``i``'s ``z``, ``grade`` and ``lane`` from its pose."""
+    _place(b, i, bodies.x, bodies.y, bodies.length, bodies.cg_height, bodies.z, bodies.grade,
+           bodies.lane, prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing)  # fmt: skip
+
+
+@kernel(inline=True)
+def _place(b, i, x, y, length, cg_height, z, grade, lane, road, stations, heights, slopes,
+           spacing):  # fmt: skip
+    height, g = ground(road, stations, heights, slopes, spacing, x[b, i] + 0.5 * length[b, i])
+    grade[b, i] = g
+    z[b, i] = height + cg_height[b, i] / math.sqrt(1.0 + g * g)  # cos(pitch) of the grade
+    lane[b, i] = lane_of(y[b, i])
+
+
+@kernel
+def integrate(b, bodies, accel, steer, prof, dt):
+    """Step episode ``b``'s bodies by ``dt`` [s] under the commanded accelerations
+    ``accel`` and front-wheel angles ``steer`` (B, N): the point mass along its lane
+    within the power, the driven wheels' grip and the brakes' grip, never rolling back;
+    the kinematic bicycle across (the kinematic world's model, module doc)."""
+    valid, x, y, yaw, speed = bodies.valid, bodies.x, bodies.y, bodies.yaw, bodies.speed
+    yaw_rate, grade, drive_power = bodies.yaw_rate, bodies.grade, bodies.drive_power
+    mass, eff_mass, drag_area = bodies.mass, bodies.eff_mass, bodies.drag_area
+    rolling, mu, driven = bodies.rolling, bodies.mu, bodies.driven_share
+    max_power, wheelbase, length = bodies.max_power, bodies.wheelbase, bodies.length
+    cg_height, z, lane = bodies.cg_height, bodies.z, bodies.lane
+    road, stations, heights, slopes, spacing = (
+        prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing
+    )
+    for i in range(valid.shape[1]):
+        if not valid[b, i]:
+            continue
+        v0 = speed[b, i]
+        g = grade[b, i]
+        cos_p = 1.0 / math.sqrt(1.0 + g * g)
+        sin_p = g * cos_p
+        m = mass[b, i]
+        resist = (
+            0.5 * AIR_DENSITY * drag_area[b, i] * v0 * abs(v0)
+            + rolling[b, i] * m * GRAVITY * cos_p * math.tanh(v0 / ROLLING_SPEED)
+            + m * GRAVITY * sin_p
+        )  # fmt: skip
+        command = accel[b, i]
+        wanted = eff_mass[b, i] * command + resist
+        power_limit = max_power[b, i] / max(v0, POWER_SPEED_MIN)
+        grip = mu[b, i] * m * GRAVITY * cos_p  # all four wheels: the brakes' limit
+        drive = min(min(max(wanted, 0.0), power_limit), grip * driven[b, i])
+        brake = min(max(-wanted, 0.0), grip)
+        a = (drive - brake - resist) / eff_mass[b, i]
+        if v0 <= 0.0 and command <= 0.0:  # held at rest
+            a = 0.0
+        drive_power[b, i] = drive * v0
+        v1 = max(v0 + a * dt, 0.0)
+        # a vehicle that stops inside the step travels to its stop and stays
+        moving = dt if v1 > 0.0 else min(dt, v0 / max(-a, 1e-9))
+        distance = max(v0 * moving + 0.5 * a * moving * moving, 0.0)
+        # the bicycle about the centre of mass, midway between the axles
+        turn, slip = 0.0, 0.0
+        if steer[b, i] != 0.0:
+            tan = math.tan(steer[b, i])
+            slip = math.atan(0.5 * tan)
+            turn = distance * math.cos(slip) * tan / wheelbase[b, i]
+        middle = yaw[b, i] + 0.5 * turn + slip
+        x[b, i] += distance * math.cos(middle)
+        y[b, i] -= distance * math.sin(middle)  # y grows to the right of travel
+        yaw[b, i] += turn
+        yaw_rate[b, i] = turn / dt
+        speed[b, i] = v1
+        _place(b, i, x, y, length, cg_height, z, grade, lane, road, stations, heights, slopes,
+               spacing)  # fmt: skip
+
+
+@kernel
+def overlaps(b, bodies, order, listed, pairs):
+    """The pairs of episode ``b``'s slots whose footprints overlap now (rectangles of
+    the bodies' length and width about their centres, turned by their yaw; the
+    separating-axis test on candidates close along the road). ``order`` (B, N) keeps
+    the slots sorted by centre x from step to step (-1 past the last), ``listed``
+    (B, N) bool which are in it; writes up to ``pairs.shape[1]`` (slot, slot) rows
+    into ``pairs[b]`` and returns how many (-1: more than that)."""
+    valid, x, y, yaw = bodies.valid, bodies.x, bodies.y, bodies.yaw
+    length, width = bodies.length, bodies.width
+    n = valid.shape[1]
+    m = 0
+    for k in range(n):  # last step's order, of the slots still valid
+        o = order[b, k]
+        if o < 0:
+            break
+        if valid[b, o]:
+            order[b, m] = o
+            m += 1
+        else:
+            listed[b, o] = False
+    for i in range(n):  # and the new ones
+        if valid[b, i] and not listed[b, i]:
+            order[b, m] = i
+            listed[b, i] = True
+            m += 1
+    if m < n:
+        order[b, m] = -1
+    for k in range(1, m):  # insertion sort by centre x
+        o = order[b, k]
+        key = x[b, o] + 0.5 * length[b, o]
+        j = k - 1
+        while j >= 0 and x[b, order[b, j]] + 0.5 * length[b, order[b, j]] > key:
+            order[b, j + 1] = order[b, j]
+            j -= 1
+        order[b, j + 1] = o
+    reach = 0.0
+    for k in range(m):
+        o = order[b, k]
+        reach = max(reach, 0.5 * (length[b, o] + width[b, o]))
+    count = 0
+    for k in range(m):
+        i = order[b, k]
+        xi = x[b, i] + 0.5 * length[b, i]
+        for q in range(k + 1, m):
+            j = order[b, q]
+            xj = x[b, j] + 0.5 * length[b, j]
+            if xj - xi > 2.0 * reach:
+                break
+            # the bounding boxes first (a footprint reaches at most its half diagonal)
+            reach_ij = 0.5 * (length[b, i] + width[b, i] + length[b, j] + width[b, j])
+            if abs(y[b, j] - y[b, i]) > reach_ij or xj - xi > reach_ij:
+                continue
+            if _overlap(xi, y[b, i], yaw[b, i], 0.5 * length[b, i], 0.5 * width[b, i],
+                        xj, y[b, j], yaw[b, j], 0.5 * length[b, j], 0.5 * width[b, j]):  # fmt: skip
+                if count == pairs.shape[1]:
+                    return -1
+                pairs[b, count, 0], pairs[b, count, 1] = min(i, j), max(i, j)
+                count += 1
+    return count
+
+
+@kernel(inline=True)
+def _overlap(xi, yi, yaw_i, hl_i, hw_i, xj, yj, yaw_j, hl_j, hw_j):
+    """Whether two footprints (centres, yaws, half lengths and widths) overlap, by the
+    separating axes of both."""
+    ci, si = math.cos(yaw_i), math.sin(yaw_i)
+    cj, sj = math.cos(yaw_j), math.sin(yaw_j)
+    dx, dy = xj - xi, yj - yi
+    for k in range(4):
+        # each footprint's axes in the road frame (x along travel, y to the right)
+        if k == 0:
+            ax, ay = ci, -si
+        elif k == 1:
+            ax, ay = si, ci
+        elif k == 2:
+            ax, ay = cj, -sj
+        else:
+            ax, ay = sj, cj
+        reach_i = hl_i * abs(ci * ax - si * ay) + hw_i * abs(si * ax + ci * ay)
+        reach_j = hl_j * abs(cj * ax - sj * ay) + hw_j * abs(sj * ax + cj * ay)
+        if abs(dx * ax + dy * ay) > reach_i + reach_j:
+            return False
+    return True

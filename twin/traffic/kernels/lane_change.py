@@ -1,0 +1,218 @@
+"""Lane-change decisions, compiled: MOBIL for the drivers due to decide, the changes
+asked for, the strategic targets and the HOV rule (the kernel of
+:mod:`twin.traffic.lane_change`, whose doc gives the rules; MOBIL is Kesting, Treiber
+and Helbing 2007).
+
+The drivers deciding in a round are judged against the scene as it was when the round
+began (the entries are not re-sorted between them), so the order they are taken in
+changes nothing. Their random draws (the next decision time, a manoeuvre's duration)
+come from counters: the run's seed, the driver's key and its count of such draws.
+"""
+
+import math
+
+from twin.core.i24 import HOV_LANE, N_LANES
+from twin.core.jit import kernel, uniform
+from twin.traffic.kernels.longitudinal import MIN_SPEED_PATH, cf, urgency
+from twin.traffic.kernels.neighbours import around
+
+LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
+MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
+URGENT_PATH = 15.0  # [m] the shortest path of an urgent (strategic) change
+GIVE_UP = 150.0  # [m] past strategic_by a strategic change is no longer tried
+DECISION_STREAM = 0x44  # the random streams of the next decision and the manoeuvre time
+DURATION_STREAM = 0x4D
+FIRST_DECISION_STREAM = 0x46
+
+
+@kernel(inline=True)
+def path_length(speed, duration, urgent):
+    """[m] a lane-change path at ``speed`` [m/s] lasting ``duration`` [s]: made for at
+    least MIN_SPEED_PATH, or, urgent, at least URGENT_PATH long."""
+    if urgent:
+        return max(speed * duration, URGENT_PATH)
+    return max(speed, MIN_SPEED_PATH) * duration
+
+
+@kernel(inline=True)
+def hov_allows(eligible, lane, target, x, openings):
+    """Whether a move from ``lane`` to ``target`` at back x [m] keeps the HOV rule (into
+    the HOV lane only when ``eligible``; across its line only inside an opening, rows
+    (x0, x1) of ``openings``)."""
+    if target == HOV_LANE and not eligible:
+        return False
+    if lane != HOV_LANE and target != HOV_LANE:
+        return True
+    for k in range(openings.shape[0]):
+        if openings[k, 0] <= x <= openings[k, 1]:
+            return True
+    return False
+
+
+@kernel(inline=True)
+def kept_out(zones, lane, x):
+    """Whether ``lane`` at ``x`` [m] lies in a keep-out zone, rows (lane, x0, x1) of
+    ``zones`` (half-open in x)."""
+    for k in range(zones.shape[0]):
+        if lane == zones[k, 0] and zones[k, 1] <= x < zones[k, 2]:
+            return True
+    return False
+
+
+@kernel
+def expire(b, t):
+    """Clear the strategic targets of drivers more than GIVE_UP past their
+    ``strategic_by``."""
+    valid, x, length = t.vehicles.valid, t.vehicles.x, t.vehicles.length
+    strategic, x_from, x_by = t.drivers.strategic, t.drivers.strategic_from, t.drivers.strategic_by
+    for i in range(valid.shape[1]):
+        if valid[b, i] and strategic[b, i] != 0 and x[b, i] + 0.5 * length[b, i] > x_by[b, i] + (
+            GIVE_UP
+        ):
+            clear_target(strategic, x_from, x_by, b, i)
+
+
+@kernel(inline=True)
+def clear_target(strategic, x_from, x_by, b, i):
+    """No strategic target for driver ``i`` (its ``strategic``, ``x_from``, ``x_by``)."""
+    strategic[b, i] = 0
+    x_from[b, i] = math.nan
+    x_by[b, i] = math.nan
+
+
+@kernel
+def change_lanes(b, time, seed, t):
+    """One decision round of episode ``b`` at its clock ``time`` [s]: start the changes
+    MOBIL chooses for the drivers due and the changes asked for where safe. Returns how
+    many started."""
+    vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
+    valid, y = vehicles.valid, vehicles.y
+    lane_to, lane_from, ctrl = drivers.lane, drivers.lane_from, drivers.ctrl
+    strategic, x_from, x_by = drivers.strategic, drivers.strategic_from, drivers.strategic_by
+    next_decision, auto, requested = drivers.next_decision, drivers.auto, drivers.requested
+    keys, decisions = drivers.key, drivers.decisions
+    sx, slength = sc.sx, sc.slength
+    n = valid.shape[1]
+    started = 0
+    for i in range(n):
+        if not valid[b, i] or lane_from[b, i] != lane_to[b, i]:
+            continue
+        driven = ctrl[b, i] == 0  # a controller decides its own changes
+        x = sx[b, i]
+        centre = x + 0.5 * slength[b, i]
+        wants = driven and strategic[b, i] != 0 and centre >= x_from[b, i]
+        timed = next_decision[b, i] <= time
+        if not ((timed and auto[b, i] and driven) or requested[b, i] != 0 or wants):
+            continue
+        urge = urgency(strategic, x_from, x_by, b, i, centre)
+        if timed:
+            draw = uniform(seed, DECISION_STREAM, keys[b, i], decisions[b, i])
+            decisions[b, i] += 1
+            next_decision[b, i] = time + settings.decision_interval * (0.5 + draw)
+        choice = _choose(b, i, x, urge, t, n)
+        if choice == 0:
+            continue
+        _start(b, seed, t, i, choice, centre, y[b, i], urge >= 0.0)
+        if choice == strategic[b, i]:
+            clear_target(strategic, x_from, x_by, b, i)
+        started += 1
+    return started
+
+
+@kernel
+def _choose(b, i, x, urge, t, n):
+    """The direction driver ``i`` at back ``x`` [m] with urgency ``urge`` changes to
+    (LEFT, RIGHT), or 0."""
+    drivers, sc, settings = t.drivers, t.scratch, t.settings
+    key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
+    sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
+    params, model, obstacle = drivers.cf, settings.model, settings.obstacle_cf
+    strategic = drivers.strategic[b, i]
+    lane = drivers.lane[b, i]
+    speed = sspeed[b, i]
+    length = slength[b, i]
+    urgent = urge >= 0.0
+    ahead, behind = around(key, group, owner, count, b, lane, x)
+    # room to reach the middle of the change behind the leader it still follows
+    high = settings.lane_change_high
+    gap_now = sx[b, ahead] - x - length if ahead >= 0 else math.inf
+    lead_now = sspeed[b, ahead] if ahead >= 0 else 0.0
+    room = gap_now + lead_now * 0.5 * high >= 0.5 * path_length(speed, high, urgent) + (
+        MIN_LANE_CHANGE_GAP
+    )
+    # its old lane's follower now (this step's car following; an obstacle's 0) and
+    # once it has left
+    old_now, old_after = 0.0, 0.0
+    if behind >= 0:
+        old_gap, lead_speed = math.inf, speed
+        if ahead >= 0:
+            old_gap = sx[b, ahead] - sx[b, behind] - slength[b, behind]
+            lead_speed = sspeed[b, ahead]
+        old_now = cf_accel[b, behind] if behind < n else 0.0
+        old_after = cf(model, params, obstacle, b, n, behind, sspeed[b, behind], lead_speed,
+                       old_gap)  # fmt: skip
+    asked = drivers.requested[b, i]
+    if asked == 0 and urgent:
+        asked = strategic
+    safe_decel = drivers.safe_decel[b, i]
+    accepted = safe_decel  # an urgent driver takes a harder gap, never past emergency braking
+    if urge > 0.0:
+        accepted = max(min(safe_decel * (1.0 + urge), settings.emergency_decel), safe_decel)
+    best, choice = 0.0, 0
+    for step in (LEFT, RIGHT):
+        target = lane + step
+        if not -N_LANES <= target <= -1:
+            continue
+        if not hov_allows(drivers.hov_eligible[b, i], lane, target, x, settings.hov_openings):
+            continue
+        if asked != 0 and asked != step:
+            continue
+        if urgent and strategic == -step:  # never away from its target
+            continue
+        if asked != step and kept_out(settings.keep_out, target, x):
+            continue
+        # MOBIL in the target lane: its new leader and follower
+        t_ahead, t_behind = around(key, group, owner, count, b, target, x)
+        gap_ahead = sx[b, t_ahead] - x - length if t_ahead >= 0 else math.inf
+        gap_behind = x - sx[b, t_behind] - slength[b, t_behind] if t_behind >= 0 else math.inf
+        v_ahead = sspeed[b, t_ahead] if t_ahead >= 0 else speed
+        own_after = cf(model, params, obstacle, b, n, i, speed, v_ahead, gap_ahead)
+        new_now, new_after = 0.0, 0.0
+        if t_behind >= 0:
+            new_now = cf_accel[b, t_behind] if t_behind < n else 0.0
+            new_after = cf(model, params, obstacle, b, n, t_behind, sspeed[b, t_behind], speed,
+                           gap_behind)  # fmt: skip
+        safe = (
+            room
+            and new_after >= -accepted
+            and own_after >= -safe_decel
+            and gap_ahead >= MIN_LANE_CHANGE_GAP
+            and gap_behind >= MIN_LANE_CHANGE_GAP
+        )
+        bias = drivers.keep_right[b, i] if step == RIGHT else -drivers.keep_right[b, i]
+        others = (new_after - new_now) + (old_after - old_now)
+        gain = (
+            own_after - cf_accel[b, i] + drivers.politeness[b, i] * others + bias
+            - drivers.threshold[b, i]
+        )  # fmt: skip
+        if asked == step:
+            gain = math.inf
+        if safe and gain > best:
+            best, choice = gain, step
+    return choice
+
+
+@kernel
+def _start(b, seed, t, i, choice, centre, y, urgent):
+    """Start driver ``i``'s change one lane ``choice`` from ``centre`` x, ``y`` [m]."""
+    drivers, sc, settings = t.drivers, t.scratch, t.settings
+    draw = uniform(seed, DURATION_STREAM, drivers.key[b, i], drivers.changes[b, i])
+    drivers.changes[b, i] += 1
+    low, high = settings.lane_change_low, settings.lane_change_high
+    duration = low + (high - low) * draw
+    drivers.lane_from[b, i] = drivers.lane[b, i]
+    drivers.lane[b, i] = drivers.lane[b, i] + choice
+    drivers.start_x[b, i] = centre
+    drivers.start_y[b, i] = y
+    drivers.path_length[b, i] = path_length(sc.sspeed[b, i], duration, urgent)
+    drivers.requested[b, i] = 0

@@ -1,0 +1,155 @@
+"""Longitudinal decisions, compiled: each driver's car-following acceleration behind
+every leader it has (one per lane it occupies), the deceleration staying clear of them
+would take (emergency braking), and the cooperation of the drivers behind an urgent
+lane change (the kernels of :mod:`twin.traffic.longitudinal` and
+:mod:`twin.traffic.strategic`, whose docs give the rules).
+"""
+
+import math
+
+from twin.core.jit import kernel
+from twin.traffic.kernels.models import follow_accel
+from twin.traffic.kernels.neighbours import around, leader_entry
+
+MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
+COOPERATE_FROM = 0.3  # urgency from which followers in the target lane make room
+COOPERATIVE_DECEL = 1.5  # [m/s^2] the most a cooperating driver brakes to make room
+MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
+
+
+@kernel(inline=True)
+def required_decel(gap, v, v_lead, lead_decel, margin, reaction):
+    """[m/s^2] >= 0 a follower needs to stay ``margin`` [m] behind its leader ``gap`` [m]
+    ahead if the leader keeps braking at ``lead_decel`` (>= 0) until it stops, after
+    ``reaction`` [s] of travel (:func:`twin.traffic.longitudinal.required_decel`);
+    ``inf`` where the room is used up already, 0 for ``gap`` inf."""
+    if not math.isfinite(gap):
+        return 0.0
+    closing = v - v_lead
+    room = gap - margin - max(closing, 0.0) * reaction
+    if lead_decel > 1e-6:
+        lead_stop_time = v_lead / lead_decel
+        lead_stop = 0.5 * v_lead * lead_stop_time
+    else:
+        lead_stop_time = math.inf
+        lead_stop = math.inf
+    stop_room = gap - margin - closing * reaction + lead_stop
+    catches_up = closing > 0.0 and 2.0 * room < closing * lead_stop_time
+    if catches_up:
+        return lead_decel + closing * closing / (2.0 * room) if room > 0.0 else math.inf
+    return v * v / (2.0 * stop_room) if stop_room > 0.0 else math.inf
+
+
+@kernel(inline=True)
+def cf(model, params, obstacle, b, n, owner, v, v_lead, gap):
+    """The car-following acceleration of ``owner`` (a vehicle's slot, with its row of
+    ``params``; or an obstacle, judged as the mean driver ``obstacle``) behind a
+    leader."""
+    if owner < n:
+        return follow_accel(
+            model, v, v_lead, gap, params[b, owner, 0], params[b, owner, 1],
+            params[b, owner, 2], params[b, owner, 3], params[b, owner, 4], params[b, owner, 5],
+        )  # fmt: skip
+    p = obstacle
+    return follow_accel(model, v, v_lead, gap, p[0], p[1], p[2], p[3], p[4], p[5])
+
+
+@kernel
+def follow(b, t):
+    """Each vehicle's acceleration behind its most constraining leader (``cf_accel``)
+    and the deceleration staying clear of all of them needs (``need``)."""
+    vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
+    valid, body_lane = vehicles.valid, vehicles.lane
+    lane_to, lane_from, params = drivers.lane, drivers.lane_from, drivers.cf
+    owner_of, group, count = sc.entry_owner, sc.entry_group, sc.entry_count[b]
+    sx, slength, sspeed, saccel = sc.sx, sc.slength, sc.sspeed, sc.saccel
+    cf_accel, need_of = sc.cf_accel, sc.need
+    model, obstacle = settings.model, settings.obstacle_cf
+    margin, reaction = settings.emergency_margin, settings.reaction_time
+    n = valid.shape[1]
+    for i in range(n):
+        cf_accel[b, i] = math.inf
+        need_of[b, i] = 0.0
+    for e in range(count):
+        o = owner_of[b, e]
+        if o >= n:
+            continue
+        speed = sspeed[b, o]
+        lead_e = leader_entry(count, group, b, e)
+        leader = owner_of[b, lead_e] if lead_e >= 0 else -1
+        gap = math.inf
+        if leader >= 0:
+            gap = sx[b, leader] - sx[b, o] - slength[b, o]
+        entry_lane = -group[b, e] - 1
+        # a slow vehicle past the middle of its lane change no longer follows the
+        # leader of the lane it leaves: it finishes the change rather than stopping
+        # across the line behind a queue it is leaving
+        if (
+            entry_lane == lane_from[b, o]
+            and lane_from[b, o] != lane_to[b, o]
+            and body_lane[b, o] == lane_to[b, o]
+            and speed < MIN_SPEED_PATH
+        ):
+            gap, leader = math.inf, o
+        v_lead = sspeed[b, leader] if leader >= 0 else speed
+        accel = cf(model, params, obstacle, b, n, o, speed, v_lead, gap)
+        if accel < cf_accel[b, o]:
+            cf_accel[b, o] = accel
+        lead_decel = max(-saccel[b, leader], 0.0) if leader >= 0 else 0.0
+        need = required_decel(gap, speed, v_lead, lead_decel, margin, reaction)
+        if need > need_of[b, o]:
+            need_of[b, o] = need
+
+
+@kernel(inline=True)
+def urgency(strategic, x_from, x_by, b, i, centre_x):
+    """Vehicle ``i``'s strategic urgency at ``centre_x`` [m] (its ``strategic``
+    direction, ``x_from`` and ``x_by``): -1 with no target or before ``x_from``; 0 to 1
+    up to ``x_by``; 1 beyond."""
+    start = x_from[b, i]
+    if strategic[b, i] == 0 or not centre_x >= start:
+        return -1.0
+    u = (centre_x - start) / max(x_by[b, i] - start, 1.0)
+    return min(max(u, 0.0), 1.0)
+
+
+@kernel
+def cooperate(b, t):
+    """``cf_accel`` with the urgent drivers settling behind their target lane's vehicle
+    and the one behind it dropping back (:func:`twin.traffic.strategic.cooperate`)."""
+    vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
+    valid = vehicles.valid
+    lane_to, lane_from, params = drivers.lane, drivers.lane_from, drivers.cf
+    strategic, x_from, x_by = drivers.strategic, drivers.strategic_from, drivers.strategic_by
+    key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
+    sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
+    model, obstacle = settings.model, settings.obstacle_cf
+    n = valid.shape[1]
+    for i in range(n):
+        if not valid[b, i] or strategic[b, i] == 0 or lane_to[b, i] != lane_from[b, i]:
+            continue
+        x = sx[b, i]
+        length = slength[b, i]
+        if urgency(strategic, x_from, x_by, b, i, x + 0.5 * length) < COOPERATE_FROM:
+            continue
+        target = lane_to[b, i] + strategic[b, i]
+        if not -4 <= target <= -1:
+            continue
+        ahead, behind = around(key, group, owner, count, b, target, x)
+        gap = x - sx[b, behind] - slength[b, behind] if behind >= 0 else math.inf
+        if gap < -0.5 * length:  # alongside: go behind it, and the one behind it helps
+            ahead = behind
+            _, behind = around(key, group, owner, count, b, target, sx[b, ahead])
+        speed = sspeed[b, i]
+        if ahead >= 0:
+            room = sx[b, ahead] - x - length
+            behind_it = cf(model, params, obstacle, b, n, i, speed, sspeed[b, ahead], room)
+            cf_accel[b, i] = min(cf_accel[b, i], max(behind_it, -COOPERATIVE_DECEL))
+        if behind < 0 or behind >= n:
+            continue
+        gap = x - sx[b, behind] - slength[b, behind]
+        if gap < -0.5 * length:
+            continue
+        room = max(gap, MIN_ROOM)
+        drop_back = cf(model, params, obstacle, b, n, behind, sspeed[b, behind], speed, room)
+        cf_accel[b, behind] = min(cf_accel[b, behind], max(drop_back, -COOPERATIVE_DECEL))

@@ -1,0 +1,183 @@
+"""Who is ahead of whom in each lane: one sort per step of an episode's lane entries,
+keyed (lane, x), and binary searches in it.
+
+A vehicle occupies every lane it is in: the lane it drives to, during a lane change
+the lane it leaves, and the lane its body is in; an obstacle its lane. Each occupied
+lane is an entry; entries are sorted by ``group * LANE_KEY + x`` with ``group`` 0..3
+for lanes -1..-4, and the leader of an entry is the next entry of its group.
+
+Owners number the vehicles' slots ``0..N-1`` and the obstacles ``N + g``; the step's
+values of both (x, length, speed, last command) are gathered in the scratch's ``sx``,
+``slength``, ``sspeed`` and ``saccel``, indexed by owner.
+
+The vehicles' entries keep last step's order and are put right by an insertion sort
+(a few neighbours overtake per step, so it costs about one pass); the obstacles, which
+come sorted by x, are merged in.
+"""
+
+import math
+
+from twin.core.jit import kernel
+
+LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x
+N_GROUPS = 4
+
+
+@kernel(inline=True)
+def group_of(lane):
+    """The entry group (0..3) of lane -1..-4; -1 for anything else."""
+    if -N_GROUPS <= lane <= -1:
+        return -lane - 1
+    return -1
+
+
+@kernel
+def gather(b, t):
+    """The step's owner values (module doc): vehicles' back x, length, speed (>= 0) and
+    last command; obstacles' x, length, speed and no acceleration (``t`` a packed
+    :data:`~twin.traffic.kernels.state.Traffic`)."""
+    vehicles, obstacles, drivers, sc = t.vehicles, t.obstacles, t.drivers, t.scratch
+    valid, x, length, speed = vehicles.valid, vehicles.x, vehicles.length, vehicles.speed
+    accel = drivers.accel
+    sx, slength, sspeed, saccel = sc.sx, sc.slength, sc.sspeed, sc.saccel
+    n = valid.shape[1]
+    for i in range(n):
+        if valid[b, i]:
+            sx[b, i] = x[b, i]
+            slength[b, i] = length[b, i]
+            sspeed[b, i] = max(speed[b, i], 0.0)
+            saccel[b, i] = accel[b, i]
+    ox, olength, ospeed = obstacles.x, obstacles.length, obstacles.speed
+    for g in range(obstacles.count[b]):
+        sx[b, n + g] = ox[b, g]
+        slength[b, n + g] = olength[b, g]
+        sspeed[b, n + g] = ospeed[b, g]
+        saccel[b, n + g] = 0.0
+
+
+@kernel
+def sort_entries(b, t):
+    """Rebuild episode ``b``'s sorted entries (module doc) from the vehicles' lanes and
+    the obstacles; :func:`gather` first."""
+    vehicles, obstacles, drivers, sc = t.vehicles, t.obstacles, t.drivers, t.scratch
+    valid, body_lane = vehicles.valid, vehicles.lane
+    lane_to, lane_from = drivers.lane, drivers.lane_from
+    marks, order_owner, order_lane = sc.marks, sc.order_owner, sc.order_lane
+    key, sx = sc.entry_key, sc.sx
+    n = valid.shape[1]
+    for i in range(n):
+        marks[b, i] = 0
+    # last step's vehicle entries that still hold, in their order
+    m = 0
+    for k in range(sc.order_count[b]):
+        o, lane = order_owner[b, k], order_lane[b, k]
+        bit = 1 << (-lane - 1)
+        if not valid[b, o] or marks[b, o] & bit:
+            continue
+        if lane == lane_to[b, o] or lane == lane_from[b, o] or lane == body_lane[b, o]:
+            order_owner[b, m], order_lane[b, m] = o, lane
+            marks[b, o] |= bit
+            m += 1
+    # and the new ones, in slot order
+    for o in range(n):
+        if not valid[b, o]:
+            continue
+        for which in range(3):
+            if which == 0:
+                lane = lane_to[b, o]
+            elif which == 1:
+                lane = lane_from[b, o]
+            else:
+                lane = body_lane[b, o]
+            if group_of(lane) < 0:
+                continue
+            bit = 1 << (-lane - 1)
+            if marks[b, o] & bit:
+                continue
+            order_owner[b, m], order_lane[b, m] = o, lane
+            marks[b, o] |= bit
+            m += 1
+    sc.order_count[b] = m
+    # insertion sort by key (the order is last step's: nearly sorted)
+    for k in range(m):
+        key[b, k] = (-order_lane[b, k] - 1) * LANE_KEY + sx[b, order_owner[b, k]]
+    for k in range(1, m):
+        kk, o, lane = key[b, k], order_owner[b, k], order_lane[b, k]
+        j = k - 1
+        while j >= 0 and key[b, j] > kk:
+            key[b, j + 1] = key[b, j]
+            order_owner[b, j + 1] = order_owner[b, j]
+            order_lane[b, j + 1] = order_lane[b, j]
+            j -= 1
+        key[b, j + 1], order_owner[b, j + 1], order_lane[b, j + 1] = kk, o, lane
+    _merge(b, m, n, obstacles.count[b], obstacles.lane, obstacles.x, order_owner, order_lane,
+           key, sc.entry_owner, sc.entry_group, sc.entry_count)  # fmt: skip
+
+
+@kernel(inline=True)
+def _merge(b, m, n, count, ob_lane, ob_x, order_owner, order_lane, key, owner, group, entries):
+    """The vehicles' ``m`` sorted entries (their keys in ``key``) merged with the
+    obstacles, each lane's in x order (they come sorted by x), into the entries."""
+    out = m + count
+    v = m - 1
+    w = out - 1
+    for grp in range(N_GROUPS - 1, -1, -1):
+        for g in range(count - 1, -1, -1):
+            if group_of(ob_lane[b, g]) != grp:
+                continue
+            kk = grp * LANE_KEY + ob_x[b, g]
+            while v >= 0 and key[b, v] > kk:
+                owner[b, w], group[b, w] = order_owner[b, v], -order_lane[b, v] - 1
+                key[b, w] = key[b, v]
+                v -= 1
+                w -= 1
+            owner[b, w], group[b, w], key[b, w] = n + g, grp, kk
+            w -= 1
+    while v >= 0:
+        owner[b, w], group[b, w] = order_owner[b, v], -order_lane[b, v] - 1
+        key[b, w] = key[b, v]
+        v -= 1
+        w -= 1
+    # obstacles off the lanes took no place: close the hole at the front
+    shift = w + 1
+    if shift > 0:
+        for k in range(shift, out):
+            owner[b, k - shift] = owner[b, k]
+            group[b, k - shift] = group[b, k]
+            key[b, k - shift] = key[b, k]
+    entries[b] = out - shift
+
+
+@kernel(inline=True)
+def leader_entry(count, group, b, e):
+    """The entry ahead of entry ``e`` in its lane, -1 where none (``count`` the
+    episode's entries, ``group`` the entries' groups)."""
+    if e + 1 < count and group[b, e + 1] == group[b, e]:
+        return e + 1
+    return -1
+
+
+@kernel(inline=True)
+def around(key, group, owner, count, b, lane, x):
+    """(ahead, behind): the owners just ahead of and just behind road-frame ``x`` [m] in
+    ``lane`` among the ``count`` sorted entries (``key``, ``group``, ``owner``), -1
+    where the lane is empty that way; an entry exactly at ``x`` (the asking vehicle)
+    is neither."""
+    grp = group_of(lane)
+    if grp < 0:
+        return -1, -1
+    query = grp * LANE_KEY + x
+    lo, hi = 0, count  # first entry with key >= query
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if key[b, mid] < query:
+            lo = mid + 1
+        else:
+            hi = mid
+    before = lo - 1
+    after = lo
+    while after < count and key[b, after] == query:
+        after += 1
+    ahead = owner[b, after] if after < count and group[b, after] == grp else -1
+    behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
+    return ahead, behind
