@@ -21,7 +21,6 @@ import numpy as np
 from twin.calibration.following import GridTraffic, LaneChanges, distance_driven
 from twin.calibration.lane_changes import Incentives
 from twin.core.i24 import LANES
-from twin.traffic.lane_change import kept_out
 
 POSITION_BIN = 100.0  # [m] bins along the road
 TIME_BIN = 60.0  # [s] bins over the window
@@ -252,3 +251,14 @@ def describe_flows(flows: dict) -> list[str]:
             f"(it must be left ahead)"
         )
     return lines
+
+
+def kept_out(zones, road, lane, x) -> np.ndarray:
+    """(k,) bool: ``lane`` (k,) at ``x`` (k,) [m] on ``road`` lies in one of the
+    keep-out ``zones``, (road, lane, x0, x1) each (half-open in x; the traffic kernels'
+    test, :func:`twin.traffic.kernels.lane_change.kept_out`)."""
+    x = np.asarray(x, dtype=np.float64)
+    out = np.zeros(x.shape, dtype=bool)
+    for z_road, z_lane, x0, x1 in zones:
+        out |= (road == z_road) & (lane == z_lane) & (x >= x0) & (x < x1)
+    return out

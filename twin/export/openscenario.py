@@ -50,7 +50,7 @@ from twin.core.atomic import AtomicFolder
 from twin.core.i24 import VEHICLE_CLASSES, Road
 from twin.core.vehicle_classes import vehicle_classes
 from twin.export.episode import Episode, ExportError, read_episode
-from twin.traffic.steering import MAX_STEER
+from twin.traffic.kernels.steering import MAX_STEER
 
 EGO = "hero"  # CARLA's role name of the vehicle a user drives; esmini takes any name
 SCENARIO, NETWORK = "i24.xosc", "i24.xodr"

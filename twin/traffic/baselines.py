@@ -307,7 +307,7 @@ class ControllerSettings:
             the ACC: where staying clear of the leader (if it keeps braking as it does)
             needs harder braking than the controller asks, the ego brakes as hard as
             needed, by the same test as the drivers' emergency braking
-            (:func:`twin.traffic.longitudinal.required_decel`). ``False``: the
+            (:func:`twin.traffic.kernels.longitudinal.required_decel`). ``False``: the
             controller's command alone (``human`` has the drivers' braking anyway).
         follower_stopper: FollowerStopper's parameters (``twin.controllers:follower_stopper``).
         pi_saturation: PI with saturation's parameters (``twin.controllers:pi_saturation``).

@@ -42,6 +42,13 @@ class TrafficConfig:
         path_preview: [s] the path's direction and curvature are taken this far ahead
             (at the current speed), against the body's yaw lag.
         max_lateral_accel: [m/s^2] limit of the lateral controller.
+        cooperate_from: [-] a strategic driver's urgency (0 at the place it starts to
+            want its change, 1 where it must have made it) from which the driver behind
+            it in the target lane drops back to make room (above 1: never).
+        cooperative_decel: [m/s^2] the most a driver brakes to make that room.
+        urgent_path: [m] the shortest path of an urgent (strategic) lane change: a
+            driver who must leave its lane noses across a queue in about three car
+            lengths, where a discretionary change keeps a path made for 5 m/s.
         seed: random seed of the drivers' draws.
     """
 
@@ -62,6 +69,9 @@ class TrafficConfig:
     lateral_gain: float = 1.0
     path_preview: float = 0.1
     max_lateral_accel: float = 4.0
+    cooperate_from: float = 0.3
+    cooperative_decel: float = 1.5
+    urgent_path: float = 15.0
     seed: int = 0
 
     def __post_init__(self):
@@ -76,6 +86,8 @@ class TrafficConfig:
             "emergency_decel": self.emergency_decel,
             "lateral_gain": self.lateral_gain,
             "max_lateral_accel": self.max_lateral_accel,
+            "cooperative_decel": self.cooperative_decel,
+            "urgent_path": self.urgent_path,
         }
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0):
@@ -93,6 +105,8 @@ class TrafficConfig:
             raise ValueError(f"hov_share must be in 0..1, got {self.hov_share}")
         if not 0 < self.brake_limit <= 1:
             raise ValueError(f"brake_limit must be in (0, 1], got {self.brake_limit}")
+        if not (math.isfinite(self.cooperate_from) and self.cooperate_from >= 0):
+            raise ValueError(f"TrafficConfig.cooperate_from must be >= 0, got {self.cooperate_from!r}")
         if self.emergency_margin < 0 or self.reaction_time < 0 or self.path_preview < 0:
             raise ValueError("emergency_margin, reaction_time and path_preview must be >= 0")
         if any(len(o) != 2 or not o[0] < o[1] for o in self.hov_openings):

@@ -1,12 +1,11 @@
-"""What the traffic manager works on each step: the obstacles it must respect, the
-scene of vehicles and obstacles with their lane occupancy, and the commands it gives."""
+"""What the traffic manager works on each step: the obstacles it must respect and the
+commands it gives."""
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from twin.core.i24 import LANE_WIDTH, N_LANES
-from twin.traffic.lanes import Occupancy
+from twin.core.i24 import N_LANES
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,55 +74,3 @@ class Commands:
     lane: np.ndarray
     changing: np.ndarray
     path_y: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class Scene:
-    """One step's managed vehicles (rows 0..n-1) followed by the obstacles, (n + k,).
-
-    Attributes:
-        n: managed vehicles. road, x [m], y [m], length [m], speed [m/s]: of all.
-        accel: [m/s^2] the vehicles' last commands and the obstacles' accelerations;
-            the manager puts its new car-following accelerations in once the
-            emergency test has read the old ones.
-        occupancy: every vehicle in its lane, the lane it leaves while changing and
-            the lane its body is in; obstacles in their lane.
-    """
-
-    n: int
-    road: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    length: np.ndarray
-    speed: np.ndarray
-    accel: np.ndarray
-    occupancy: Occupancy
-
-    @classmethod
-    def build(cls, drivers, states, speed: np.ndarray, obstacles: Obstacles) -> "Scene":
-        """The scene of the managed ``drivers`` (their state, by increasing id) whose
-        bodies are at ``states`` moving at ``speed`` (n,) [m/s] >= 0, and ``obstacles``."""
-        k = len(obstacles)
-
-        def join(mine, theirs):
-            return np.concatenate([mine, theirs]) if k else mine
-
-        none = np.zeros(k, np.int8)
-        road, x = join(drivers.road, obstacles.road), join(states.x, obstacles.x)
-        lanes = [join(drivers.lane, obstacles.lane), join(drivers.lane_from, none)]
-        occupancy = Occupancy.build(road, x, [*lanes, join(states.lane, none)])
-        return cls(
-            n=len(drivers),
-            road=road,
-            x=x,
-            y=join(states.y, centre_y(obstacles.lane)),
-            length=join(drivers.length, obstacles.length),
-            speed=join(speed, obstacles.speed),
-            accel=join(drivers.accel, obstacles.accel).copy(),
-            occupancy=occupancy,
-        )
-
-
-def centre_y(lane: np.ndarray) -> np.ndarray:
-    """Road-frame y [m] of lane centres, for lanes already checked."""
-    return (0.5 - lane) * LANE_WIDTH

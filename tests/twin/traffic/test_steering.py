@@ -7,20 +7,12 @@ import pytest
 from tests.twin.traffic.conftest import make_manager, run, spawn
 from twin.core.i24 import LANE_WIDTH, lane_center
 from twin.physics.kinematic import KinematicWorld
-from twin.traffic.steering import path_shape, stanley_steer
+from twin.traffic.kernels.steering import path_shape, stanley
 
 
 def test_stanley_steers_toward_the_path():
     def steer(error, heading_error=0.0, curvature=0.0):
-        return stanley_steer(
-            np.array([error]),
-            np.array([heading_error]),
-            np.array([25.0]),
-            np.array([curvature]),
-            np.array([2.7]),
-            1.0,
-            np.array([0.5]),
-        )[0]
+        return stanley(error, heading_error, 25.0, curvature, 2.7, 1.0, 0.5)
 
     assert steer(1.0) > 0 > steer(-1.0)  # right of the path (positive y): steer left
     assert steer(0.0) == 0.0
@@ -31,7 +23,7 @@ def test_stanley_steers_toward_the_path():
 
 def test_lane_change_path_is_a_smooth_blend_with_consistent_derivatives():
     x = np.linspace(-10.0, 110.0, 12001)
-    y, slope, bend = path_shape(x, 0.0, 1.0, 4.0, 100.0)
+    y, slope, bend = np.array([path_shape(xi, 0.0, 1.0, 4.0, 100.0) for xi in x]).T
     assert y[0] == 1.0 and y[-1] == 4.0 and y[6000] == pytest.approx(2.5)
     assert np.all(np.diff(y) >= 0)
     h = x[1] - x[0]

@@ -6,7 +6,8 @@ import pytest
 from tests.twin.traffic.conftest import make_manager, point_mass_manager, run, spawn
 from tests.twin.traffic.test_manager import point_states
 from twin.physics.kinematic import KinematicWorld
-from twin.traffic import lane_change, strategic
+from twin.traffic.kernels.lane_change import GIVE_UP
+from twin.traffic.kernels.longitudinal import urgency
 
 SPEED = 15.0  # [m/s]
 
@@ -17,11 +18,11 @@ def kinematic(built_map):
         yield world
 
 
-def _dense_lane_beside_a_merger(world, built_map):
+def _dense_lane_beside_a_merger(world, built_map, **settings):
     """Lane -2 a platoon at 15 m/s with 16 m from back to back (no gap a car can take
     without its new follower braking hard); one car beside it in lane -3, alone there,
     whose target is to move left within 250 m."""
-    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1)
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1, **settings)
     platoon = spawn(world, manager, 1, -2, 100.0 + 16.0 * np.arange(10), SPEED)
     merger = spawn(world, manager, 1, -3, 172.0, SPEED)
     everyone = np.r_[platoon, merger]
@@ -46,9 +47,9 @@ def test_a_strategic_driver_changes_by_its_place_because_a_follower_makes_room(
     assert record.speed.min() > 5.0  # room made by dropping back, nobody stopped
 
 
-def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map, monkeypatch):
-    monkeypatch.setattr(strategic, "COOPERATE_FROM", 2.0)  # urgency never reaches it
-    manager, merger, _ = _dense_lane_beside_a_merger(kinematic, built_map)
+def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map):
+    # urgency never reaches it
+    manager, merger, _ = _dense_lane_beside_a_merger(kinematic, built_map, cooperate_from=2.0)
     record = run(kinematic, manager, 18.0)
     column = int(np.flatnonzero(kinematic.states().id == merger)[0])
     assert np.all(record.lane[:, column] == -3)
@@ -58,13 +59,16 @@ def test_urgency_grows_from_its_start_to_its_place_and_targets_expire():
     manager, params = point_mass_manager(np.full(2, -3), 0)
     manager.add([0, 1], 1, -3, params)
     manager.set_strategic([0, 1], [1, -1], [100.0, 100.0], [300.0, 300.0])
-    d = manager._d
-    u = strategic.urgency(d, np.array([0, 0, 0, 1]), np.array([50.0, 200.0, 400.0, 300.0]))
-    assert u.tolist() == [-1.0, 0.5, 1.0, 1.0]
+    d = manager._d  # the kernels' arrays: eastbound vehicles are episode 1
+
+    def u(i, x):
+        return urgency(d.strategic, d.strategic_from, d.strategic_by, 1, i, x)
+
+    assert [u(0, 50.0), u(0, 200.0), u(0, 400.0), u(1, 300.0)] == [-1.0, 0.5, 1.0, 1.0]
     # a driver GIVE_UP past its place stops trying; one yet to reach its start keeps
     # its target
     length = params.length[0]
-    x = np.array([300.0 + strategic.GIVE_UP + 1.0, 50.0]) - 0.5 * length
+    x = np.array([300.0 + GIVE_UP + 1.0, 50.0]) - 0.5 * length
     manager.step(point_states([0, 1], x, [-3, -3], [0.0, 0.0]))
     assert manager.strategic([0, 1]).tolist() == [0, -1]
 
@@ -114,10 +118,10 @@ def test_a_target_the_vehicle_may_never_reach_is_refused():
         manager.set_strategic([1], 0.5, 0.0, 100.0)  # not silently truncated to 0
 
 
-def _queues_side_by_side(world, built_map):
+def _queues_side_by_side(world, built_map, **settings):
     """Lanes -2 and -3 two queues crawling at 2 m/s, 4 m bumper to bumper; one car in
     lane -3 must move left within 60 m."""
-    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=2)
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=2, **settings)
     spacing = 4.0 + 4.6  # gap plus about a car's length
     left = spawn(world, manager, 1, -2, 100.0 + spacing * np.arange(8), 2.0)
     right = spawn(world, manager, 1, -3, 104.0 + spacing * np.arange(8), 2.0)
@@ -129,8 +133,8 @@ def _queues_side_by_side(world, built_map):
     return manager, merger
 
 
-def _merges_in_the_queue(world, built_map) -> bool:
-    manager, merger = _queues_side_by_side(world, built_map)
+def _merges_in_the_queue(world, built_map, **settings) -> bool:
+    manager, merger = _queues_side_by_side(world, built_map, **settings)
     record = run(world, manager, 40.0)
     column = int(np.flatnonzero(world.states().id == merger)[0])
     assert record.contacts == 0
@@ -141,11 +145,9 @@ def test_an_urgent_change_gets_across_a_crawling_queue(kinematic, built_map):
     assert _merges_in_the_queue(kinematic, built_map)
 
 
-def test_with_a_path_made_for_5_m_s_the_same_change_finds_no_room(
-    kinematic, built_map, monkeypatch
-):
-    monkeypatch.setattr(lane_change, "URGENT_PATH", 30.0)  # 5 m/s x 6 s, as discretionary
-    assert not _merges_in_the_queue(kinematic, built_map)
+def test_with_a_path_made_for_5_m_s_the_same_change_finds_no_room(kinematic, built_map):
+    # 5 m/s x 6 s, as a discretionary change's
+    assert not _merges_in_the_queue(kinematic, built_map, urgent_path=30.0)
 
 
 def _overtaker_kept_out(zones, x_from=None):

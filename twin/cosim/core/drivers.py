@@ -233,23 +233,49 @@ def _draw(b, i, core, seed, lane, x):
     x, or (0, nan, nan)."""
     beh, slots = core.beh, core.slots
     slots.tgt_draws[b, i] += 1
-    k = -lane - 1
-    if not beh.flows_on or not beh.flow_lanes[k]:
+    if not beh.flows_on:
         return 0, math.nan, math.nan
-    edges = beh.flow_edges
+    return draw_target(seed, slots.tid[b, i], slots.tgt_draws[b, i], lane, x, beh.flow_edges,
+                       beh.flow_left, beh.flow_right, beh.flow_lanes)  # fmt: skip
+
+
+@kernel
+def draw_target(seed, key, draws, lane, x, edges, left, right, lanes):
+    """A strategic target drawn from the recording's flows (the ``calibrated``
+    behaviour): the vehicle of record ``key`` in ``lane`` at back x [m] passes the
+    position bins (``edges``) ahead of it and, in each, leaves its lane left or right
+    with the flows' probabilities (``left``, ``right``: (4, bins), per lane -1..-4;
+    ``lanes`` (4,) bool where the lane has flows); its target is the first bin drawn,
+    wanted from half a bin before it to the bin's end. ``draws``: how many targets it
+    has drawn, this one included (a vehicle draws again in the lane it changed to).
+    Returns (direction, x_from, x_by), or (0, nan, nan)."""
+    k = -lane - 1
+    if not 0 <= k < lanes.size or not lanes[k]:
+        return 0, math.nan, math.nan
     bins = edges.size - 1
-    first = 0  # bins starting ahead of x
+    first = 0  # the bins starting ahead of x
     while first <= bins and edges[first] <= x:
         first += 1
     half = 0.5 * (edges[1] - edges[0])
-    draws = slots.tgt_draws[b, i]
-    key = slots.tid[b, i]
     for j in range(first, bins):
         u = uniform(seed, STRATEGIC_STREAM, key, draws * BIN_EVENTS + j)
-        left, right = beh.flow_left[k, j], beh.flow_right[k, j]
-        if u < left + right:
-            return (1 if u < left else -1), edges[j] - half, edges[j + 1]
+        if u < left[k, j] + right[k, j]:
+            return (1 if u < left[k, j] else -1), edges[j] - half, edges[j + 1]
     return 0, math.nan, math.nan
+
+
+def flow_arrays(flows: dict | None) -> tuple:
+    """(edges, left, right, lanes) of the recording's strategic flows
+    (``calibration.json``'s ``lane_flows``) for :func:`draw_target`."""
+    if flows is None:
+        return np.zeros(2), np.zeros((4, 1)), np.zeros((4, 1)), np.zeros(4, bool)
+    edges = np.asarray(flows["x_edges"], dtype=np.float64)
+    left, right = np.zeros((4, edges.size - 1)), np.zeros((4, edges.size - 1))
+    lanes = np.zeros(4, bool)
+    for lane, (pl, pr) in flow_probabilities(flows, edges.size - 1).items():
+        left[-lane - 1], right[-lane - 1] = pl, pr
+        lanes[-lane - 1] = True
+    return edges, left, right, lanes
 
 
 @kernel(inline=True)
@@ -327,16 +353,7 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         fits[r[ok]] = table.loc[tids[inside][ok], list(fitted)].to_numpy()
         fit_ok[r[ok]] = True
     flows = behaviour.strategic_flows
-    edges, left, right, lanes = np.zeros(2), np.zeros((4, 1)), np.zeros((4, 1)), np.zeros(4, bool)
-    if flows is not None:
-        from twin.cosim.strategic_targets import _probabilities
-
-        edges = np.asarray(flows["x_edges"], dtype=np.float64)
-        p = _probabilities(flows, edges.size - 1)
-        left, right = np.zeros((4, edges.size - 1)), np.zeros((4, edges.size - 1))
-        for lane, (pl, pr) in p.items():
-            left[-lane - 1], right[-lane - 1] = pl, pr
-            lanes[-lane - 1] = True
+    edges, left, right, lanes = flow_arrays(flows)
     plan = plan if plan is not None else empty_plan(recording.tid.size)
     return BehaviourArrays(
         mode=mode,
@@ -379,3 +396,19 @@ def empty_plan(trajectories: int) -> dict:
         "lane_to": np.zeros(0, np.int64),
     }
 
+
+def flow_probabilities(flows: dict, n_bins: int) -> dict:
+    """{lane: (p_left, p_right)}, (bins,) each: the probability that a vehicle passing a
+    bin in the lane leaves it that way for a strategic reason."""
+    out = {}
+    for name, s in flows["strategic"].items():
+        a, b = (int(v) for v in name.split(">"))
+        p = np.asarray(s["probability"], dtype=np.float64)
+        left, right = out.setdefault(a, (np.zeros(n_bins), np.zeros(n_bins)))
+        (left if b > a else right)[:] += p
+    for left, right in out.values():  # never more than certainty between the two
+        total = left + right
+        scale = np.where(total > 1.0, 1.0 / np.maximum(total, 1e-12), 1.0)
+        left *= scale
+        right *= scale
+    return out

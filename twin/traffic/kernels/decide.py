@@ -41,7 +41,8 @@ TrafficSettings = namedtuple(
     "TrafficSettings",
     "model max_accel_column dt decision_interval decision_steps lane_change_low "
     "lane_change_high emergency_decel emergency_margin reaction_time brake_limit "
-    "lateral_gain path_preview max_lateral_accel hov_openings keep_out obstacle_cf "
+    "lateral_gain path_preview max_lateral_accel cooperate_from cooperative_decel urgent_path "
+    "hov_openings keep_out obstacle_cf "
     "action_speed action_gain action_low action_high "
     "fs_desired fs_dx0 fs_decel fs_gain fs_max_accel fs_max_decel "
     "acc_desired acc_time_gap acc_min_gap acc_k1 acc_k2 acc_cruise_gain acc_max_accel "
@@ -85,6 +86,9 @@ def settings(
         lateral_gain=float(config.lateral_gain),
         path_preview=float(config.path_preview),
         max_lateral_accel=float(config.max_lateral_accel),
+        cooperate_from=float(config.cooperate_from),
+        cooperative_decel=float(config.cooperative_decel),
+        urgent_path=float(config.urgent_path),
         hov_openings=np.array(config.hov_openings, dtype=np.float64).reshape(-1, 2),
         keep_out=zones.reshape(-1, 3),
         obstacle_cf=np.asarray(obstacle_cf, dtype=np.float64),

@@ -1,7 +1,13 @@
-"""Lane-change decisions, compiled: MOBIL for the drivers due to decide, the changes
-asked for, the strategic targets and the HOV rule (the kernel of
-:mod:`twin.traffic.lane_change`, whose doc gives the rules; MOBIL is Kesting, Treiber
-and Helbing 2007).
+"""Lane-change decisions of the traffic manager, compiled: MOBIL (Kesting, Treiber,
+Helbing 2007, :mod:`twin.traffic.mobil`) for the drivers due to decide, the changes
+asked for (by a controller), the strategic targets (a lane to leave by a place:
+:mod:`twin.traffic.kernels.longitudinal`'s doc) and the HOV rule.
+
+A driver decides on a grid of ``decision_period`` at random intervals around
+``decision_interval``; a change it starts lasts a drawn manoeuvre time, along a path
+the lateral controller tracks (:mod:`twin.traffic.kernels.steering`). Accelerations are
+the drivers' car-following model's; obstacles (the ghosts) are judged as the class
+table's mean driver.
 
 The drivers deciding in a round are judged against the scene as it was when the round
 began (the entries are not re-sorted between them), so the order they are taken in
@@ -18,7 +24,6 @@ from twin.traffic.kernels.neighbours import around
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
-URGENT_PATH = 15.0  # [m] the shortest path of an urgent (strategic) change
 GIVE_UP = 150.0  # [m] past strategic_by a strategic change is no longer tried
 DECISION_STREAM = 0x44  # the random streams of the next decision and the manoeuvre time
 DURATION_STREAM = 0x4D
@@ -26,11 +31,11 @@ FIRST_DECISION_STREAM = 0x46
 
 
 @kernel(inline=True)
-def path_length(speed, duration, urgent):
+def path_length(speed, duration, urgent, urgent_path):
     """[m] a lane-change path at ``speed`` [m/s] lasting ``duration`` [s]: made for at
-    least MIN_SPEED_PATH, or, urgent, at least URGENT_PATH long."""
+    least MIN_SPEED_PATH, or, ``urgent``, at least ``urgent_path`` long."""
     if urgent:
-        return max(speed * duration, URGENT_PATH)
+        return max(speed * duration, urgent_path)
     return max(speed, MIN_SPEED_PATH) * duration
 
 
@@ -137,7 +142,9 @@ def _choose(b, i, x, urge, t, n):
     high = settings.lane_change_high
     gap_now = sx[b, ahead] - x - length if ahead >= 0 else math.inf
     lead_now = sspeed[b, ahead] if ahead >= 0 else 0.0
-    room = gap_now + lead_now * 0.5 * high >= 0.5 * path_length(speed, high, urgent) + (
+    room = gap_now + lead_now * 0.5 * high >= 0.5 * path_length(
+        speed, high, urgent, settings.urgent_path
+    ) + (
         MIN_LANE_CHANGE_GAP
     )
     # its old lane's follower now (this step's car following; an obstacle's 0) and
@@ -214,5 +221,6 @@ def _start(b, seed, t, i, choice, centre, y, urgent):
     drivers.lane[b, i] = drivers.lane[b, i] + choice
     drivers.start_x[b, i] = centre
     drivers.start_y[b, i] = y
-    drivers.path_length[b, i] = path_length(sc.sspeed[b, i], duration, urgent)
+    drivers.path_length[b, i] = path_length(sc.sspeed[b, i], duration, urgent,
+                                            settings.urgent_path)  # fmt: skip
     drivers.requested[b, i] = 0

@@ -1,8 +1,27 @@
-"""Longitudinal decisions, compiled: each driver's car-following acceleration behind
-every leader it has (one per lane it occupies), the deceleration staying clear of them
-would take (emergency braking), and the cooperation of the drivers behind an urgent
-lane change (the kernels of :mod:`twin.traffic.longitudinal` and
-:mod:`twin.traffic.strategic`, whose docs give the rules).
+"""Longitudinal decisions of the traffic manager, as compiled kernels: each driver's
+car-following acceleration behind every leader it has (one per lane it occupies), the
+deceleration it would need to stay clear of them (emergency braking), and the
+cooperation of the drivers behind an urgent (strategic) lane change.
+
+The acceleration itself is tracked by the vehicle model, which adds feedforward for
+grade, rolling resistance and drag.
+
+**Strategic lane changes** (the idea of SUMO's LC2013 strategic and cooperative
+layers, Erdmann 2015, in the twin's own form): a driver who must leave its lane by a
+place (a lane that ends, a merge or an exit beyond the window, as the recording's
+flows say, or the change its own recording makes) has a target: a direction, the
+place ``strategic_from`` where it starts to want the change and the place
+``strategic_by`` by which it must have made it; its urgency grows from 0 at the one to
+1 at the other (:func:`urgency`). From ``strategic_from`` it wants that change
+whatever MOBIL's incentive, judges it at every decision step, makes no change the
+other way, and takes a gap whose new follower must brake up to ``safe_decel (1 +
+urgency)`` (at most ``emergency_decel``); past ``strategic_by`` it keeps trying until
+GIVE_UP metres beyond (:mod:`twin.traffic.kernels.lane_change`). Once its urgency is at
+least ``cooperate_from``, it settles behind the target lane's vehicle ahead of it (or
+alongside it, when that one is more than half a length past its back), and the driver
+behind that one drops back for it, each braking no harder than ``cooperative_decel``
+(:func:`cooperate`). An urgent change takes a shorter path than a discretionary one
+(``urgent_path``), so that a driver can get across a crawling queue as real drivers do.
 """
 
 import math
@@ -12,8 +31,6 @@ from twin.traffic.kernels.models import follow_accel
 from twin.traffic.kernels.neighbours import around, leader_entry
 
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
-COOPERATE_FROM = 0.3  # urgency from which followers in the target lane make room
-COOPERATIVE_DECEL = 1.5  # [m/s^2] the most a cooperating driver brakes to make room
 MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
 
 
@@ -21,8 +38,13 @@ MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the u
 def required_decel(gap, v, v_lead, lead_decel, margin, reaction):
     """[m/s^2] >= 0 a follower needs to stay ``margin`` [m] behind its leader ``gap`` [m]
     ahead if the leader keeps braking at ``lead_decel`` (>= 0) until it stops, after
-    ``reaction`` [s] of travel (:func:`twin.traffic.longitudinal.required_decel`);
-    ``inf`` where the room is used up already, 0 for ``gap`` inf."""
+    ``reaction`` [s] of travel; ``inf`` where the room is used up already, 0 for
+    ``gap`` inf.
+
+    After ``reaction`` of travel at the current speeds, the follower brakes at a
+    constant deceleration. If it would close the gap before the leader stops, the
+    relative motion decides (``lead_decel + closing^2 / (2 room)``); otherwise the final
+    gap with both stopped does."""
     if not math.isfinite(gap):
         return 0.0
     closing = v - v_lead
@@ -116,7 +138,7 @@ def urgency(strategic, x_from, x_by, b, i, centre_x):
 @kernel
 def cooperate(b, t):
     """``cf_accel`` with the urgent drivers settling behind their target lane's vehicle
-    and the one behind it dropping back (:func:`twin.traffic.strategic.cooperate`)."""
+    and the one behind it dropping back (module doc)."""
     vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
     valid = vehicles.valid
     lane_to, lane_from, params = drivers.lane, drivers.lane_from, drivers.cf
@@ -124,13 +146,14 @@ def cooperate(b, t):
     key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
     sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
     model, obstacle = settings.model, settings.obstacle_cf
+    start, most = settings.cooperate_from, settings.cooperative_decel
     n = valid.shape[1]
     for i in range(n):
         if not valid[b, i] or strategic[b, i] == 0 or lane_to[b, i] != lane_from[b, i]:
             continue
         x = sx[b, i]
         length = slength[b, i]
-        if urgency(strategic, x_from, x_by, b, i, x + 0.5 * length) < COOPERATE_FROM:
+        if urgency(strategic, x_from, x_by, b, i, x + 0.5 * length) < start:
             continue
         target = lane_to[b, i] + strategic[b, i]
         if not -4 <= target <= -1:
@@ -144,7 +167,7 @@ def cooperate(b, t):
         if ahead >= 0:
             room = sx[b, ahead] - x - length
             behind_it = cf(model, params, obstacle, b, n, i, speed, sspeed[b, ahead], room)
-            cf_accel[b, i] = min(cf_accel[b, i], max(behind_it, -COOPERATIVE_DECEL))
+            cf_accel[b, i] = min(cf_accel[b, i], max(behind_it, -most))
         if behind < 0 or behind >= n:
             continue
         gap = x - sx[b, behind] - slength[b, behind]
@@ -152,4 +175,4 @@ def cooperate(b, t):
             continue
         room = max(gap, MIN_ROOM)
         drop_back = cf(model, params, obstacle, b, n, behind, sspeed[b, behind], speed, room)
-        cf_accel[b, behind] = min(cf_accel[b, behind], max(drop_back, -COOPERATIVE_DECEL))
+        cf_accel[b, behind] = min(cf_accel[b, behind], max(drop_back, -most))
