@@ -1,12 +1,16 @@
 """``i24twin/WaveDampening-v0``: one AV (the ego) in recorded I-24 waves, as a
-Gymnasium environment.
+Gymnasium environment, single or batched.
 
 The ego is driven by the agent; the visible vehicles around it by the traffic manager
 with the run's behaviour (calibrated drivers where the store is calibrated), the
-recording beyond them as the ghost-cell boundary (:mod:`twin.cosim`). Importing this
-module registers the environment: ``gymnasium.make("i24twin/WaveDampening-v0")``
-after ``import twin.control.env``, or ``gymnasium.make("twin.env:i24twin/WaveDampening-v0")``
-(Gymnasium imports the module first).
+recording beyond them as the ghost-cell boundary (:mod:`twin.cosim`). Both the single
+env (:class:`WaveDampeningEnv`) and the vector env
+(:class:`twin.control.vector_env.VectorWaveDampeningEnv`, many episodes stepped in one
+kernel call) run on the batched core (:mod:`twin.control.engine`). Importing this
+module registers both: ``gymnasium.make("i24twin/WaveDampening-v0")`` after ``import
+twin.env`` (or ``gymnasium.make("twin.env:i24twin/WaveDampening-v0")``), and
+``gymnasium.make_vec("i24twin/WaveDampening-v0", num_envs=N,
+vectorization_mode="vector_entry_point", world="kinematic")``.
 
 Episodes are drawn from the congested cells of the store (:mod:`twin.runners.episodes`;
 the embedded morning, preset C, by default), split by time: ``train`` episodes lie
@@ -16,17 +20,19 @@ before ``split_time`` (default: the middle of the recording), ``test`` episodes 
 ``world="kinematic"``, one step per action): ``accel`` (default), a Box
 [-3.0, 1.5] m/s^2, the ego's commanded acceleration; or ``speed``, a Box [0, 35] m/s,
 a desired speed the ego tracks with a speed loop (a = 1.0 (v_cmd - v), within the
-same limits).
+same limits). An action outside the Box is clipped to it; a NaN or infinite one is
+refused with a ValueError naming the sub-env and the value.
 
 **Observation** (Box, float32, :data:`OBSERVATION`, bounds :data:`OBS_LOW` and
-:data:`OBS_HIGH`, values clipped to them): own speed [m/s] and acceleration
-[m/s^2]; gap [m] to the leader in the own lane (bumper to bumper, 200 when none within
-200 m) and its speed (the own speed when none); the same of the follower; and the
-recorded speeds ahead [m/s], per lane -1..-4, the mean of the recording 0-200, 200-400
-and 400-600 m downstream of the ego (what a connected vehicle could know; the run's
-default desired speed ``vel_default`` where nobody is recorded). Optional Gaussian
-noise (``obs_noise``, sd as a fraction of each value) and latency (``latency_steps``,
-control steps).
+:data:`OBS_HIGH`, values clipped to them), of the state after the step
+(:mod:`twin.control.observe`): own speed [m/s] and acceleration [m/s^2] (measured over
+the step); gap [m] to the leader in the own lane (bumper to bumper, 200 when none
+within 200 m) and its speed (the own speed when none); the same of the follower; and
+the recorded speeds ahead [m/s], per lane -1..-4, the mean of the recording 0-200,
+200-400 and 400-600 m downstream of the ego (what a connected vehicle could know; the
+run's default desired speed ``vel_default`` where nobody is recorded). Optional
+Gaussian noise (``obs_noise``, sd as a fraction of each value) and latency
+(``latency_steps``, control steps).
 
 **Reward** per control step (:class:`Reward`; weights settable): minus the fuel [g] of
 the AV and its 5 followers over the step (RAV4 model, :mod:`twin.physics.energy`), minus
@@ -34,29 +40,31 @@ the AV and its 5 followers over the step (RAV4 model, :mod:`twin.physics.energy`
 minus ``ttc_weight`` when its time to collision is under ``ttc_min`` s.
 
 ``terminated``: the AV collided; ``truncated``: the episode's end (or it left the map
-and data). At the end ``info["metrics"]`` holds the benchmark's metrics
-(:func:`twin.metrics.table.flatten`).
+and data). At the end ``info["metrics"]`` holds the episode's figures
+(:func:`twin.control.observe.metrics`: the AV and its followers' economy, the ego's
+speed error against its recording, collisions, lane changes, least time to collision,
+acceleration and jerk, the safety layer's time, the return).
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
 
+from twin.control import observe
+from twin.control.engine import CONTROL_DT, Episodes, check_actions, noisy
 from twin.core.i24 import LANES
 from twin.cosim.config import SCENARIO_B, CosimConfig, switch_world
-from twin.metrics.economy import followers
-from twin.physics import energy
-from twin.traffic.controller_api import EgoCommand, Observation
+from twin.traffic.controller_api import Observation
 
 ENV_ID = "i24twin/WaveDampening-v0"
-CONTROL_DT = 0.1  # [s] the agent's step
+VECTOR_ENTRY_POINT = "twin.control.vector_env:VectorWaveDampeningEnv"
 ACCEL_RANGE = (-3.0, 1.5)  # [m/s^2] the action's bounds
 SPEED_RANGE = (0.0, 35.0)  # [m/s] the action's bounds as a desired speed
 SPEED_GAIN = 1.0  # [1/s] of the speed loop under the speed action
-GAP_CAP = 200.0  # [m] gaps are reported up to this
+GAP_CAP = observe.GAP_CAP  # [m] gaps are reported up to this
 AHEAD_BINS = ((0.0, 200.0), (200.0, 400.0), (400.0, 600.0))  # [m] downstream of the ego
 #: The observation's entries, in order.
 OBSERVATION = (
@@ -131,12 +139,100 @@ class WaveDampeningEnv(gym.Env):
         world: str | None = None,
         seed: int = 0,
     ):
-        from mapgen.build import default_map
+        setup = EnvSetup.make(
+            data, split=split, split_time=split_time, duration=duration, action=action,
+            reward=reward, obs_noise=obs_noise, latency_steps=latency_steps, cosim=cosim,
+            world=world, seed=seed,
+        )  # fmt: skip
+        self.setup = setup
+        self.store, self.bundle, self.cosim = setup.store, setup.bundle, setup.cosim
+        self.road, self.duration, self.action_kind = setup.cosim.road, setup.duration, action
+        self.reward_weights = setup.reward
+        self.obs_noise, self.latency_steps, self.base_seed = obs_noise, latency_steps, seed
+        self.action_space = setup.action_space()
+        self.observation_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+        self.episodes = setup.episodes(1)
+        self.episode = -1
+        self._history: list[np.ndarray] = []
+
+    @property
+    def sim(self):
+        """The running episode's cosimulation facade (the physics world), or None."""
+        return self.episodes.sim
+
+    @property
+    def t0(self) -> float:
+        """[s unix] the running episode's start."""
+        return float(self.episodes.state.episodes.t0[0])
+
+    # -- Gymnasium ----------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """A new episode: ``options={"episode": i}`` picks one, else drawn."""
+        super().reset(seed=seed)
+        index = (options or {}).get("episode")
+        k = self.episodes.reset(0, self.np_random, index)
+        self.episode = k
+        self._history = []
+        obs = self._observation()
+        return obs, {"episode": k, "ego_record_id": self.episodes.record_id[0]}
+
+    def step(self, action):
+        if self.episode < 0:
+            raise RuntimeError("call reset() before step()")
+        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        if action.size != 1:
+            raise ValueError(f"the action must be one number, got {action!r}")
+        low, high = float(self.action_space.low[0]), float(self.action_space.high[0])
+        actions = check_actions(action, low, high, np.ones(1, dtype=bool))
+        episodes = self.episodes
+        episodes.step(actions)
+        obs = self._observation()
+        terminated = bool(episodes.collided[0])
+        truncated = bool(episodes.done[0]) and not terminated
+        fuel = float(episodes.stats[0, observe.FUEL_SEEN])
+        info = {"fuel_g_total": fuel}
+        if terminated or truncated:
+            info["metrics"] = episodes.metrics(0)
+        return obs, float(episodes.reward[0]), terminated, truncated, info
+
+    def close(self):
+        self.episodes.close()
+
+    # -- inside -------------------------------------------------------------------------
+
+    def _observation(self) -> np.ndarray:
+        obs = noisy(self.episodes.obs, self.obs_noise, [self.np_random], OBS_LOW, OBS_HIGH)[0]
+        self._history.append(obs)
+        del self._history[: -(self.latency_steps + 1)]
+        return self._history[0]
+
+
+@dataclass(frozen=True)
+class EnvSetup:
+    """What an env (single or vector) is made of: the recording and the map, opened
+    once per process; the episodes' configuration and where they start; the spaces'
+    settings. :meth:`make` checks every setting."""
+
+    store: object
+    bundle: object
+    traffic: object
+    cosim: CosimConfig
+    cells: object
+    sampling: object
+    duration: float
+    action: str
+    reward: Reward
+    seed: int
+
+    @classmethod
+    def make(cls, data=None, *, split="train", split_time=None, duration=120.0, action="accel",
+             reward=None, obs_noise=0.0, latency_steps=0, cosim=SCENARIO_B, world=None,
+             seed=0) -> "EnvSetup":  # fmt: skip
+        """Raises: ValueError naming an impossible setting."""
         from twin.cosim.windows import road_limits
-        from twin.data.empirical import EmpiricalTraffic
         from twin.runners.episodes import EpisodeSampling, measure_cells
         from twin.runners.evaluation import CONGESTED_TRAVEL
-        from twin.runners.run import open_data
 
         if split not in ("train", "test"):
             raise ValueError(f"split must be 'train' or 'test', got {split!r}")
@@ -148,24 +244,14 @@ class WaveDampeningEnv(gym.Env):
             raise ValueError(f"obs_noise must be >= 0, got {obs_noise!r}")
         if not (isinstance(latency_steps, int) and latency_steps >= 0):
             raise ValueError(f"latency_steps must be an integer >= 0, got {latency_steps!r}")
-        self.store = open_data(data or "embedded:morning", progress=False)
-        self.traffic = EmpiricalTraffic(self.store)
-        self.bundle = default_map(progress=False)
+        store, bundle, traffic = opened(data or "embedded:morning")
         if world is not None:
             cosim = switch_world(cosim, world)
         steps = CONTROL_DT / cosim.dt
         if abs(steps - round(steps)) > 1e-9:
             raise ValueError(f"the step {cosim.dt} s must divide the control step {CONTROL_DT} s")
-        self.cosim = cosim
-        # the reset's first step shows the controller the ego; where that step is a
-        # whole control step (the kinematic world) the episode is that much longer, so
-        # that the agent acts over all of ``duration`` in both worlds
-        self._peek = cosim.dt if round(steps) == 1 else 0.0
-        self.road = cosim.road
-        self.duration, self.action_kind = float(duration), action
-        self.reward_weights = reward or Reward()
-        self.obs_noise, self.latency_steps, self.base_seed = obs_noise, latency_steps, seed
-        first, last = self.store.time_range(self.road)
+        road = cosim.road
+        first, last = store.time_range(road)
         split_time = 0.5 * (first + last) if split_time is None else float(split_time)
         if not first < split_time < last:
             raise ValueError(
@@ -173,161 +259,44 @@ class WaveDampeningEnv(gym.Env):
                 f"{last:.0f})"
             )
         window = (None, split_time) if split == "train" else (split_time, None)
-        self.sampling = EpisodeSampling(roads=(self.road.value,), congested_share=1.0)
-        limits = {self.road: road_limits(self.bundle, self.traffic, self.road)}
-        self.cells = measure_cells(
-            self.store, self.sampling, limits, self.duration, window=window,
-            room_speed=CONGESTED_TRAVEL,
+        sampling = EpisodeSampling(roads=(road.value,), congested_share=1.0)
+        key = (id(store), road.value, float(duration), window)
+        if key not in _CELLS:
+            limits = {road: road_limits(bundle, traffic, road)}
+            _CELLS[key] = measure_cells(store, sampling, limits, float(duration), window=window,
+                                        room_speed=CONGESTED_TRAVEL)  # fmt: skip
+        return cls(store, bundle, traffic, cosim, _CELLS[key], sampling, float(duration), action,
+                   reward or Reward(), int(seed))  # fmt: skip
+
+    def action_space(self) -> gym.spaces.Box:
+        low, high = ACCEL_RANGE if self.action == "accel" else SPEED_RANGE
+        return gym.spaces.Box(low, high, shape=(1,), dtype=np.float32)
+
+    def episodes(self, count: int) -> Episodes:
+        """``count`` episodes of this setup on the batched core."""
+        w = self.reward
+        return Episodes(
+            self.store, self.bundle, self.cosim, self.cells, self.sampling, count=count,
+            duration=self.duration, action=self.action,
+            weights=(w.fuel_weight, w.gap_weight, w.gap_max, w.ttc_weight, w.ttc_min),
+            low=OBS_LOW, high=OBS_HIGH, base_seed=self.seed, traffic=self.traffic,
         )  # fmt: skip
-        low, high = ACCEL_RANGE if action == "accel" else SPEED_RANGE
-        self.action_space = gym.spaces.Box(low, high, shape=(1,), dtype=np.float32)
-        self.observation_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
-        self.sim = None
-        self.episode = -1
-        self._command = 0.0
-        self._last: Observation | None = None
-        self._history: list[np.ndarray] = []
-        self._followers: list[int] = []
-        self._collisions = 0
-        self._ego_accel = 0.0  # [m/s^2] measured over the last physics step
-        self._states = None  # the world's states after the last physics step
 
-    # -- Gymnasium ----------------------------------------------------------------------
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """A new episode: ``options={"episode": i}`` picks one, else drawn."""
-        from twin.cosim.cosimulator import Cosimulator
-        from twin.runners.episodes import PLACEMENT_ERRORS, draw_episode, episode_config
+_OPENED: dict = {}
+_CELLS: dict = {}
 
-        super().reset(seed=seed)
-        self.close()
-        index = (options or {}).get("episode")
-        for _ in range(20):  # an episode whose ego cannot be placed is drawn again
-            k = int(self.np_random.integers(0, 2**31 - 1)) if index is None else int(index)
-            spec = draw_episode(self.cells, self.sampling, self.base_seed, k)
-            config = episode_config(
-                self.cosim,
-                spec,
-                scenario="env",
-                t_max=self.duration + self._peek,
-                ego_controller="",
-                camera=replace(self.cosim.camera, enabled=False),
-            )
-            self.sim = Cosimulator(config, self.traffic, self.bundle, controller=self._drive)
-            try:
-                self.sim.reset()
-                break
-            except PLACEMENT_ERRORS:
-                self.sim.close()
-                self.sim = None
-                if index is not None:
-                    raise
-        if self.sim is None:
-            raise RuntimeError("no episode could be placed in 20 draws")
-        self.episode = k
-        # before the agent's first action the ego holds its speed (a speed action of 0
-        # would brake it at the full -3 m/s^2 through the step that shows it the ego)
-        hold = self.sim.ego.speed if self.action_kind == "speed" else 0.0
-        self._command, self._last, self._history = hold, None, []
-        self._collisions, self._ego_accel, self._states = 0, 0.0, None
-        self._advance()  # one world step: the controller sees the ego once
-        rows = self.sim.log.vehicles()
-        self._followers = followers(rows, self.sim.ego_id)
-        return self._observation(), {"episode": k, "ego_record_id": self.sim.ego.id}
 
-    def step(self, action):
-        action = np.asarray(action, dtype=np.float64).reshape(-1)
-        if action.size != 1 or not np.isfinite(action[0]):
-            raise ValueError(f"the action must be one finite number, got {action!r}")
-        low, high = float(self.action_space.low[0]), float(self.action_space.high[0])
-        self._command = float(np.clip(action[0], low, high))
-        fuel = 0.0
-        steps = max(1, round(CONTROL_DT / self.sim.config.dt))
-        for _ in range(steps):
-            if self.sim.done:
-                break
-            fuel += self._advance()
-        collided = len(self.sim.counters.collisions) > self._collisions and any(
-            self.sim.ego_id in (a, b)
-            for _, a, b in self.sim.counters.collisions[self._collisions :]
-        )
-        self._collisions = len(self.sim.counters.collisions)
-        obs = self._observation()
-        reward = self._reward(fuel)
-        terminated = bool(collided)
-        truncated = bool(self.sim.done) and not terminated
-        info = {"fuel_g": fuel}
-        if terminated or truncated:
-            info["metrics"] = self._metrics()
-        return obs, reward, terminated, truncated, info
+def opened(data: str):
+    """(store, map, recorded traffic) of ``data``, opened once per process."""
+    if data not in _OPENED:
+        from mapgen.build import default_map
+        from twin.data.empirical import EmpiricalTraffic
+        from twin.runners.run import open_data
 
-    def close(self):
-        if self.sim is not None:
-            self.sim.close()
-            self.sim = None
-
-    # -- inside -------------------------------------------------------------------------
-
-    def _drive(self, obs: Observation) -> EgoCommand:
-        """The ego's controller: the agent's last action."""
-        self._last = obs
-        return EgoCommand(accel=action_accel(self.action_kind, self._command, obs.speed))
-
-    def _advance(self) -> float:
-        """One physics step; the fuel [g] of the AV and its followers in it (their
-        measured acceleration over the step, as the run's energy figures)."""
-        before = self._states if self._states is not None else self.sim.world.states()
-        self.sim.step()
-        states = self._states = self.sim.world.states()
-        dt = self.sim.config.dt
-        # ids are sorted in both; a vehicle new in this step has no acceleration yet
-        where = np.minimum(np.searchsorted(before.id, states.id), max(before.id.size - 1, 0))
-        known = before.id[where] == states.id if before.id.size else np.zeros(states.id.size, bool)
-        accel = np.where(known, states.speed - before.speed[where], 0.0) / dt
-        ego = states.id == self.sim.ego_id
-        self._ego_accel = float(accel[ego][0]) if ego.any() else 0.0
-        mine = np.isin(states.id, [self.sim.ego_id, *self._followers])
-        if not mine.any():
-            return 0.0
-        _, _, pitch = self.sim.world.road.to_world(
-            states.road[mine],
-            states.x[mine] + 0.5 * self.sim.world.params.length[mine],
-            states.y[mine],
-        )
-        speed = np.maximum(states.speed[mine], 0.0)
-        return float(energy.RAV4_2019.rate(speed, accel[mine], np.tan(pitch)).sum() * dt)
-
-    def _observation(self) -> np.ndarray:
-        states = self._states
-        x = float(states.x[states.id == self.sim.ego_id][0])
-        ahead = ahead_speeds(self.traffic, self.road, self.sim.t, x, self.cosim.vel_default)
-        vector = features(self._last, self._ego_accel, ahead)
-        if self.obs_noise > 0:
-            vector = vector * (1.0 + self.obs_noise * self.np_random.standard_normal(vector.size))
-        vector = np.clip(vector, OBS_LOW, OBS_HIGH).astype(np.float32)
-        self._history.append(vector)
-        del self._history[: -(self.latency_steps + 1)]
-        return self._history[0]
-
-    def _reward(self, fuel: float) -> float:
-        w = self.reward_weights
-        obs = self._last
-        k = obs.lanes.lanes.index(obs.lane)
-        gap, lead = float(obs.lanes.leader_gap[k]), float(obs.lanes.leader_speed[k])
-        reward = -w.fuel_weight * fuel
-        if math.isfinite(gap) and obs.speed > 1.0 and gap / obs.speed > w.gap_max:
-            reward -= w.gap_weight
-        closing = obs.speed - lead if math.isfinite(gap) else 0.0
-        if closing > 0 and gap / closing < w.ttc_min:
-            reward -= w.ttc_weight
-        return float(reward)
-
-    def _metrics(self) -> dict:
-        from twin.metrics.measure import measure
-        from twin.metrics.table import flatten
-
-        figures, _ = measure(self.sim, self.store, 0.0, 0.0)
-        return flatten(figures)
+        store = open_data(data, progress=False)
+        _OPENED[data] = (store, default_map(progress=False), EmpiricalTraffic(store))
+    return _OPENED[data]
 
 
 def action_accel(kind: str, command: float, speed: float) -> float:
@@ -383,9 +352,15 @@ def ahead_speeds(traffic, road, t: float, x: float, free_speed: float) -> list[f
 
 
 def register_envs() -> None:
-    """Register ``i24twin/WaveDampening-v0`` with Gymnasium (done on import)."""
+    """Register ``i24twin/WaveDampening-v0`` with Gymnasium (done on import): the single
+    env, and the batched vector env for ``gymnasium.make_vec(...,
+    vectorization_mode="vector_entry_point")``."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="twin.control.env:WaveDampeningEnv")
+        gym.register(
+            id=ENV_ID,
+            entry_point="twin.control.env:WaveDampeningEnv",
+            vector_entry_point=VECTOR_ENTRY_POINT,
+        )
 
 
 register_envs()

@@ -98,6 +98,10 @@ class Cosimulator:
             set, else the traffic manager drives the ego.
         shared: what the core shares between episodes of this configuration (made
             here when not given; a runner of many episodes makes it once).
+        ego_kind: who drives the ego, as a ``ctrl`` kind of
+            :mod:`twin.traffic.kernels.state` (the env's agent: ACTION); default: from
+            the controller.
+        log: keep the trajectory log (the env keeps none).
 
     Raises:
         ControllerError: ``config.ego_controller`` cannot be imported.
@@ -112,6 +116,8 @@ class Cosimulator:
         *,
         controller=None,
         shared: Shared | None = None,
+        ego_kind: int | None = None,
+        log: bool = True,
     ):
         self.config = config
         self.traffic = traffic
@@ -126,10 +132,13 @@ class Cosimulator:
             if compiled
             else (kinds.PYTHON if self.controller is not None else kinds.DRIVER)
         )
+        if ego_kind is not None:
+            kind, self.controller = ego_kind, None
         self.shared = (shared or Shared.make(traffic.store, bundle, config, traffic=traffic))
         self.shared = self.shared.with_controllers(kind)
         self.behaviour = self.shared.behaviour
-        self.batch = Batch(self.shared, 1, log=True)
+        self.batch = Batch(self.shared, 1, log=log)
+        self.keeps_log = log
         self.state, self.core = self.batch.state, self.batch.core
         if config.world == "physics":
             from twin.physics.world import PhysicsConfig, PhysicsWorld
@@ -274,7 +283,8 @@ class Cosimulator:
         self._bodies = np.empty(0, np.int64)
         self._mirror_bodies()
         self._take_controllers()
-        self._sync(record_from=0)
+        self._synced = -1
+        self._sync()
 
     def step(self) -> None:
         """Steps 3 to 7: desired speeds, one physics step, despawn, spawn, ghost reload."""
@@ -309,19 +319,22 @@ class Cosimulator:
         self.batch.check(0)
         self._mirror_bodies()
         self._take_controllers()
-        self._sync(record_from=self.step_index)
+        self._sync()
         self.times.steps += 1
         self.times.total += time.perf_counter() - start
 
     def run(self, progress: bool = False, on_step: Callable[["Cosimulator"], None] | None = None):
         """Reset (if not done yet) and step to the end, with a progress bar if asked;
-        ``on_step(self)`` is called after each step (and after a reset made here)."""
+        ``on_step(self)`` is called after each step (and after a reset made here). In
+        the kinematic world with no Python controller and no ``on_step``, the core runs
+        the episode's steps back to back and the log is read once at the end."""
         from twin.core.progress import progress_bar
 
         if self.log is None:
             self.reset()
             if on_step is not None:
                 on_step(self)
+        fast = self.config.world != "physics" and on_step is None and not self._python_kinds()
         with progress_bar(
             progress=progress,
             total=self.config.steps,
@@ -329,11 +342,29 @@ class Cosimulator:
             unit="step",
             desc=f"scenario {self.config.scenario}",
         ) as bar:
+            if fast and not self.done:
+                start = time.perf_counter()
+                before = self.step_index
+                while not self.state.episodes.done[0]:
+                    core_step.step_batch(self.core)
+                self.times.physics += time.perf_counter() - start
+                self.times.total += time.perf_counter() - start
+                self.times.steps += self.step_index - before
+                self.batch.check(0)
+                self._take_controllers()
+                self._sync()
+                bar.update(self.step_index - before)
             while not self.done:
                 self.step()
                 if on_step is not None:
                     on_step(self)
                 bar.update(1)
+
+    def _python_kinds(self) -> bool:
+        """Whether a vehicle may be driven by a Python controller (the ego's, an AV's)."""
+        cs = self.shared.settings
+        kinds_used = (cs.ego_controller, cs.av_controller)
+        return any(k % kinds.GUARDED == kinds.PYTHON for k in kinds_used)
 
     # -- the controllers a user wrote ---------------------------------------------------
 
@@ -468,9 +499,9 @@ class Cosimulator:
             raise KeyError(f"not a simulated vehicle: {ids[~found].tolist()}")
         return valid[order][where]
 
-    def _sync(self, record_from: int) -> None:
+    def _sync(self) -> None:
         """The log rows, windows and counters of the steps the core took since the last
-        call (one, or the reset's)."""
+        call."""
         st, ep = self.state, self.state.episodes
         k = self.step_index
         lo, hi = ep.windows[0, 0], ep.windows[0, 3]
@@ -479,21 +510,11 @@ class Cosimulator:
             visible=(float(ep.windows[0, 1]), float(ep.windows[0, 2])),
             ghost_front=(float(ep.windows[0, 2]), float(hi)),
         )
-        append_step(self.log, self.shared, st, 0, k, self.config.dt, self._heading[self.direction])
-        c = self.counters
-        c.spawned, c.spawned_initially = int(ep.spawned[0]), int(ep.spawned_initially[0])
-        c.despawned = int(ep.despawned[0])
-        c.skipped_overlap, c.skipped_invalid = int(ep.skipped_overlap[0]), int(ep.skipped_invalid[0])
-        c.skipped_full, c.off_road = int(ep.skipped_full[0]), int(ep.off_road[0])
-        n = min(int(ep.spawn_error_count[0]), ep.spawn_errors.shape[1])
-        c.spawn_speed_error = ep.spawn_errors[0, :n].tolist()
-        m = min(int(ep.collisions[0]), layout.COLLISIONS_KEPT)
-        c.collisions = [(float(t), int(a), int(b)) for t, a, b in ep.collision_log[0, :m]]
-        if ep.ended[0] == layout.EGO_LEFT and not c.ended:
-            c.ended = (
-                f"the ego left the range of map and data (x = {ep.ended_x[0]:.1f} m) at "
-                f"{self.sim_time:.2f} s"
-            )
+        if self.keeps_log and k > self._synced:
+            append_steps(self.log, self.shared, st, 0, self._synced + 1, k, self.config.dt,
+                         self._heading[self.direction])  # fmt: skip
+        self._synced = k
+        counters_of(self.counters, st, 0, self.sim_time)
 
 
 def _compiled_specs() -> set[str]:
@@ -512,34 +533,54 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
-def append_step(log: TrajectoryLog, shared: Shared, state, b: int, k: int, dt: float,
-                road_heading: float) -> None:  # fmt: skip
-    """Append episode ``b``'s log row ``k`` of the core's log to ``log`` (the vehicles
-    in id order, the windows, the ghosts at their rate)."""
+def append_steps(log: TrajectoryLog, shared: Shared, state, b: int, k0: int, k1: int,
+                 dt: float, road_heading: float) -> None:  # fmt: skip
+    """Append episode ``b``'s log rows of steps ``k0`` to ``k1`` (the core's log) to
+    ``log``: the vehicles of each step in id order, the windows, the ghosts at their
+    rate."""
     lg = state.log
-    ids = lg.id[b, k]
-    valid = ids >= 0
-    order = np.argsort(ids[valid], kind="stable")
-    slots = np.flatnonzero(valid)[order]
-    rec = shared.recording
-    tids = np.asarray(rec.tid)[lg.r[b, k, slots]].astype(np.int64)
+    rec_tid = np.asarray(shared.recording.tid)
+    ids = lg.id[b, k0 : k1 + 1]
+    step, slot = np.nonzero(ids >= 0)
+    order = np.lexsort((ids[step, slot], step))
+    step, slot = step[order], slot[order]
+    k = step + k0
     ego = int(state.episodes.ego_id[b])
     log.add_rows(
-        time=k * dt, id=ids[slots], tid=tids, ego_id=ego, lane=lg.lane[b, k, slots],
-        x=lg.x[b, k, slots], y=lg.y[b, k, slots], z=lg.z[b, k, slots],
-        speed=lg.speed[b, k, slots], accel_cmd=lg.accel_cmd[b, k, slots],
-        heading=road_heading + lg.yaw[b, k, slots], drive_power=lg.drive_power[b, k, slots],
+        time=k * dt, id=ids[step, slot], tid=rec_tid[lg.r[b, k, slot]].astype(np.int64),
+        ego_id=ego, lane=lg.lane[b, k, slot], x=lg.x[b, k, slot], y=lg.y[b, k, slot],
+        z=lg.z[b, k, slot], speed=lg.speed[b, k, slot], accel_cmd=lg.accel_cmd[b, k, slot],
+        heading=road_heading + lg.yaw[b, k, slot], drive_power=lg.drive_power[b, k, slot],
     )  # fmt: skip
-    w = lg.windows[b, k]
-    log.add_window_bounds(k * dt, *w)
-    if k % lg.ghost_every == 0:
-        row = k // lg.ghost_every
+    for j in range(k0, k1 + 1):
+        log.add_window_bounds(j * dt, *lg.windows[b, j])
+    every = lg.ghost_every
+    for j in range((k0 + every - 1) // every * every, k1 + 1, every):
+        row = j // every
         n = int(lg.ghost_count[b, row])
         log.add_ghost_rows(
-            k * dt, np.asarray(rec.tid)[lg.ghost_r[b, row, :n]].astype(np.int32),
-            lg.ghost_lane[b, row, :n], lg.ghost_x[b, row, :n], lg.ghost_y[b, row, :n],
-            lg.ghost_speed[b, row, :n],
+            j * dt, rec_tid[lg.ghost_r[b, row, :n]].astype(np.int32), lg.ghost_lane[b, row, :n],
+            lg.ghost_x[b, row, :n], lg.ghost_y[b, row, :n], lg.ghost_speed[b, row, :n],
         )  # fmt: skip
+
+
+def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
+    """``c`` with episode ``b``'s counts from the core."""
+    ep = state.episodes
+    c.spawned, c.spawned_initially = int(ep.spawned[b]), int(ep.spawned_initially[b])
+    c.despawned = int(ep.despawned[b])
+    c.skipped_overlap, c.skipped_invalid = int(ep.skipped_overlap[b]), int(ep.skipped_invalid[b])
+    c.skipped_full, c.off_road = int(ep.skipped_full[b]), int(ep.off_road[b])
+    n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
+    c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
+    m = min(int(ep.collisions[b]), layout.COLLISIONS_KEPT)
+    c.collisions = [(float(t), int(x), int(y)) for t, x, y in ep.collision_log[b, :m]]
+    if ep.ended[b] == layout.EGO_LEFT and not c.ended:
+        c.ended = (
+            f"the ego left the range of map and data (x = {ep.ended_x[b]:.1f} m) at "
+            f"{sim_time:.2f} s"
+        )
+    return c
 
 
 class TrafficView:

@@ -36,7 +36,9 @@ PARAMETERS = (
     "vehicle_class", "length", "width", "height", "mass", "eff_mass", "max_power",
     "drag_area", "rolling", "mu", "driven_share", "wheelbase", "cg_height", "wheel_radius",
 )  # fmt: skip
-STATE = ("valid", "id", "x", "y", "yaw", "speed", "yaw_rate", "z", "grade", "lane", "drive_power")
+STATE = (
+    "valid", "top", "id", "x", "y", "yaw", "speed", "yaw_rate", "z", "grade", "lane", "drive_power"
+)  # fmt: skip
 Bodies = namedtuple("Bodies", STATE + PARAMETERS)
 Profile = namedtuple("Profile", "road stations heights slopes spacing")
 
@@ -44,12 +46,12 @@ Profile = namedtuple("Profile", "road stations heights slopes spacing")
 def bodies(b: int, n: int) -> Bodies:
     """Empty bodies of ``b`` episodes with ``n`` slots."""
     ints = ("id", "lane", "vehicle_class")
-    return Bodies(
-        **{
-            name: np.zeros((b, n), bool if name == "valid" else (np.int64 if name in ints else float))
-            for name in Bodies._fields
-        }
-    )
+    arrays = {
+        name: np.zeros((b, n), bool if name == "valid" else (np.int64 if name in ints else float))
+        for name in Bodies._fields
+    }
+    arrays["top"] = np.zeros(b, np.int64)  # one past the highest valid slot
+    return Bodies(**arrays)
 
 
 def body_columns(params: VehicleParams) -> dict[str, np.ndarray]:
@@ -112,22 +114,23 @@ def lane_of(y):
 
 
 @kernel(inline=True)
-def _count_below(stations, spacing, s, inclusive):
-    """How many ``stations`` are below ``s`` (or at it, where ``inclusive``); found
-    directly where they are evenly ``spacing`` apart, else by bisection."""
-    n = stations.size
+def _piece(stations, spacing, s):
+    """The index j of the profile piece [stations[j], stations[j+1]] holding ``s``
+    (within the profile): found directly where the stations are evenly ``spacing``
+    apart, else by bisection."""
+    last = stations.size - 1
     if spacing > 0.0:
-        k = min(max(int(math.floor((s - stations[0]) / spacing)) + 1, 0), n)
-        while k < n and (stations[k] < s or (inclusive and stations[k] == s)):
-            k += 1
-        while k > 0 and not (stations[k - 1] < s or (inclusive and stations[k - 1] == s)):
-            k -= 1
-        return k
-    lo, hi = 0, n
-    while lo < hi:
+        j = min(max(int((s - stations[0]) / spacing), 0), last - 1)
+        if s < stations[j] and j > 0:  # rounding at a station
+            j -= 1
+        elif s >= stations[j + 1] and j < last - 1:
+            j += 1
+        return j
+    lo, hi = 0, last
+    while hi - lo > 1:
         mid = (lo + hi) // 2
-        if stations[mid] < s or (inclusive and stations[mid] == s):
-            lo = mid + 1
+        if stations[mid] <= s:
+            lo = mid
         else:
             hi = mid
     return lo
@@ -138,22 +141,18 @@ def ground(road, stations, heights, slopes, spacing, centre_x):
     """(height [m], grade [-] along travel) of the pavement of ``road`` (+1, -1) under
     road-frame ``centre_x``, from the profile (``stations``, ``heights``, ``slopes``,
     even ``spacing`` or 0; :meth:`mapgen.road.RoadModel.to_world`: it extends flat
-    beyond its ends)."""
+    beyond its ends). On a profile point, eastbound drives onto the piece after it,
+    westbound onto the piece before."""
     last = stations.size - 1
     s = centre_x if road > 0 else SEGMENT_LENGTH - centre_x
-    if s <= stations[0]:
-        height = heights[0]
-    elif s >= stations[last]:
-        height = heights[last]
-    else:
-        j = min(_count_below(stations, spacing, s, True) - 1, last - 1)
-        w = (s - stations[j]) / (stations[j + 1] - stations[j])
-        height = heights[j] + w * (heights[j + 1] - heights[j])
-    if not stations[0] <= s <= stations[last]:
-        return height, 0.0
-    # eastbound drives onto the piece after a profile point, westbound the one before
-    piece = min(max(_count_below(stations, spacing, s, road > 0) - 1, 0), last - 1)
-    slope = slopes[piece]
+    if s < stations[0] or s > stations[last]:
+        return (heights[0] if s < stations[0] else heights[last]), 0.0
+    j = _piece(stations, spacing, s)
+    w = (s - stations[j]) / (stations[j + 1] - stations[j])
+    height = heights[j] + w * (heights[j + 1] - heights[j])
+    if road < 0 and s == stations[j] and j > 0:
+        j -= 1
+    slope = slopes[j]
     return height, slope if road > 0 else -slope
 
 
@@ -188,7 +187,7 @@ def integrate(b, bodies, accel, steer, prof, dt):
     road, stations, heights, slopes, spacing = (
         prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing
     )
-    for i in range(valid.shape[1]):
+    for i in range(bodies.top[b]):
         if not valid[b, i]:
             continue
         v0 = speed[b, i]
@@ -241,9 +240,9 @@ def overlaps(b, bodies, order, listed, pairs):
     into ``pairs[b]`` and returns how many (-1: more than that)."""
     valid, x, y, yaw = bodies.valid, bodies.x, bodies.y, bodies.yaw
     length, width = bodies.length, bodies.width
-    n = valid.shape[1]
+    n = bodies.top[b]
     m = 0
-    for k in range(n):  # last step's order, of the slots still valid
+    for k in range(valid.shape[1]):  # last step's order, of the slots still valid
         o = order[b, k]
         if o < 0:
             break
@@ -257,7 +256,7 @@ def overlaps(b, bodies, order, listed, pairs):
             order[b, m] = i
             listed[b, i] = True
             m += 1
-    if m < n:
+    if m < valid.shape[1]:
         order[b, m] = -1
     for k in range(1, m):  # insertion sort by centre x
         o = order[b, k]

@@ -475,7 +475,7 @@ class TrafficManager:
             return np.broadcast_to(np.asarray(values, dtype), (rows, n)).copy()
 
         vehicles = state.Vehicles(
-            valid=valid, x=both(states.x), y=both(states.y), yaw=both(yaw),
+            valid=valid, top=np.full(rows, n, np.int64), x=both(states.x), y=both(states.y), yaw=both(yaw),
             speed=both(states.speed), lane=both(states.lane, np.int64), length=both(self._length),
             wheelbase=both(self._wheelbase), mu=both(self._mu),
         )  # fmt: skip

@@ -339,6 +339,12 @@ class Batch:
         if self.state.episodes.overflow.any():
             self.check(int(np.flatnonzero(self.state.episodes.overflow)[0]))
 
+    def check_all(self) -> None:
+        """Raise CoreError where an episode outgrew a capacity (the first, named)."""
+        overflow = np.flatnonzero(self.state.episodes.overflow)
+        if overflow.size:
+            self.check(int(overflow[0]))
+
     def check(self, b: int) -> None:
         """Raise CoreError where episode ``b`` outgrew a capacity, naming which."""
         flags = int(self.state.episodes.overflow[b])

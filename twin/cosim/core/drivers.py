@@ -189,7 +189,7 @@ def update_targets(b, core):
     time_to = ep.t0[b] + ep.steps[b] * core.settings.dt
     tgt_on, plan_next, plan_end, tgt_lane = slots.tgt_on, slots.plan_next, slots.plan_end, slots.tgt_lane
     strategic, lanes, lane_from = drivers.strategic, drivers.lane, drivers.lane_from
-    for i in range(valid.shape[1]):
+    for i in range(core.bodies.top[b]):
         if not valid[b, i] or not tgt_on[b, i]:
             continue
         if strategic[b, i] != 0 or lane_from[b, i] != lanes[b, i]:

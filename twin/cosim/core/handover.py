@@ -78,7 +78,7 @@ def despawn_outside(b, core):
     valid, x, ep = core.bodies.valid, core.bodies.x, core.episodes
     v0, v1, ego = ep.windows[b, 1], ep.windows[b, 2], ep.ego[b]
     gone = 0
-    for i in range(valid.shape[1]):
+    for i in range(core.bodies.top[b]):
         if valid[b, i] and i != ego and not v0 <= x[b, i] <= v1:
             remove(b, core, i)
             gone += 1
@@ -94,7 +94,10 @@ def remove(b, core, i):
     if h >= 0:
         table.flags[b, h] &= ~SIMULATED
         table.slot[b, h] = -1
-    core.bodies.valid[b, i] = False
+    bo = core.bodies
+    bo.valid[b, i] = False
+    while bo.top[b] > 0 and not bo.valid[b, bo.top[b] - 1]:
+        bo.top[b] -= 1
     core.slots.tgt_on[b, i] = False
     clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
 
@@ -136,7 +139,7 @@ def fits(b, core, x, y, speed, length, width):
     valid, bx, by, bspeed, blength, bwidth = bo.valid, bo.x, bo.y, bo.speed, bo.length, bo.width
     lane, lane_from = dr.lane, dr.lane_from
     c, rest, decel = cs.clearance, cs.clearance_at_rest, cs.spawn_decel
-    for j in range(valid.shape[1]):
+    for j in range(bo.top[b]):
         if not valid[b, j]:
             continue
         bv = max(bspeed[b, j], 0.0)
@@ -166,6 +169,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
             break
     if i < 0:
         return -1
+    bo.top[b] = max(bo.top[b], i + 1)
     seed = ep.seed[b]
     tid = rec.tid[r]
     bo.valid[b, i] = True
@@ -377,13 +381,12 @@ def lead_speeds(b, core):
     valid, x, ids, lanes = bo.valid, bo.x, bo.id, dr.lane
     params, base = dr.cf, sl.base_speed
     glane, gx, gspeed = gh.lane, gh.x, gh.speed
-    n = valid.shape[1]
     ego = ep.ego[b]
     ego_x = x[b, ego]
     leads = ep.leads
     for k in range(N_LANES):
         leads[b, k] = -1
-    for i in range(n):
+    for i in range(bo.top[b]):
         if not valid[b, i]:
             continue
         params[b, i, 0] = base[b, i]

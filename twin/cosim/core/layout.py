@@ -45,7 +45,8 @@ Episodes = namedtuple(
     "seed t0 step steps done ended ended_x ego ego_id ego_r next_id windows lead_speed leads "
     "spawned spawned_initially despawned skipped_overlap skipped_invalid skipped_full "
     "collisions collision_log off_road spawn_errors spawn_error_count touching "
-    "touching_count pair_count fuel speed_prev followers follower_count overflow",
+    "touching_count pair_count fuel fuel_sum group_distance speed_prev speed_prev_control "
+    "collisions_before followers follower_count overflow",
 )
 TidTable = namedtuple("TidTable", "key flags slot")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
@@ -107,7 +108,9 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         collision_log=np.zeros((b, COLLISIONS_KEPT, 3)), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),
         touching=np.zeros((b, TOUCHING_KEPT, 2), np.int64), touching_count=zeros.copy(),
-        pair_count=zeros.copy(), fuel=np.zeros(b), speed_prev=np.zeros((b, n)),
+        pair_count=zeros.copy(), fuel=np.zeros(b), fuel_sum=np.zeros(b),
+        group_distance=np.zeros(b), speed_prev=np.zeros((b, n)), speed_prev_control=np.zeros(b),
+        collisions_before=zeros.copy(),
         followers=np.full((b, FOLLOWERS), -1, np.int64), follower_count=zeros.copy(),
         overflow=zeros.copy(),
     )  # fmt: skip
@@ -147,7 +150,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
 def vehicles(bo) -> traffic.Vehicles:
     """The traffic kernels' view of the bodies (the same arrays)."""
     return traffic.Vehicles(
-        valid=bo.valid, x=bo.x, y=bo.y, yaw=bo.yaw, speed=bo.speed, lane=bo.lane,
+        valid=bo.valid, top=bo.top, x=bo.x, y=bo.y, yaw=bo.yaw, speed=bo.speed, lane=bo.lane,
         length=bo.length, wheelbase=bo.wheelbase, mu=bo.mu,
     )  # fmt: skip
 

@@ -59,6 +59,12 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
         order[b, i] = -1
         listed[b, i] = False
         ctrl[b, i] = 0
+    bo.top[b] = 0
+    if core.log.on:
+        ids = core.log.id
+        for k in range(ids.shape[1]):
+            for i in range(ids.shape[2]):
+                ids[b, k, i] = -1
     keys = core.table.key
     for h in range(keys.shape[1]):
         keys[b, h] = -1
@@ -70,6 +76,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.skipped_overlap[b], ep.skipped_invalid[b], ep.skipped_full[b] = 0, 0, 0
     ep.collisions[b], ep.off_road[b], ep.spawn_error_count[b] = 0, 0, 0
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
+    ep.fuel_sum[b], ep.group_distance[b], ep.collisions_before[b] = 0.0, 0.0, 0
     for k in range(4):
         ep.lead_speed[b, k] = math.nan
     c = t.counters
@@ -96,7 +103,7 @@ def _followers(b, core):
     count = 0
     for _ in range(FOLLOWERS):
         best = -1
-        for i in range(valid.shape[1]):
+        for i in range(bo.top[b]):
             if not valid[b, i] or i == ego or lane[b, i] != lane[b, ego] or x[b, i] >= x[b, ego]:
                 continue
             taken = False
@@ -124,7 +131,7 @@ def before_world(b, core):
         update_targets(b, core)
     decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
     speed, before = core.bodies.speed, ep.speed_prev
-    for i in range(speed.shape[1]):
+    for i in range(core.bodies.top[b]):
         before[b, i] = speed[b, i]
 
 
@@ -136,7 +143,7 @@ def after_world(b, core):
     bo, sl, ep, cs = core.bodies, core.slots, core.episodes, core.settings
     ep.step[b] += 1
     step = ep.step[b]
-    _checks(b, bo.valid, bo.speed, bo.lane, sl.just_spawned, sl.spawn_speed, sl.off_road,
+    _checks(b, bo.top[b], bo.valid, bo.speed, bo.lane, sl.just_spawned, sl.spawn_speed, sl.off_road,
             core.traffic.drivers.accel, ep.spawn_errors, ep.spawn_error_count, ep.off_road,
             cs.dt)  # fmt: skip
     if cs.kinematic:
@@ -154,19 +161,22 @@ def after_world(b, core):
     despawn_outside(b, core)
     snapshot(b, core, ep.t0[b] + step * cs.dt)
     ep.spawned[b] += enter_and_reload(b, core, False)
-    ep.fuel[b] = _fuel(b, core)
+    fuel, distance = _fuel(b, core)
+    ep.fuel[b] = fuel
+    ep.fuel_sum[b] += fuel
+    ep.group_distance[b] += distance
     record(b, core, step)
     ep.done[b] = step >= ep.steps[b] or ep.ended[b] != 0
 
 
 @kernel
-def _checks(b, valid, speed, lane, just_spawned, spawn_speed, off_road, accel, errors,
+def _checks(b, top, valid, speed, lane, just_spawned, spawn_speed, off_road, accel, errors,
             error_count, off_count, dt):  # fmt: skip
     """The speed error of the vehicles spawned before the step, one step after their
     impulse (|v - max(v_spawn + a_commanded dt, 0)| / max(v_spawn, 1 m/s); a braking
     vehicle slower than HOLD_SPEED may also be held at rest, as the physics world's
     static friction holds it); the vehicles off the four lanes, each counted once."""
-    for i in range(valid.shape[1]):
+    for i in range(top):
         if not valid[b, i]:
             continue
         if just_spawned[b, i]:
@@ -223,15 +233,16 @@ def _contacts(b, core, time):
 
 @kernel
 def _fuel(b, core):
-    """[g] the fuel of the AV and its followers over the step (the RAV4 model at each
-    one's speed, measured acceleration and grade; a vehicle new in the step has no
-    acceleration yet)."""
+    """([g], [m]) the fuel of the AV and its followers over the step (the RAV4 model at
+    each one's speed, measured acceleration and grade; a vehicle new in the step has no
+    acceleration yet) and the distance they drove (at the mean of the speeds before and
+    after)."""
     bo, ep, cs = core.bodies, core.episodes, core.settings
     valid, ids, speeds, grade = bo.valid, bo.id, bo.speed, bo.grade
     just_spawned, before, followers = core.slots.just_spawned, ep.speed_prev, ep.followers
     coefficients, dt = cs.fuel, cs.dt
-    total = 0.0
-    for i in range(valid.shape[1]):
+    total, distance = 0.0, 0.0
+    for i in range(bo.top[b]):
         if not valid[b, i]:
             continue
         mine = i == ep.ego[b]
@@ -243,7 +254,9 @@ def _fuel(b, core):
         speed = max(speeds[b, i], 0.0)
         accel = 0.0 if just_spawned[b, i] else (speeds[b, i] - before[b, i]) / dt
         total += fuel_rate(coefficients, speed, accel, grade[b, i])
-    return total * dt
+        if not just_spawned[b, i]:
+            distance += 0.5 * (speed + max(before[b, i], 0.0)) * dt
+    return total * dt, distance
 
 
 @kernel
@@ -257,7 +270,7 @@ def record(b, core, step):
     speed, yaw, power, r, new, accel = bo.speed, bo.yaw, bo.drive_power, sl.r, sl.just_spawned, dr.accel
     lid, lr, llane, lx, ly, lz = log.id, log.r, log.lane, log.x, log.y, log.z
     lspeed, laccel, lyaw, lpower = log.speed, log.accel_cmd, log.yaw, log.drive_power
-    for i in range(valid.shape[1]):
+    for i in range(bo.top[b]):
         if not valid[b, i]:
             lid[b, step, i] = -1
             continue

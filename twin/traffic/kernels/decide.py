@@ -124,14 +124,13 @@ def decide(b, step, time, seed, t):
     gather(b, t)
     sort_entries(b, t)
     follow(b, t)
-    valid, strategic = t.vehicles.valid, t.drivers.strategic
-    n = valid.shape[1]
-    for i in range(n):
+    valid, strategic, top = t.vehicles.valid, t.drivers.strategic, t.vehicles.top[b]
+    for i in range(top):
         if valid[b, i] and strategic[b, i] != 0:
             cooperate(b, t)
             break
-    _emergency(b, valid, sc.need, sc.cf_accel, sc.emergency, sc.command, settings.emergency_decel,
-               counters.emergency_steps)  # fmt: skip
+    _emergency(b, top, valid, sc.need, sc.cf_accel, sc.emergency, sc.command,
+               settings.emergency_decel, counters.emergency_steps)  # fmt: skip
     if step % settings.decision_steps == 0:
         expire(b, t)
         counters.lane_changes[b] += change_lanes(b, time, seed, t)
@@ -140,10 +139,10 @@ def decide(b, step, time, seed, t):
 
 
 @kernel(inline=True)
-def _emergency(b, valid, need, cf_accel, emergency, command, threshold, steps):
+def _emergency(b, top, valid, need, cf_accel, emergency, command, threshold, steps):
     """Where staying clear needs more than ``threshold`` [m/s^2], the command brakes as
     hard as it needs (and the step counts)."""
-    for i in range(valid.shape[1]):
+    for i in range(top):
         if not valid[b, i]:
             continue
         urgent = need[b, i] > threshold
@@ -164,7 +163,7 @@ def limit(b, t):
     ctrl, params, accel_out = drivers.ctrl, drivers.cf, drivers.accel
     command, emergency, need = sc.command, sc.emergency, sc.need
     column, brake_limit = settings.max_accel_column, settings.brake_limit
-    for i in range(valid.shape[1]):
+    for i in range(vehicles.top[b]):
         if not valid[b, i]:
             continue
         kind = ctrl[b, i] % state.GUARDED

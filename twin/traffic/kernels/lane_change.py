@@ -70,7 +70,7 @@ def expire(b, t):
     ``strategic_by``."""
     valid, x, length = t.vehicles.valid, t.vehicles.x, t.vehicles.length
     strategic, x_from, x_by = t.drivers.strategic, t.drivers.strategic_from, t.drivers.strategic_by
-    for i in range(valid.shape[1]):
+    for i in range(t.vehicles.top[b]):
         if valid[b, i] and strategic[b, i] != 0 and x[b, i] + 0.5 * length[b, i] > x_by[b, i] + (
             GIVE_UP
         ):
@@ -99,7 +99,7 @@ def change_lanes(b, time, seed, t):
     sx, slength = sc.sx, sc.slength
     n = valid.shape[1]
     started = 0
-    for i in range(n):
+    for i in range(vehicles.top[b]):
         if not valid[b, i] or lane_from[b, i] != lane_to[b, i]:
             continue
         driven = ctrl[b, i] == 0  # a controller decides its own changes

@@ -89,7 +89,7 @@ def follow(b, t):
     model, obstacle = settings.model, settings.obstacle_cf
     margin, reaction = settings.emergency_margin, settings.reaction_time
     n = valid.shape[1]
-    for i in range(n):
+    for i in range(vehicles.top[b]):
         cf_accel[b, i] = math.inf
         need_of[b, i] = 0.0
     for e in range(count):
@@ -148,7 +148,7 @@ def cooperate(b, t):
     model, obstacle = settings.model, settings.obstacle_cf
     start, most = settings.cooperate_from, settings.cooperative_decel
     n = valid.shape[1]
-    for i in range(n):
+    for i in range(vehicles.top[b]):
         if not valid[b, i] or strategic[b, i] == 0 or lane_to[b, i] != lane_from[b, i]:
             continue
         x = sx[b, i]

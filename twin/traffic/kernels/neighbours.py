@@ -41,7 +41,7 @@ def gather(b, t):
     accel = drivers.accel
     sx, slength, sspeed, saccel = sc.sx, sc.slength, sc.sspeed, sc.saccel
     n = valid.shape[1]
-    for i in range(n):
+    for i in range(vehicles.top[b]):
         if valid[b, i]:
             sx[b, i] = x[b, i]
             slength[b, i] = length[b, i]
@@ -65,21 +65,22 @@ def sort_entries(b, t):
     marks, order_owner, order_lane = sc.marks, sc.order_owner, sc.order_lane
     key, sx = sc.entry_key, sc.sx
     n = valid.shape[1]
-    for i in range(n):
+    top = vehicles.top[b]
+    for i in range(top):
         marks[b, i] = 0
     # last step's vehicle entries that still hold, in their order
     m = 0
     for k in range(sc.order_count[b]):
         o, lane = order_owner[b, k], order_lane[b, k]
         bit = 1 << (-lane - 1)
-        if not valid[b, o] or marks[b, o] & bit:
+        if o >= top or not valid[b, o] or marks[b, o] & bit:
             continue
         if lane == lane_to[b, o] or lane == lane_from[b, o] or lane == body_lane[b, o]:
             order_owner[b, m], order_lane[b, m] = o, lane
             marks[b, o] |= bit
             m += 1
     # and the new ones, in slot order
-    for o in range(n):
+    for o in range(top):
         if not valid[b, o]:
             continue
         for which in range(3):

@@ -7,7 +7,8 @@ The kernels never allocate: every array below is made once (:func:`drivers`,
 while the vehicles' ``valid`` is true.
 
 * ``Vehicles`` (B, N), what the traffic reads of the bodies (the world's arrays,
-  shared): ``valid``; ``x`` [m] back centre and ``y`` [m] in the road frame; ``yaw``
+  shared): ``valid``, and ``top`` (B,) one past the highest valid slot (the kernels
+  look no further); ``x`` [m] back centre and ``y`` [m] in the road frame; ``yaw``
   [rad] against the direction of travel; ``speed`` [m/s]; ``lane``, the lane the body
   is in (0 off the lanes); ``length``, ``wheelbase`` [m]; ``mu``, the tyres' grip.
 * ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``.
@@ -28,7 +29,7 @@ from numba.experimental import structref
 from twin.core.jit import StructType, kernel, packing
 from twin.traffic.kernels.models import N_PARAMS
 
-Vehicles = namedtuple("Vehicles", "valid x y yaw speed lane length wheelbase mu")
+Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length wheelbase mu")
 Obstacles = namedtuple("Obstacles", "count lane x length speed")
 Drivers = namedtuple(
     "Drivers",

@@ -65,7 +65,7 @@ def finish_changes(b, t):
     valid, x, y, length = vehicles.valid, vehicles.x, vehicles.y, vehicles.length
     lane, lane_from = drivers.lane, drivers.lane_from
     start_x, path_length = drivers.start_x, drivers.path_length
-    for i in range(valid.shape[1]):
+    for i in range(vehicles.top[b]):
         if not valid[b, i] or lane_from[b, i] == lane[b, i]:
             continue
         centre = x[b, i] + 0.5 * length[b, i]
@@ -88,7 +88,7 @@ def steer(b, t):
     out_steer, out_path = sc.steer, sc.path_y
     preview, gain, dt = settings.path_preview, settings.lateral_gain, settings.dt
     max_lateral = settings.max_lateral_accel
-    for i in range(valid.shape[1]):
+    for i in range(vehicles.top[b]):
         if not valid[b, i]:
             continue
         speed = max(speeds[b, i], 0.0)
