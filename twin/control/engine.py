@@ -164,7 +164,7 @@ def check_actions(actions: np.ndarray, low: float, high: float, running: np.ndar
     actions = np.asarray(actions, dtype=np.float64).reshape(-1)
     bad = np.flatnonzero(~np.isfinite(actions) & running)
     if bad.size:
-        raise ValueError(f"sub-env {bad[0]}: the action {actions[bad[0]]!r} is not a finite number")
+        raise ValueError(f"sub-env {bad[0]}: the action {float(actions[bad[0]])} is not a finite number")
     return np.clip(np.nan_to_num(actions), low, high)
 
 

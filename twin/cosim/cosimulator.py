@@ -758,3 +758,68 @@ def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) ->
     )
     return clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
 
+
+
+class Finished:
+    """A finished episode of a batch, as the metrics read a cosimulation
+    (:func:`twin.metrics.measure.measure`): its configuration, log, ego, counts and
+    timing.
+
+    Args:
+        shared: the batch's shared part. batch: the batch. b: the episode.
+        config: the episode's configuration (its place, time and seed).
+        times: the wall time of its loop (:class:`StepTimes`).
+    """
+
+    def __init__(self, shared: Shared, batch: Batch, b: int, config: CosimConfig, times):
+        st = batch.state
+        self.config, self.traffic, self.behaviour = config, shared.traffic, shared.behaviour
+        self.road, self.direction = config.road, config.road.direction
+        self.world = _RoadOnly(shared.bundle.road)
+        self.times = times
+        placed = batch.placements[b]
+        self.t0 = placed.t0
+        self.step_index = int(st.episodes.step[b])
+        self.ego_id = int(st.episodes.ego_id[b])
+        rec = shared.recording
+        meta = shared.store.trajectory_arrays
+        self.ego = RecordedVehicle(
+            tid=placed.tid, id=str(meta["id"][placed.tid]), road=self.road, t=placed.t0,
+            x=placed.x, y=placed.y, lane=_lane(placed.y), speed=placed.speed,
+            length=float(rec.length[placed.r]), width=float(rec.width[placed.r]),
+            height=float(rec.height[placed.r]), vehicle_class=int(rec.vehicle_class[placed.r]),
+        )  # fmt: skip
+        self.log = TrajectoryLog(self.t0, self.direction, config.dt)
+        heading = shared.bundle.road.heading(self.direction)
+        append_steps(self.log, shared, st, b, 0, self.step_index, config.dt, heading)
+        self.counters = counters_of(Counters(), st, b, self.sim_time)
+        self.manager = _Counts(st.counters, b)
+        self.av_ids: set[int] = set()
+        if config.av_share > 0:  # the AVs are the vehicles whose record draws one
+            from twin.core.jit import uniforms
+            from twin.cosim.core.drivers import AV_STREAM
+
+            rows = self.log.vehicles()[["id", "tid"]].drop_duplicates()
+            draw = uniforms(int(st.episodes.seed[b]), AV_STREAM, rows["tid"].to_numpy(np.int64), 0)
+            chosen = rows["id"].to_numpy()[draw < config.av_share]
+            self.av_ids = {int(i) for i in chosen if i != self.ego_id}
+
+    @property
+    def sim_time(self) -> float:
+        return self.step_index * self.config.dt
+
+
+class _RoadOnly:
+    """A finished episode's world: the road it ran on."""
+
+    def __init__(self, road):
+        self.road = road
+
+
+class _Counts:
+    """A finished episode's traffic-manager counts."""
+
+    def __init__(self, counters, b: int):
+        self.lane_changes = int(counters.lane_changes[b])
+        self.safety_overrides = int(counters.safety_overrides[b])
+        self.emergency_steps = int(counters.emergency_steps[b])

@@ -144,6 +144,30 @@ def window(rec, t, x_lo, x_hi, out_r, out_x, out_y, out_v):
 
 
 @kernel
+def windows(rec, times, x_lo, x_hi, out_k, out_r, out_x, out_y, out_v):
+    """:func:`window` at each of ``times`` (m,) with its bounds ``x_lo``, ``x_hi`` (m,):
+    the rows of all of them, each tagged with its query in ``out_k``. Returns how many,
+    or -1 when the arrays are too small."""
+    n = 0
+    capacity = out_r.size
+    for k in range(times.size):
+        got = window(rec, times[k], x_lo[k], x_hi[k], out_r[n:], out_x[n:], out_y[n:], out_v[n:])
+        if got < 0 or n + got > capacity:
+            return -1
+        out_k[n : n + got] = k
+        n += got
+    return n
+
+
+@kernel
+def replay_many(rec, r, times, present, x, y, speed):
+    """Trajectories ``r`` (m,) at ``times`` (m,): whether each is present, its x and y
+    [m] and its speed [m/s] (0 where absent)."""
+    for k in range(r.size):
+        present[k], x[k], y[k], speed[k] = replay(rec, r[k], times[k])
+
+
+@kernel
 def closest(rec, lane, x, t, max_distance, max_time, speed_scale, out_r, out_x, out_y, out_v):
     """The recorded vehicle spatio-temporally closest to ``lane``, ``x`` [m] and ``t``
     [s] (:meth:`twin.data.empirical.EmpiricalTraffic.closest`): candidates within
@@ -280,7 +304,15 @@ def load_recording(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
 
 def store_key(store: TrajectoryStore) -> str:
     """A digest of what a store holds: its metadata and its files' sizes and times (a
-    store written again is a new key)."""
+    store written again is a new key); taken once per store object."""
+    key = getattr(store, "_recording_key", None)
+    if key is None:
+        key = _digest(store)
+        store._recording_key = key
+    return key
+
+
+def _digest(store: TrajectoryStore) -> str:
     digest = hashlib.sha256((store.path / "metadata.json").read_bytes())
     for path in sorted(store.path.glob("*.parquet")):
         stat = path.stat()

@@ -34,7 +34,8 @@ STALL_TIME = 5.0  # [s] ...and this long, it is stalled across the line
 
 
 def ego_metrics(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict:
-    """The simulated ego (its log rows) against its recording (``store.trajectory``)."""
+    """The simulated ego (its log rows) against its recording (its path: t, x, speed;
+    :meth:`~twin.data.empirical.EmpiricalTraffic.track`)."""
     t = t0 + ego_rows["time"].to_numpy()
     valid = (t >= recorded["t"][0]) & (t <= recorded["t"][-1])
     if not valid.any():
@@ -156,25 +157,18 @@ def in_moving_window(time: np.ndarray, x: np.ndarray, windows: pd.DataFrame) -> 
     return inside_episode & (x >= x0) & (x <= x1)
 
 
-def traffic_speed_error(rows: pd.DataFrame, traffic: EmpiricalTraffic, t0: float) -> dict:
+def traffic_speed_error(rows: pd.DataFrame, traffic: EmpiricalTraffic, t0: float,
+                        road) -> dict:  # fmt: skip
     """Mean absolute speed error of simulated vehicles (``rows``: their log rows, sampled)
-    against the recorded vehicle each was spawned from, while both exist."""
-    errors, vehicles = [], 0
-    recordings = traffic.store.trajectory_samples(rows["tid"].unique())
-    for tid, group in rows.groupby("tid", sort=True):
-        recorded = recordings[int(tid)]
-        t = t0 + group["time"].to_numpy()
-        valid = (t >= recorded["t"][0]) & (t <= recorded["t"][-1])
-        if not valid.any():
-            continue
-        v_rec = np.interp(t[valid], recorded["t"], recorded["speed"].astype(np.float64))
-        errors.append(np.abs(group["speed"].to_numpy()[valid] - v_rec))
-        vehicles += 1
-    if not errors:
+    against the recorded vehicle each was spawned from, while both exist (the recording
+    in memory: :meth:`EmpiricalTraffic.recorded_speeds`)."""
+    tids = rows["tid"].to_numpy().astype(np.int64)
+    present, v_rec = traffic.recorded_speeds(road, tids, t0 + rows["time"].to_numpy())
+    if not present.any():
         return {"vehicles_compared": 0}
-    errors = np.concatenate(errors)
+    errors = np.abs(rows["speed"].to_numpy()[present] - v_rec[present])
     return {
-        "vehicles_compared": vehicles,
+        "vehicles_compared": int(np.unique(tids[present]).size),
         "speed_mae_mps": _r(errors.mean()),
         "speed_error_p95_mps": _r(np.percentile(errors, 95)),
     }
@@ -196,13 +190,10 @@ def speed_field_metrics(
         traffic: the recording.
         t0, t_max: [s] the episode.
     """
-    recorded = []
-    for time, x0, x1 in windows[["time", "x0", "x1"]].itertuples(index=False):
-        snap = traffic.snapshot(road, t0 + time, x0, x1)
-        recorded.append(
-            pd.DataFrame({"time": time, "x": snap.x, "lane": snap.lane, "speed": snap.speed})
-        )
-    recorded = pd.concat(recorded, ignore_index=True)
+    times = windows["time"].to_numpy()
+    snaps = traffic.snapshots(road, t0 + times, windows["x0"].to_numpy(), windows["x1"].to_numpy())
+    recorded = pd.DataFrame({"time": times[snaps["query"]], "x": snaps["x"],
+                             "lane": snaps["lane"], "speed": snaps["speed"]})  # fmt: skip
     lo = np.floor(windows["x0"].min() / CELL_X) * CELL_X
     hi = np.ceil(windows["x1"].max() / CELL_X) * CELL_X
     x_edges = np.arange(lo, hi + CELL_X / 2, CELL_X)

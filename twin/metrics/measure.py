@@ -32,7 +32,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
     """
     cfg, log = sim.config, sim.log
     vehicles, windows, ghosts = log.vehicles(), log.windows(), log.ghosts()
-    recorded_ego = store.trajectory(sim.ego.tid)
+    recorded_ego = sim.traffic.track(cfg.road, sim.ego.tid)
     ego_rows = vehicles[vehicles["role"] == 0]
     every = max(1, round(fidelity.SAMPLE_PERIOD / cfg.dt))
     step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
@@ -40,9 +40,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
     sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
     sim_s = sim.sim_time
     lengths = store.trajectory_arrays["length"]
-    recorded_changes = following.lane_changes(
-        following.load_grid(store, cfg.road, sim.t0, sim.t0 + sim_s)
-    )
+    recorded_changes = recorded_lane_changes(store, cfg.road, sim.t0, sim.t0 + sim_s)
     figures = {
         "format": RUN_FORMAT,
         "version": __version__,
@@ -54,7 +52,9 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
         "ended_early": sim.counters.ended or None,
         "ego": _ego(sim, ego_rows, recorded_ego),
         "traffic": {
-            **fidelity.traffic_speed_error(sampled[sampled["role"] == 1], sim.traffic, sim.t0),
+            **fidelity.traffic_speed_error(
+                sampled[sampled["role"] == 1], sim.traffic, sim.t0, cfg.road
+            ),
             "speed_field": fidelity.speed_field_metrics(
                 sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
             ),
@@ -168,3 +168,22 @@ def _physics(sim: Cosimulator) -> dict:
 
 def _round(value: float) -> float:
     return round(float(value), 6) if math.isfinite(value) else None
+
+
+_CHANGES: dict = {}
+
+
+def recorded_lane_changes(store: TrajectoryStore, road, t0: float, t1: float):
+    """The recording's lane changes on ``road`` between unix ``t0`` and ``t1`` [s]
+    (:func:`twin.calibration.following.lane_changes`), found once per process over the
+    whole recording."""
+    from dataclasses import replace
+
+    key = (str(store.path), str(road))
+    if key not in _CHANGES:
+        first, last = store.time_range(road)
+        _CHANGES[key] = following.lane_changes(following.load_grid(store, road, first, last))
+    changes = _CHANGES[key]
+    keep = (changes.time >= t0) & (changes.time <= t1)
+    per_change = ("tid", "time", "x", "lane_from", "lane_to", "speed_from", "speed_to")
+    return replace(changes, **{name: getattr(changes, name)[keep] for name in per_change})

@@ -40,17 +40,32 @@ def leader_gaps(
     """
     gap = np.full(len(ego), math.inf)
     speed = np.full(len(ego), math.nan)
-    by_time = {round(t, 6): frame for t, frame in others.groupby(others["time"].round(6))}
+    if len(ego) == 0 or len(others) == 0:
+        return gap, speed
     front = ego["x"].to_numpy() + length[ego["tid"].to_numpy().astype(np.int64)]
-    for i, (t, lane) in enumerate(zip(ego["time"].to_numpy(), ego["lane"].to_numpy(), strict=True)):
-        frame = by_time.get(round(float(t), 6))
-        if frame is None:
-            continue
-        ahead = frame[(frame["lane"].to_numpy() == lane) & (frame["x"].to_numpy() > front[i] - 1.0)]
-        if len(ahead):
-            k = int(np.argmin(ahead["x"].to_numpy()))
-            gap[i] = float(ahead["x"].iloc[k]) - front[i]
-            speed[i] = float(ahead["speed"].iloc[k])
+    # one sorted key (time, lane, x) for all the others; each ego row's query finds the
+    # first vehicle at or past front - 1 m in its lane at its time
+    times = np.unique(np.round(others["time"].to_numpy(), 6))
+    t_other = np.searchsorted(times, np.round(others["time"].to_numpy(), 6))
+    t_ego = np.searchsorted(times, np.round(ego["time"].to_numpy(), 6))
+    t_ego_ok = (t_ego < times.size) & (
+        times[np.minimum(t_ego, times.size - 1)] == np.round(ego["time"].to_numpy(), 6)
+    )
+    span = 1.0e5  # [m] beyond any road-frame x
+    key_other = (t_other * 8 + (-others["lane"].to_numpy().astype(np.int64) + 3)) * span + (
+        others["x"].to_numpy() + span / 2
+    )
+    order = np.argsort(key_other, kind="stable")
+    key_other = key_other[order]
+    group = (t_ego * 8 + (-ego["lane"].to_numpy().astype(np.int64) + 3)) * span
+    query = group + front - 1.0 + span / 2
+    at = np.searchsorted(key_other, query, side="right")
+    inside = t_ego_ok & (at < key_other.size)
+    at = np.minimum(at, key_other.size - 1)
+    inside &= key_other[at] < group + span  # the same time and lane
+    rows = order[at[inside]]
+    gap[inside] = others["x"].to_numpy()[rows] - front[inside]
+    speed[inside] = others["speed"].to_numpy()[rows]
     return gap, speed
 
 

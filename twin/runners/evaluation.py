@@ -225,33 +225,33 @@ def evaluate(
         results = out / RESULTS
         results.mkdir(exist_ok=True)
         remove_stale(results)
-        jobs = [
-            (config, spec, arm, where(store, bundle))
-            for spec in specs
-            for arm in config.arms
-            if not _result_path(out, spec.index, arm[0]).is_file()
-        ]
+        jobs = _jobs(config, specs, out, where(store, bundle), workers)
+        todo = sum(len(job[1]) for job in jobs)
         with progress_bar(
             progress=progress,
-            total=len(jobs),
+            total=todo,
             unit="episode",
-            desc=f"eval {out.name}: {len(jobs)} of {len(specs) * len(config.arms)} to run",
+            desc=f"eval {out.name}: {todo} of {len(specs) * len(config.arms)} to run",
         ) as bar:
 
-            def save(k: int, row: dict) -> None:
-                _, spec, arm, _ = jobs[k]
-                with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
-                    tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
-                bar.update(1)
+            def save(k: int, rows: list[dict]) -> None:
+                _, chunk, arm, _ = jobs[k]
+                for spec, row in zip(chunk, rows, strict=True):
+                    with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
+                        tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
+                bar.update(len(rows))
 
             run_jobs(
-                _run_one,
+                _run_chunk,
                 jobs,
                 engine=engine,
                 workers=workers,
                 ray_address=ray_address,
                 on_done=save,
-                describe=lambda job: f"episode {job[1].index} ({job[2][0]})",
+                describe=lambda job: (
+                    f"episode{'s' if len(job[1]) > 1 else ''} "
+                    f"{', '.join(str(s.index) for s in job[1])} ({job[2][0]})"
+                ),
                 error_type=EvaluationError,
             )
         summary = assemble(out, config, specs, extension)
@@ -278,15 +278,35 @@ def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[Episo
     return [draw_episode(cells, sampling, config.seed, i) for i in range(config.episodes)]
 
 
-def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
-    """One (episode, arm): the cosimulation and its metrics as a flat row, with the
-    ego's and its followers' speeds each second (for the pictures)."""
-    from twin.cosim.cosimulator import Cosimulator
-    from twin.data.empirical import EmpiricalTraffic
-    from twin.metrics.measure import measure
+BATCH = 8  # episodes of an arm a worker runs together in the batched core
 
+
+def _jobs(config: EvalConfig, specs, out: Path, location, workers: int) -> list[tuple]:
+    """The jobs of the episodes not done yet: per arm, chunks of episodes the batched
+    core runs together (kinematic world, controllers it has kernels for; at most
+    :data:`BATCH`, and enough chunks to keep the workers busy), else one per job."""
+    jobs = []
+    for arm in config.arms:
+        todo = [s for s in specs if not _result_path(out, s.index, arm[0]).is_file()]
+        size = BATCH if _batched(config, arm) else 1
+        if size > 1:
+            size = max(1, min(size, -(-len(todo) // max(workers, 1))))
+        for k in range(0, len(todo), size):
+            jobs.append((config, todo[k : k + size], arm, location))
+    return jobs
+
+
+def _batched(config: EvalConfig, arm: tuple) -> bool:
+    """Whether an arm's episodes run in the batched core together."""
+    from twin.cosim.core.batch import COMPILED
+
+    return config.cosim.world == "kinematic" and arm[2] in COMPILED
+
+
+def _episode(config: EvalConfig, spec: EpisodeSpec, arm: tuple):
+    """The cosimulation configuration of episode ``spec`` in ``arm``, and its row's
+    identity columns."""
     label, behaviour, controller = arm
-    store, bundle = worker_data(location)
     cosim = episode_config(
         config.cosim,
         spec,
@@ -305,6 +325,26 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
         "controller": controller_label(controller) if controller else None,
         **columns,
     }
+    return cosim, row
+
+
+def _run_chunk(config: EvalConfig, chunk: list, arm: tuple, location) -> list[dict]:
+    """Episodes ``chunk`` of ``arm``: their cosimulations and metrics as flat rows, with
+    the ego's and its followers' speeds each second (for the pictures); in the batched
+    core together where it can (:func:`_batched`), else one by one."""
+    if _batched(config, arm):
+        return _run_batch(config, chunk, arm, location)
+    return [_run_one(config, spec, arm, location) for spec in chunk]
+
+
+def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
+    """One (episode, arm) in the cosimulator (either world, any controller)."""
+    from twin.cosim.cosimulator import Cosimulator
+    from twin.data.empirical import EmpiricalTraffic
+    from twin.metrics.measure import measure
+
+    store, bundle = worker_data(location)
+    cosim, row = _episode(config, spec, arm)
     with Cosimulator(cosim, EmpiricalTraffic(store), bundle) as sim:
         setup = time.perf_counter()
         skipped = reset_or_skip(sim)
@@ -314,7 +354,62 @@ def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dic
         sim.run(progress=False)
         loop_s = time.perf_counter() - begin
         figures, frames = measure(sim, store, loop_s, begin - setup)
-    traces = speed_traces(frames[0], sim.ego_id, figures["control"]["followers"], cosim.dt)
+    return _row(row, figures, frames, sim.ego_id, cosim.dt)
+
+
+def _run_batch(config: EvalConfig, chunk: list, arm: tuple, location) -> list[dict]:
+    """Episodes ``chunk`` of ``arm`` stepped together in the batched core; each
+    measured as the cosimulator's run is (:class:`twin.cosim.cosimulator.Finished`)."""
+    from twin.cosim.core.batch import Batch
+    from twin.cosim.core.step import step_batch
+    from twin.cosim.cosimulator import Finished, StepTimes
+    from twin.metrics.measure import measure
+    from twin.runners.episodes import PLACEMENT_ERRORS
+
+    store, bundle = worker_data(location)
+    episodes = [_episode(config, spec, arm) for spec in chunk]
+    shared = _shared(location, episodes[0][0])
+    batch = Batch(shared, len(chunk), log=True)
+    rows: list[dict | None] = [None] * len(chunk)
+    setup = time.perf_counter()
+    for b, (cosim, row) in enumerate(episodes):
+        try:
+            batch.reset(b, lane=cosim.lane, x=cosim.x, time=cosim.time, seed=cosim.seed)
+        except PLACEMENT_ERRORS as error:
+            rows[b] = {**row, "skipped": str(error)}
+    begin = time.perf_counter()
+    while not batch.done.all():
+        step_batch(batch.core)
+    batch.check_all()
+    loop_s = (time.perf_counter() - begin) / len(chunk)  # each episode's share
+    reset_s = (begin - setup) / len(chunk)
+    for b, (cosim, row) in enumerate(episodes):
+        if rows[b] is not None:
+            continue
+        times = StepTimes(steps=int(batch.state.episodes.step[b]), total=loop_s, physics=loop_s)
+        finished = Finished(shared, batch, b, cosim, times)
+        figures, frames = measure(finished, store, loop_s, reset_s)
+        rows[b] = _row(row, figures, frames, finished.ego_id, cosim.dt)
+    return rows
+
+
+_SHARED: dict = {}
+
+
+def _shared(location, cosim):
+    """What a worker's batches of one configuration share (made once per process)."""
+    from twin.cosim.core.batch import Shared
+    from twin.data.empirical import EmpiricalTraffic
+
+    key = (location, repr(replace(cosim, lane=-1, x=0.0, time=SCENARIO_B.time, seed=0)))
+    if key not in _SHARED:
+        store, bundle = worker_data(location)
+        _SHARED[key] = Shared.make(store, bundle, cosim, traffic=EmpiricalTraffic(store))
+    return _SHARED[key]
+
+
+def _row(row: dict, figures: dict, frames, ego_id: int, dt: float) -> dict:
+    traces = speed_traces(frames[0], ego_id, figures["control"]["followers"], dt)
     return {
         **row,
         "skipped": None,
