@@ -59,7 +59,8 @@ EGO_MODES = ("trajectory", "external")
 LATE = ("add", "omit")
 MINORS = (0, 1, 2, 3)  # OpenSCENARIO 1.0 to 1.3 (scenariogeneration writes each)
 DEFAULT_RATE = 10.0  # [Hz] trajectory vertices per second
-GAP = 0.5  # [s] a longer pause in a vehicle's rows splits its trajectory (it left and came back)
+GAP = 0.5  # [s] a pause this long or longer in a vehicle's rows splits its trajectory (it left
+# and came back)
 #: OpenSCENARIO 1.0 vehicle categories of the I-24 classes (the twin drives a semi as one
 #: rigid body, so it is a truck, not a tractor with a semitrailer entity)
 CATEGORY = {"sedan": "car", "midsize": "car", "pickup": "car", "van": "van", "semi": "truck",
@@ -72,6 +73,8 @@ MAX_SPEED, MAX_ACCEL, MAX_DECEL = 70.0, 15.0, 15.0  # [m/s], [m/s^2], [m/s^2]
 #: The controller the external ego gets: each player reads its own property
 EXTERNAL = {"module": "external_control", "esminiController": "ExternalController"}
 DIGITS = 3  # positions to the millimetre, times to the millisecond
+CHORD = 0.005  # [m] a vertex is added where the kept ones' chord misses a row by more
+MAX_REFINE = 20  # rounds of adding vertices (each halves the worst stretches)
 
 
 def scenariogeneration():
@@ -248,11 +251,13 @@ def _decimate(tracks: pd.DataFrame, rate: float) -> pd.DataFrame:
     where it pauses: it left and came back), the row nearest each tick ``start + k /
     rate``, its last row, and the rows either side of a hand-over between the twin and the
     recording (where the run has the vehicle jump from where the twin drove it to where
-    it was recorded, within one step). Adds a ``piece`` column (0, 1, ... per vehicle)."""
+    it was recorded, within one step), and, where a player following those linearly
+    would miss a row by more than :data:`CHORD`, the rows that keep it within
+    (:func:`_refine`). Adds a ``piece`` column (0, 1, ... per vehicle)."""
     tracks = tracks.sort_values(["record_id", "time"], kind="stable").reset_index(drop=True)
     rid, time = tracks["record_id"].to_numpy(), tracks["time"].to_numpy()
     new_vehicle = np.r_[True, rid[1:] != rid[:-1]]
-    new_piece = new_vehicle | np.r_[False, np.diff(time) > GAP]
+    new_piece = new_vehicle | np.r_[False, np.diff(time) >= GAP - 1e-9]
     piece = np.cumsum(new_piece) - 1
     start = time[np.flatnonzero(new_piece)][piece]
     tick = np.round((time - start) * rate)
@@ -265,8 +270,37 @@ def _decimate(tracks: pd.DataFrame, rate: float) -> pd.DataFrame:
     role = tracks["role"].to_numpy()
     handed = (role[1:] != role[:-1]) & (piece[1:] == piece[:-1])
     keep[np.r_[handed, False] | np.r_[False, handed]] = True
+    _refine(keep, piece, time, tracks["x"].to_numpy(), tracks["y"].to_numpy())
     tracks["piece"] = piece - piece[np.flatnonzero(new_vehicle)][np.cumsum(new_vehicle) - 1]
     return tracks[keep].reset_index(drop=True)
+
+
+def _refine(keep, piece, time, x, y) -> None:
+    """Add to ``keep`` the rows a player following the kept ones linearly would miss by
+    more than :data:`CHORD` (hard braking bends a 0.1 s chord by a centimetre): the row
+    furthest from the chord of each such stretch, until none is left. Rows sorted by
+    (vehicle, time); ``piece`` numbers each vehicle's pieces."""
+    for _ in range(MAX_REFINE):
+        kept = np.flatnonzero(keep)
+        after = np.searchsorted(kept, np.arange(keep.size))  # the next kept row at or after
+        after = np.minimum(after, kept.size - 1)
+        before = np.maximum(after - 1, 0)
+        a, b = kept[before], kept[after]
+        inside = ~keep & (piece[a] == piece[b]) & (a < np.arange(keep.size)) & (b > np.arange(keep.size))
+        if not inside.any():
+            return
+        w = np.where(inside, (time - time[a]) / np.maximum(time[b] - time[a], 1e-12), 0.0)
+        miss = np.hypot(x - (x[a] + w * (x[b] - x[a])), y - (y[a] + w * (y[b] - y[a])))
+        miss = np.where(inside, miss, 0.0)
+        bad = miss > CHORD
+        if not bad.any():
+            return
+        # per stretch (its kept row after), the worst row
+        rows = np.flatnonzero(bad)
+        order = np.lexsort((-miss[rows], b[rows]))
+        rows = rows[order]
+        first = np.r_[True, b[rows][1:] != b[rows][:-1]]
+        keep[rows[first]] = True
 
 
 def _reference_points(
