@@ -152,7 +152,9 @@ def _register_commands(benchmarks) -> None:
     _repeats(p, 3)
     p.set_defaults(handler=_dataset)
     p = benchmarks.add_parser(
-        "env", help="env steps per second of i24twin/WaveDampening-v0, one env and a vector env"
+        "env",
+        help="env steps per second of i24twin/WaveDampening-v0, one env and a vector env; "
+        "its reset; the kernels' cold compile and warm start",
     )
     add_data(p, "store folder or embedded:NAME (default: the embedded morning)", type=str)
     p.add_argument(
@@ -161,7 +163,13 @@ def _register_commands(benchmarks) -> None:
         default=200,
         help="env steps of 0.1 s timed per env and repeat",
     )
-    add_workers(p, "envs in the vector env (default: the cores)")
+    add_workers(p, "envs of the physics world's AsyncVectorEnv (default: the cores)")
+    p.add_argument(
+        "--num-envs",
+        type=at_least_one,
+        default=256,
+        help="episodes of the kinematic world's batched vector env",
+    )
     add_world(p)
     _repeats(p, 3)
     p.set_defaults(handler=_env)
@@ -371,6 +379,7 @@ def _env(args) -> int:
             workers=args.workers,
             repeats=args.repeats,
             world=args.world or "physics",
+            num_envs=args.num_envs,
         ),
         args,
     )

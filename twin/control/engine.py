@@ -62,6 +62,7 @@ class Episodes:
         self.first = np.zeros(n, dtype=bool)
         self.episode = np.full(n, -1, np.int64)
         self.record_id = [""] * n
+        self.specs: list = [None] * n
         self._work = tuple(np.empty(4096, t) for t in (np.int32, float, float, float))
 
     @property
@@ -84,6 +85,7 @@ class Episodes:
             spec = draw_episode(self.cells, self.sampling, self.base_seed, k)
             try:
                 self._start(b, spec)
+                self.specs[b] = spec
                 break
             except PLACEMENT_ERRORS:
                 if index is not None:
@@ -142,6 +144,16 @@ class Episodes:
         observe.observe_batch(
             self.core, before, self.obs, self.reward, self.collided, self.stats, self.weights,
             self.low, self.high, CONTROL_DT, self.first, *self._work,
+        )  # fmt: skip
+
+    def config(self, b: int):
+        """Episode ``b``'s cosimulation configuration (to run it again, in either world,
+        with any controller)."""
+        from twin.runners.episodes import episode_config
+
+        return episode_config(
+            self.cosim, self.specs[b], scenario="env", t_max=self.duration, ego_controller="",
+            camera=replace(self.cosim.camera, enabled=False),
         )  # fmt: skip
 
     def metrics(self, b: int) -> dict:

@@ -146,6 +146,7 @@ class WaveDampeningEnv(gym.Env):
         )  # fmt: skip
         self.setup = setup
         self.store, self.bundle, self.cosim = setup.store, setup.bundle, setup.cosim
+        self.traffic = setup.traffic
         self.road, self.duration, self.action_kind = setup.cosim.road, setup.duration, action
         self.reward_weights = setup.reward
         self.obs_noise, self.latency_steps, self.base_seed = obs_noise, latency_steps, seed
@@ -159,6 +160,11 @@ class WaveDampeningEnv(gym.Env):
     def sim(self):
         """The running episode's cosimulation facade (the physics world), or None."""
         return self.episodes.sim
+
+    def episode_config(self) -> CosimConfig:
+        """The running episode's cosimulation configuration (to run it again in the
+        cosimulator, with any controller)."""
+        return self.episodes.config(0)
 
     @property
     def t0(self) -> float:

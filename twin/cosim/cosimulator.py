@@ -308,7 +308,8 @@ class Cosimulator:
                 from twin.physics.kernels import integrate
 
                 sh = self.shared
-                integrate(0, self.state.bodies, self.state.drivers.accel, self.state.scratch.steer,
+                accel = self.state.drivers.accel
+                integrate(0, self.state.bodies, accel, self.state.scratch.steer, accel, accel,
                           sh.settings.profile, sh.settings.dt)  # fmt: skip
             else:
                 self._physics_step()

@@ -26,6 +26,7 @@ from twin.physics.energy import RAV4_2019, FuelModel
 from twin.physics.vehicle import (
     AIR_DENSITY,
     GRAVITY,
+    BRAKE_LOCK_MARGIN,
     POWER_SPEED_MIN,
     ROLLING_SPEED,
     VehicleParams,
@@ -173,11 +174,13 @@ def _place(b, i, x, y, length, cg_height, z, grade, lane, road, stations, height
 
 
 @kernel
-def integrate(b, bodies, accel, steer, prof, dt):
+def integrate(b, bodies, accel, steer, drive, brake, prof, dt):
     """Step episode ``b``'s bodies by ``dt`` [s] under the commanded accelerations
     ``accel`` and front-wheel angles ``steer`` (B, N): the point mass along its lane
     within the power, the driven wheels' grip and the brakes' grip, never rolling back;
-    the kinematic bicycle across (the kinematic world's model, module doc)."""
+    the kinematic bicycle across (the kinematic world's model, module doc). Where
+    ``accel`` is NaN the raw ``drive`` and ``brake`` fractions (0..1 of the power and
+    of the full brakes) act instead."""
     valid, x, y, yaw, speed = bodies.valid, bodies.x, bodies.y, bodies.yaw, bodies.speed
     yaw_rate, grade, drive_power = bodies.yaw_rate, bodies.grade, bodies.drive_power
     mass, eff_mass, drag_area = bodies.mass, bodies.eff_mass, bodies.drag_area
@@ -201,15 +204,19 @@ def integrate(b, bodies, accel, steer, prof, dt):
             + m * GRAVITY * sin_p
         )  # fmt: skip
         command = accel[b, i]
-        wanted = eff_mass[b, i] * command + resist
         power_limit = max_power[b, i] / max(v0, POWER_SPEED_MIN)
         grip = mu[b, i] * m * GRAVITY * cos_p  # all four wheels: the brakes' limit
-        drive = min(min(max(wanted, 0.0), power_limit), grip * driven[b, i])
-        brake = min(max(-wanted, 0.0), grip)
-        a = (drive - brake - resist) / eff_mass[b, i]
-        if v0 <= 0.0 and command <= 0.0:  # held at rest
-            a = 0.0
-        drive_power[b, i] = drive * v0
+        if math.isnan(command):  # raw control
+            force = min(drive[b, i] * power_limit, grip * driven[b, i])
+            braking = min(brake[b, i] * BRAKE_LOCK_MARGIN * mu[b, i] * m * GRAVITY, grip)
+            held = v0 <= 0.0 and brake[b, i] > 0.0 and drive[b, i] == 0.0
+        else:
+            wanted = eff_mass[b, i] * command + resist
+            force = min(min(max(wanted, 0.0), power_limit), grip * driven[b, i])
+            braking = min(max(-wanted, 0.0), grip)
+            held = v0 <= 0.0 and command <= 0.0
+        a = 0.0 if held else (force - braking - resist) / eff_mass[b, i]  # held at rest
+        drive_power[b, i] = force * v0
         v1 = max(v0 + a * dt, 0.0)
         # a vehicle that stops inside the step travels to its stop and stays
         moving = dt if v1 > 0.0 else min(dt, v0 / max(-a, 1e-9))
@@ -283,7 +290,7 @@ def overlaps(b, bodies, order, listed, pairs):
             reach_ij = 0.5 * (length[b, i] + width[b, i] + length[b, j] + width[b, j])
             if abs(y[b, j] - y[b, i]) > reach_ij or xj - xi > reach_ij:
                 continue
-            if _overlap(xi, y[b, i], yaw[b, i], 0.5 * length[b, i], 0.5 * width[b, i],
+            if footprints_overlap(xi, y[b, i], yaw[b, i], 0.5 * length[b, i], 0.5 * width[b, i],
                         xj, y[b, j], yaw[b, j], 0.5 * length[b, j], 0.5 * width[b, j]):  # fmt: skip
                 if count == pairs.shape[1]:
                     return -1
@@ -293,7 +300,7 @@ def overlaps(b, bodies, order, listed, pairs):
 
 
 @kernel(inline=True)
-def _overlap(xi, yi, yaw_i, hl_i, hw_i, xj, yj, yaw_j, hl_j, hw_j):
+def footprints_overlap(xi, yi, yaw_i, hl_i, hw_i, xj, yj, yaw_j, hl_j, hw_j):
     """Whether two footprints (centres, yaws, half lengths and widths) overlap, by the
     separating axes of both."""
     ci, si = math.cos(yaw_i), math.sin(yaw_i)

@@ -42,7 +42,7 @@ def test_a_policy_in_the_twin_sees_what_the_envs_agent_saw(data):
         trained.append(obs)
         done = terminated or truncated
     assert truncated and len(trained) == 61
-    config = env.sim.config
+    config = env.episode_config()
     env.close()
 
     model = Recorder(0.1)
@@ -78,7 +78,7 @@ def test_without_a_model_the_shipped_policy_drives_and_missing_models_are_named(
 def test_a_policy_that_returns_nan_stops_the_run(data):
     env = WaveDampeningEnv(data, duration=2.0)
     env.reset(seed=2)
-    config = env.sim.config
+    config = env.episode_config()
     env.close()
     controller = PolicyController(Recorder(float("nan")))
     sim = Cosimulator(config, env.traffic, env.bundle, controller=controller)

@@ -9,7 +9,8 @@ import pytest
 
 from twin.core.i24 import lane_center
 from twin.core.vehicle_classes import vehicle_classes
-from twin.physics.kinematic import KinematicWorld, footprint_overlaps
+from twin.physics.kernels import footprints_overlap
+from twin.physics.kinematic import KinematicWorld
 from twin.physics.states import SpawnStates
 from twin.physics.vehicle import GRAVITY, POWER_SPEED_MIN, VehicleParams, resistance
 from twin.physics.world import PhysicsWorld
@@ -76,10 +77,12 @@ def test_a_commanded_acceleration_is_tracked_exactly_within_the_limits(kinematic
 
 def test_the_engine_power_limits_acceleration_at_speed(kinematic):
     ids = spawn(kinematic, 300.0, 30.0)
+    s0 = kinematic.states()
+    p = kinematic.params
+    # the map's pitch at the spawn pose, as the step saw it
+    _, _, pitch = kinematic.road.to_world(s0.road, s0.x + 0.5 * p.length, s0.y)
     kinematic.set_controls(ids, accel=[5.0], steer=[0.0])
     kinematic.step()
-    p = kinematic.params
-    _, pitch = kinematic._ground()  # at the spawn pose, as the step saw it
     power_limited = p.max_power / max(30.0, POWER_SPEED_MIN) - resistance(p, 30.0, np.sin(pitch))
     expected = power_limited / p.effective_mass
     assert kinematic.states().speed[0] == pytest.approx(30.0 + 0.1 * expected[0], rel=1e-9)
@@ -147,22 +150,19 @@ def test_overlapping_footprints_are_contacts_and_touching_ones_only_then(kinemat
     del b
 
 
-def test_footprints_turned_against_each_other_by_the_separating_axes():
-    params = VehicleParams.from_classes(
-        vehicle_classes(), [0, 0], [4.0, 4.0], [2.0, 2.0], [1.5, 1.5]
-    )
-    road = np.array([1, 1], np.int8)
+def test_footprints_turned_against_each_other_by_the_separating_axes(kinematic):
+    def overlap(x, y, yaw):  # two 4 m x 2 m footprints: centres, yaws
+        return footprints_overlap(0.0, 0.0, 0.0, 2.0, 1.0, x, y, yaw, 2.0, 1.0)
+
     # side by side 2.3 m apart: apart when straight; the second turned 0.5 rad reaches over
-    y = np.array([0.0, 2.3])
-    assert footprint_overlaps(road, np.zeros(2), y, np.zeros(2), params).shape == (0, 2)
-    turned = footprint_overlaps(road, np.zeros(2), y, np.array([0.0, 0.5]), params)
-    assert turned.tolist() == [[0, 1]]
+    assert not overlap(0.0, 2.3, 0.0)
+    assert overlap(0.0, 2.3, 0.5)
     # corner to corner along a diagonal: bounding boxes overlap, footprints do not
-    x, y = np.array([0.0, 3.9]), np.array([0.0, 2.6])
-    assert footprint_overlaps(road, x, y, np.array([0.0, 0.6]), params).shape == (0, 2)
+    assert not overlap(3.9, 2.6, 0.6)
     # the other road never touches
-    other = np.array([1, -1], np.int8)
-    assert footprint_overlaps(other, np.zeros(2), np.zeros(2), np.zeros(2), params).shape == (0, 2)
+    spawn(kinematic, 300.0, 10.0, road=1, y=5.0)
+    spawn(kinematic, 300.0, 10.0, road=-1, y=5.0)
+    assert kinematic.vehicle_contacts().shape == (0, 2)
 
 
 def test_the_same_commands_give_the_same_motion_in_both_worlds(built_map):
@@ -196,7 +196,7 @@ def test_raw_drive_and_brake_act_as_in_the_physics_world(kinematic):
     s, p = kinematic.states(), kinematic.params
     # full drive: the engine's power at this speed, or the driven wheels' grip (a sedan's
     # front axle holds half its weight: 6.6 kN, under 140 kW / 20 m/s = 7 kN)
-    grip = p.mu[0] * p.mass[0] * GRAVITY * np.cos(kinematic._ground()[1][0]) / 2
+    grip = p.mu[0] * p.mass[0] * GRAVITY * np.cos(kinematic.pitch()[0]) / 2
     assert s.drive_power[0] == pytest.approx(min(p.max_power[0], 20.0 * grip), rel=1e-3)
     # full brake: the tyres' grip, mu g, give or take the grade
     decel = (20.0 - s.speed[1]) / 0.1
@@ -207,7 +207,7 @@ def test_raw_drive_and_brake_act_as_in_the_physics_world(kinematic):
 
 def test_a_vehicle_at_rest_is_held_on_the_grade_and_never_rolls_back(kinematic):
     ids = spawn(kinematic, np.linspace(100.0, 1400.0, 14), 0.0)
-    _, pitch = kinematic._ground()
+    pitch = kinematic.pitch()
     assert np.abs(pitch).max() > 0.005  # the profile has grades here
     kinematic.set_controls(ids, accel=np.zeros(ids.size), steer=np.zeros(ids.size))
     x0 = kinematic.states().x.copy()

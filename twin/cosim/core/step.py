@@ -310,5 +310,5 @@ def step_batch(core):
         if done[b]:
             continue
         before_world(b, core)
-        integrate(b, bodies, accel, steer, profile, dt)
+        integrate(b, bodies, accel, steer, accel, accel, profile, dt)  # never raw
         after_world(b, core)
