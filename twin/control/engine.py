@@ -176,7 +176,9 @@ def check_actions(actions: np.ndarray, low: float, high: float, running: np.ndar
     actions = np.asarray(actions, dtype=np.float64).reshape(-1)
     bad = np.flatnonzero(~np.isfinite(actions) & running)
     if bad.size:
-        raise ValueError(f"sub-env {bad[0]}: the action {float(actions[bad[0]])} is not a finite number")
+        raise ValueError(
+            f"sub-env {bad[0]}: the action {float(actions[bad[0]])} is not a finite number"
+        )
     return np.clip(np.nan_to_num(actions), low, high)
 
 
@@ -187,4 +189,3 @@ def noisy(obs: np.ndarray, noise: float, rngs, low, high) -> np.ndarray:
         draws = np.stack([rng.standard_normal(obs.shape[1]) for rng in rngs])
         obs = obs * (1.0 + noise * draws)
     return np.clip(obs, low, high).astype(np.float32)
-

@@ -59,7 +59,7 @@ def observe_batch(core, done_before, obs, reward, collided, stats, weights, low,
 @kernel
 def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_dt, first,
              snap_r, snap_x, snap_y, snap_v):  # fmt: skip
-    bo, ep, sl, cs = core.bodies, core.episodes, core.slots, core.settings
+    bo, ep, cs = core.bodies, core.episodes, core.settings
     dr, gh = core.traffic.drivers, core.ghosts
     valid, x, lanes, speeds, length, ids = bo.valid, bo.x, bo.lane, bo.speed, bo.length, bo.id
     e = ep.ego[b]
@@ -132,7 +132,7 @@ def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_
         st[RETURN] += r
     st[LAST_X] = ego_x
     st[LAST_ACCEL] = accel
-    present, rec_x, _, rec_v = replay(core.rec, ep.ego_r[b], time)
+    present, _, _, rec_v = replay(core.rec, ep.ego_r[b], time)
     if present:
         st[SPEED_SQ] += (speeds[b, e] - rec_v) ** 2
         st[SAMPLES] += 1.0

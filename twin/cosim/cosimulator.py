@@ -37,14 +37,15 @@ import numpy as np
 from mapgen.build import MapBundle
 from twin.core.i24 import HOV_LANE, N_LANES
 from twin.cosim.config import CosimConfig
-from twin.cosim.core import handover, layout, step as core_step
+from twin.cosim.core import handover, layout
+from twin.cosim.core import step as core_step
 from twin.cosim.core.batch import Batch, Shared, controller_kind
 from twin.cosim.log import TrajectoryLog
 from twin.cosim.windows import Ghosts, Windows
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle
 from twin.physics.states import SpawnStates, VehicleStates, quaternion_of
-from twin.traffic.controller_api import load_controller
 from twin.traffic.controlled import apply_controllers
+from twin.traffic.controller_api import load_controller
 from twin.traffic.kernels import state as kinds
 
 CLEARANCE_SPEED = handover.CLEARANCE_SPEED
@@ -124,8 +125,8 @@ class Cosimulator:
         self.road = config.road
         self.direction = config.road.direction
         compiled = controller is None and config.ego_controller in _compiled_specs()
-        self.controller = None if compiled else (
-            controller or load_controller(config.ego_controller, config)
+        self.controller = (
+            None if compiled else (controller or load_controller(config.ego_controller, config))
         )
         kind = (
             controller_kind(config.ego_controller, config.controller.emergency_braking)
@@ -134,7 +135,7 @@ class Cosimulator:
         )
         if ego_kind is not None:
             kind, self.controller = ego_kind, None
-        self.shared = (shared or Shared.make(traffic.store, bundle, config, traffic=traffic))
+        self.shared = shared or Shared.make(traffic.store, bundle, config, traffic=traffic)
         self.shared = self.shared.with_controllers(kind)
         self.behaviour = self.shared.behaviour
         self.batch = Batch(self.shared, 1, log=log)
@@ -477,7 +478,9 @@ class Cosimulator:
                 )
             )  # fmt: skip
             if not np.array_equal(made, new):
-                raise RuntimeError(f"the physics world named its bodies {made} where the core has {new}")
+                raise RuntimeError(
+                    f"the physics world named its bodies {made} where the core has {new}"
+                )
         self._bodies = np.sort(ids)
 
     # -- bookkeeping ------------------------------------------------------------------
@@ -758,7 +761,6 @@ def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) ->
         cfg.spawn_clearance - cfg.spawn_clearance_at_rest
     )
     return clearance + np.maximum(closing, 0.0) / (2.0 * cfg.spawn_decel)
-
 
 
 class Finished:

@@ -28,7 +28,6 @@ from twin.data.recording import window
 from twin.data.store import TrajectoryStore
 
 
-
 @dataclass(frozen=True, eq=False)
 class Snapshot:
     """Recorded vehicles on one road at one time, as struct-of-arrays sorted by x.
@@ -192,7 +191,9 @@ class EmpiricalTraffic:
         from twin.data.recording import windows
 
         rec = self.recording(road)
-        times, x_min, x_max = (np.ascontiguousarray(a, dtype=np.float64) for a in (times, x_min, x_max))
+        times, x_min, x_max = (
+            np.ascontiguousarray(a, dtype=np.float64) for a in (times, x_min, x_max)
+        )
         size = max(1024, 256 * times.size)
         while True:
             out = (np.empty(size, np.int64), np.empty(size, np.int32), np.empty(size),

@@ -66,7 +66,16 @@ _PER_TRAJECTORY = (
     "tid", "frame0", "count", "offset", "t_first", "t_last", "length", "width", "height",
     "vehicle_class",
 )  # fmt: skip
-_ARRAYS = (*_PER_TRAJECTORY, "x", "y", "speed", "bucket_start", "bucket_r", "bucket_x", "bucket_pad")
+_ARRAYS = (
+    *_PER_TRAJECTORY,
+    "x",
+    "y",
+    "speed",
+    "bucket_start",
+    "bucket_r",
+    "bucket_x",
+    "bucket_pad",
+)
 
 
 # -- kernels ----------------------------------------------------------------------------
@@ -111,7 +120,7 @@ def window(rec, t, x_lo, x_hi, out_r, out_x, out_y, out_v):
     """The trajectories present at ``t`` [s] with ``x_lo <= x <= x_hi`` [m], sorted by x:
     their ``r``, x, y and speed written into the ``out_*`` arrays. Returns how many,
     or -1 when there are more than the arrays hold."""
-    k = int(math.floor((t - rec.base) / rec.bucket_s))
+    k = math.floor((t - rec.base) / rec.bucket_s)
     if k < 0 or k >= rec.bucket_pad.size:
         return 0
     a, b = rec.bucket_start[k], rec.bucket_start[k + 1]
@@ -136,7 +145,12 @@ def window(rec, t, x_lo, x_hi, out_r, out_x, out_y, out_v):
             return -1
         j = n  # insertion by x (the entries come nearly sorted)
         while j > 0 and out_x[j - 1] > x:
-            out_r[j], out_x[j], out_y[j], out_v[j] = out_r[j - 1], out_x[j - 1], out_y[j - 1], out_v[j - 1]
+            out_r[j], out_x[j], out_y[j], out_v[j] = (
+                out_r[j - 1],
+                out_x[j - 1],
+                out_y[j - 1],
+                out_v[j - 1],
+            )
             j -= 1
         out_r[j], out_x[j], out_y[j], out_v[j] = r, x, y, v
         n += 1
@@ -259,8 +273,8 @@ def _bucket_ranges(frame0, count, offset, x, base, dt, bucket_s, n_buckets, lo_x
             if not math.isfinite(value):
                 continue
             g = (frame0[r] + f) * dt  # after base
-            k0 = max(int(math.floor((g - dt) / bucket_s)), 0)
-            k1 = min(int(math.floor((g + dt) / bucket_s)), n_buckets - 1)
+            k0 = max(math.floor((g - dt) / bucket_s), 0)
+            k1 = min(math.floor((g + dt) / bucket_s), n_buckets - 1)
             for k in range(k0, k1 + 1):
                 if not lo_x[k, r] <= value:  # NaN (none yet) or larger
                     lo_x[k, r] = value
@@ -284,9 +298,10 @@ def load_recording(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
     """
     road = Road.parse(road)
     key = (store_key(store), road.value)
-    if key not in _LOADED and store.metadata["roads"].get(road.value, {}).get(
-        "samples", 0
-    ) < IN_MEMORY_SAMPLES:
+    if (
+        key not in _LOADED
+        and store.metadata["roads"].get(road.value, {}).get("samples", 0) < IN_MEMORY_SAMPLES
+    ):
         _LOADED[key] = build(store, road)  # small: built faster than a cache is read
     if key not in _LOADED:
         folder = cache_dir() / f"recording-{key[0]}-{road.value}"
@@ -365,8 +380,10 @@ def build(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
     count = (frame1 - frame0 + 1).astype(np.int64)
     offset = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
     total = int(count.sum())
-    x, y, v = np.full(total, np.nan), np.full(total, np.nan, np.float32), np.full(
-        total, np.nan, np.float32
+    x, y, v = (
+        np.full(total, np.nan),
+        np.full(total, np.nan, np.float32),
+        np.full(total, np.nan, np.float32),
     )
     local = np.full(meta["tid"].size, -1, dtype=np.int64)
     local[rows] = np.arange(rows.size)
@@ -409,7 +426,7 @@ def _buckets(frame0, count, offset, x, base, n_buckets):
         lo_x = np.full((k1 - k0, frame0.size), np.nan)
         hi_x = np.full((k1 - k0, frame0.size), np.nan)
         # frames are placed by their time after base; shift so that bucket k0 is row 0
-        shift = int(round(k0 * BUCKET_S / GRID_DT))
+        shift = round(k0 * BUCKET_S / GRID_DT)
         _bucket_ranges(frame0 - shift, count, offset, x, base, GRID_DT, BUCKET_S, k1 - k0,
                        lo_x, hi_x)  # fmt: skip
         k, r = np.nonzero(np.isfinite(lo_x))

@@ -286,7 +286,9 @@ def _refine(keep, piece, time, x, y) -> None:
         after = np.minimum(after, kept.size - 1)
         before = np.maximum(after - 1, 0)
         a, b = kept[before], kept[after]
-        inside = ~keep & (piece[a] == piece[b]) & (a < np.arange(keep.size)) & (b > np.arange(keep.size))
+        inside = (
+            ~keep & (piece[a] == piece[b]) & (a < np.arange(keep.size)) & (b > np.arange(keep.size))
+        )
         if not inside.any():
             return
         w = np.where(inside, (time - time[a]) / np.maximum(time[b] - time[a], 1e-12), 0.0)

@@ -25,8 +25,8 @@ from twin.core.jit import kernel
 from twin.physics.energy import RAV4_2019, FuelModel
 from twin.physics.vehicle import (
     AIR_DENSITY,
-    GRAVITY,
     BRAKE_LOCK_MARGIN,
+    GRAVITY,
     POWER_SPEED_MIN,
     ROLLING_SPEED,
     VehicleParams,
@@ -81,8 +81,8 @@ def profile(road_model, road: int) -> Profile:
     heights = np.asarray(road_model.profile_z, dtype=np.float64)
     steps = np.diff(stations)
     spacing = float(steps[0]) if np.allclose(steps, steps[0], rtol=0, atol=1e-9) else 0.0
-    return Profile(road=int(road), stations=stations, heights=heights, slopes=np.diff(heights) / steps,
-                   spacing=spacing)  # fmt: skip
+    slopes = np.diff(heights) / steps
+    return Profile(int(road), stations, heights, slopes, spacing)
 
 
 def fuel_coefficients(model: FuelModel = RAV4_2019) -> np.ndarray:
@@ -160,8 +160,10 @@ def ground(road, stations, heights, slopes, spacing, centre_x):
 @kernel
 def place(b, i, bodies, prof):
     """Slot ``i``'s ``z``, ``grade`` and ``lane`` from its pose."""
-    _place(b, i, bodies.x, bodies.y, bodies.length, bodies.cg_height, bodies.z, bodies.grade,
-           bodies.lane, prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing)  # fmt: skip
+    _place(
+        b, i, bodies.x, bodies.y, bodies.length, bodies.cg_height, bodies.z, bodies.grade,
+        bodies.lane, prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing,
+    )  # fmt: skip
 
 
 @kernel(inline=True)
@@ -188,7 +190,11 @@ def integrate(b, bodies, accel, steer, drive, brake, prof, dt):
     max_power, wheelbase, length = bodies.max_power, bodies.wheelbase, bodies.length
     cg_height, z, lane = bodies.cg_height, bodies.z, bodies.lane
     road, stations, heights, slopes, spacing = (
-        prof.road, prof.stations, prof.heights, prof.slopes, prof.spacing
+        prof.road,
+        prof.stations,
+        prof.heights,
+        prof.slopes,
+        prof.spacing,
     )
     for i in range(bodies.top[b]):
         if not valid[b, i]:

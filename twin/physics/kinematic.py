@@ -33,6 +33,7 @@ import numpy as np
 from mapgen.build import MapBundle
 from twin.core.i24 import lane_of
 from twin.core.vehicle_classes import vehicle_classes
+from twin.physics import kernels
 from twin.physics.states import (
     ActiveVehicles,
     SpawnStates,
@@ -40,7 +41,6 @@ from twin.physics.states import (
     quaternion_of,
     write_controls,
 )
-from twin.physics import kernels
 from twin.physics.vehicle import GRAVITY, VehicleParams
 
 MAX_DT = 0.1  # [s] the longest step (the control step)
@@ -112,15 +112,24 @@ class KinematicWorld(ActiveVehicles):
         old = self._bodies
         self._bodies = kernels.Bodies(
             **{
-                name: old.top if name == "top" else np.concatenate(
-                    [getattr(old, name), np.broadcast_to(values[name], (len(ROADS), n))
-                     .astype(getattr(old, name).dtype)], axis=1,
-                )  # fmt: skip
+                name: old.top
+                if name == "top"
+                else np.concatenate(
+                    [
+                        getattr(old, name),
+                        np.broadcast_to(values[name], (len(ROADS), n)).astype(
+                            getattr(old, name).dtype
+                        ),
+                    ],
+                    axis=1,
+                )
                 for name in kernels.Bodies._fields
             }
         )
         for name in _FIELDS:
-            self._controls[name] = np.concatenate([self._controls[name], np.zeros((len(ROADS), n))], 1)
+            self._controls[name] = np.concatenate(
+                [self._controls[name], np.zeros((len(ROADS), n))], 1
+            )
         self._ids = np.concatenate([self._ids, ids])
         self._params = VehicleParams.concatenate([self._params, params])
         self._road = np.concatenate([self._road, states.road.astype(np.int8)])

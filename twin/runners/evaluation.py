@@ -366,7 +366,7 @@ def _run_batch(config: EvalConfig, chunk: list, arm: tuple, location) -> list[di
     from twin.metrics.measure import measure
     from twin.runners.episodes import PLACEMENT_ERRORS
 
-    store, bundle = worker_data(location)
+    store, _ = worker_data(location)
     episodes = [_episode(config, spec, arm) for spec in chunk]
     shared = _shared(location, episodes[0][0])
     batch = Batch(shared, len(chunk), log=True)

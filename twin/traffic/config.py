@@ -106,7 +106,9 @@ class TrafficConfig:
         if not 0 < self.brake_limit <= 1:
             raise ValueError(f"brake_limit must be in (0, 1], got {self.brake_limit}")
         if not (math.isfinite(self.cooperate_from) and self.cooperate_from >= 0):
-            raise ValueError(f"TrafficConfig.cooperate_from must be >= 0, got {self.cooperate_from!r}")
+            raise ValueError(
+                f"TrafficConfig.cooperate_from must be >= 0, got {self.cooperate_from!r}"
+            )
         if self.emergency_margin < 0 or self.reaction_time < 0 or self.path_preview < 0:
             raise ValueError("emergency_margin, reaction_time and path_preview must be >= 0")
         if any(len(o) != 2 or not o[0] < o[1] for o in self.hov_openings):

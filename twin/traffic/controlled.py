@@ -27,7 +27,11 @@ def observation(t, b: int, i: int, ids: np.ndarray, obstacle_y: np.ndarray, road
     sc, dr, veh = t.scratch, t.drivers, t.vehicles
     n = veh.valid.shape[1]
     count = int(sc.entry_count[b])
-    key, group, owner = sc.entry_key[b, :count], sc.entry_group[b, :count], sc.entry_owner[b, :count]
+    key, group, owner = (
+        sc.entry_key[b, :count],
+        sc.entry_group[b, :count],
+        sc.entry_owner[b, :count],
+    )
     sx, sspeed, slength = sc.sx[b], sc.sspeed[b], sc.slength[b]
     x = float(sx[i])
     lanes = np.array(LANES, dtype=np.int64)

@@ -38,7 +38,8 @@ from twin.traffic.controlled import apply_controllers
 from twin.traffic.controller_api import EgoController, lane_change_direction
 from twin.traffic.drivers import DriverTraits
 from twin.traffic.kernels import state
-from twin.traffic.kernels.decide import decide, settings as kernel_settings
+from twin.traffic.kernels.decide import decide
+from twin.traffic.kernels.decide import settings as kernel_settings
 from twin.traffic.kernels.models import N_PARAMS
 from twin.traffic.models import car_following_model
 from twin.traffic.scene import NO_OBSTACLES, Commands, Obstacles
@@ -176,15 +177,24 @@ class TrafficManager:
         }  # fmt: skip
         self._d = state.Drivers(
             *(
-                np.concatenate([old, np.broadcast_to(values[f], (len(ROADS), *values[f].shape))
-                                .astype(old.dtype)], axis=1)  # fmt: skip
+                np.concatenate(
+                    [
+                        old,
+                        np.broadcast_to(values[f], (len(ROADS), *values[f].shape)).astype(
+                            old.dtype
+                        ),
+                    ],
+                    axis=1,
+                )
                 for f, old in zip(state.Drivers._fields, self._d, strict=True)
             )
         )
         self._ids = np.concatenate([self._ids, ids])
         self._row = np.concatenate([self._row, (road > 0).astype(np.int64)])
         self._length = np.concatenate([self._length, params.length])
-        self._wheelbase = np.concatenate([self._wheelbase, params.mounts[:, 0, 0] - params.mounts[:, 2, 0]])
+        self._wheelbase = np.concatenate(
+            [self._wheelbase, params.mounts[:, 0, 0] - params.mounts[:, 2, 0]]
+        )
         self._mu = np.concatenate([self._mu, params.mu])
         self._order_valid = False
 
@@ -475,7 +485,8 @@ class TrafficManager:
             return np.broadcast_to(np.asarray(values, dtype), (rows, n)).copy()
 
         vehicles = state.Vehicles(
-            valid=valid, top=np.full(rows, n, np.int64), x=both(states.x), y=both(states.y), yaw=both(yaw),
+            valid=valid, top=np.full(rows, n, np.int64), x=both(states.x), y=both(states.y),
+            yaw=both(yaw),
             speed=both(states.speed), lane=both(states.lane, np.int64), length=both(self._length),
             wheelbase=both(self._wheelbase), mu=both(self._mu),
         )  # fmt: skip
@@ -546,4 +557,3 @@ class TrafficManager:
 def _check_speed(speed: np.ndarray) -> None:
     if not np.all(np.isfinite(speed)) or np.any(speed < 0):
         raise ValueError(f"desired speeds must be finite and >= 0 m/s, got {speed!r}")
-

@@ -12,7 +12,7 @@ from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.kernels import footprints_overlap
 from twin.physics.kinematic import KinematicWorld
 from twin.physics.states import SpawnStates
-from twin.physics.vehicle import GRAVITY, POWER_SPEED_MIN, VehicleParams, resistance
+from twin.physics.vehicle import GRAVITY, POWER_SPEED_MIN, resistance
 from twin.physics.world import PhysicsWorld
 from twin.physics.worlds import DEFAULT_DT, World, check_world, make_world
 

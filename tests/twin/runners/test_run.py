@@ -203,4 +203,6 @@ def test_metric_oracles(scene_store):
     assert metrics.speed_field_metrics(sim, windows, traffic, "westbound", T0, 4.0)["all_lanes"][
         "bias_mps"
     ] == pytest.approx(1.0)
-    assert metrics.traffic_speed_error(sim, traffic, T0, "westbound")["speed_mae_mps"] == pytest.approx(1.0)
+    assert metrics.traffic_speed_error(sim, traffic, T0, "westbound")[
+        "speed_mae_mps"
+    ] == pytest.approx(1.0)

@@ -187,7 +187,12 @@ def update_targets(b, core):
     seed = ep.seed[b]
     time_from = ep.t0[b]
     time_to = ep.t0[b] + ep.steps[b] * core.settings.dt
-    tgt_on, plan_next, plan_end, tgt_lane = slots.tgt_on, slots.plan_next, slots.plan_end, slots.tgt_lane
+    tgt_on, plan_next, plan_end, tgt_lane = (
+        slots.tgt_on,
+        slots.plan_next,
+        slots.plan_end,
+        slots.tgt_lane,
+    )
     strategic, lanes, lane_from = drivers.strategic, drivers.lane, drivers.lane_from
     for i in range(core.bodies.top[b]):
         if not valid[b, i] or not tgt_on[b, i]:
@@ -195,10 +200,8 @@ def update_targets(b, core):
         if strategic[b, i] != 0 or lane_from[b, i] != lanes[b, i]:
             continue
         lane = lanes[b, i]
-        if beh.mode == RECORDED:
-            due = plan_next[b, i] < plan_end[b, i]
-        else:
-            due = lane != tgt_lane[b, i]
+        recorded = beh.mode == RECORDED
+        due = plan_next[b, i] < plan_end[b, i] if recorded else lane != tgt_lane[b, i]
         if due:
             next_target(b, i, core, seed, lane, x[b, i], time_from, time_to)
 
@@ -371,7 +374,9 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         max_accel_scale=float(dist.max_accel_scale), hov_share=float(traffic_config.hov_share),
         decision_interval=float(traffic_config.decision_interval),
         auto=bool(traffic_config.auto_lane_change and behaviour.auto_lane_change),
-        politeness=float(mobil.politeness if behaviour.politeness is None else behaviour.politeness),
+        politeness=float(
+            mobil.politeness if behaviour.politeness is None else behaviour.politeness
+        ),
         threshold=float(mobil.threshold if behaviour.threshold is None else behaviour.threshold),
         safe_decel=float(mobil.safe_decel), keep_right=float(mobil.keep_right),
         dist_on=bool(behaviour.distributions), dist_have=have, dist_mean=mean,

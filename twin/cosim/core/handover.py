@@ -13,7 +13,15 @@ import math
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.cosim.core import drivers as behaviour
-from twin.cosim.core.layout import GHOST, GHOSTS_FULL, SEEN, SIMULATED, SNAPSHOT_FULL, TABLE_FULL, WAITING
+from twin.cosim.core.layout import (
+    GHOST,
+    GHOSTS_FULL,
+    SEEN,
+    SIMULATED,
+    SNAPSHOT_FULL,
+    TABLE_FULL,
+    WAITING,
+)
 from twin.data.recording import lane_of, window
 from twin.physics.kernels import place
 from twin.traffic.kernels import state as traffic
@@ -405,9 +413,9 @@ def lead_speeds(b, core):
         target = base[b, lead]
         best = -1
         for g in range(gh.count[b]):
-            if glane[b, g] == lane and gx[b, g] > x[b, lead]:
-                if best < 0 or gx[b, g] < gx[b, best]:
-                    best = g
+            ahead = glane[b, g] == lane and gx[b, g] > x[b, lead]
+            if ahead and (best < 0 or gx[b, g] < gx[b, best]):
+                best = g
         if best >= 0:
             target = gspeed[b, best]
         if cs.lead_chases_ghost:

@@ -52,7 +52,8 @@ TidTable = namedtuple("TidTable", "key flags slot")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
 Snapshot = namedtuple("Snapshot", "count r x y speed")
 Log = namedtuple(
-    "Log", "on id r lane x y z speed accel_cmd yaw drive_power windows ghost_every ghost_count "
+    "Log",
+    "on id r lane x y z speed accel_cmd yaw drive_power windows ghost_every ghost_count "
     "ghost_r ghost_lane ghost_x ghost_y ghost_speed",
 )
 State = namedtuple(

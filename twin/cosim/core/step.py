@@ -267,7 +267,14 @@ def record(b, core, step):
         return
     bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
     valid, ids, lane, x, y, z = bo.valid, bo.id, bo.lane, bo.x, bo.y, bo.z
-    speed, yaw, power, r, new, accel = bo.speed, bo.yaw, bo.drive_power, sl.r, sl.just_spawned, dr.accel
+    speed, yaw, power, r, new, accel = (
+        bo.speed,
+        bo.yaw,
+        bo.drive_power,
+        sl.r,
+        sl.just_spawned,
+        dr.accel,
+    )
     lid, lr, llane, lx, ly, lz = log.id, log.r, log.lane, log.x, log.y, log.z
     lspeed, laccel, lyaw, lpower = log.speed, log.accel_cmd, log.yaw, log.drive_power
     for i in range(bo.top[b]):

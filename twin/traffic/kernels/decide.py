@@ -158,7 +158,13 @@ def limit(b, t):
     (emergency braking over it where the controller is guarded), within the tyres' grip
     for a controller, within the driver's brake limit (all the grip in an emergency)
     and its acceleration for a driver."""
-    vehicles, drivers, sc, settings, counters = t.vehicles, t.drivers, t.scratch, t.settings, t.counters
+    vehicles, drivers, sc, settings, counters = (
+        t.vehicles,
+        t.drivers,
+        t.scratch,
+        t.settings,
+        t.counters,
+    )
     valid, mu = vehicles.valid, vehicles.mu
     ctrl, params, accel_out = drivers.ctrl, drivers.cf, drivers.accel
     command, emergency, need = sc.command, sc.emergency, sc.need
@@ -186,7 +192,13 @@ def limit(b, t):
 @kernel
 def controlled_accel(b, i, kind, t):
     """[m/s^2] what controller ``kind`` asks of vehicle ``i``."""
-    vehicles, drivers, sc, settings, actions = t.vehicles, t.drivers, t.scratch, t.settings, t.actions
+    vehicles, drivers, sc, settings, actions = (
+        t.vehicles,
+        t.drivers,
+        t.scratch,
+        t.settings,
+        t.actions,
+    )
     speed = max(vehicles.speed[b, i], 0.0)
     if kind == state.ACTION:
         if settings.action_speed:

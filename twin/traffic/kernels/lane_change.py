@@ -48,7 +48,7 @@ def hov_allows(eligible, lane, target, x, openings):
         return False
     if lane != HOV_LANE and target != HOV_LANE:
         return True
-    for k in range(openings.shape[0]):
+    for k in range(openings.shape[0]):  # noqa: SIM110 (a generator does not compile)
         if openings[k, 0] <= x <= openings[k, 1]:
             return True
     return False
@@ -71,8 +71,10 @@ def expire(b, t):
     valid, x, length = t.vehicles.valid, t.vehicles.x, t.vehicles.length
     strategic, x_from, x_by = t.drivers.strategic, t.drivers.strategic_from, t.drivers.strategic_by
     for i in range(t.vehicles.top[b]):
-        if valid[b, i] and strategic[b, i] != 0 and x[b, i] + 0.5 * length[b, i] > x_by[b, i] + (
-            GIVE_UP
+        if (
+            valid[b, i]
+            and strategic[b, i] != 0
+            and x[b, i] + 0.5 * length[b, i] > x_by[b, i] + (GIVE_UP)
         ):
             clear_target(strategic, x_from, x_by, b, i)
 
@@ -144,9 +146,7 @@ def _choose(b, i, x, urge, t, n):
     lead_now = sspeed[b, ahead] if ahead >= 0 else 0.0
     room = gap_now + lead_now * 0.5 * high >= 0.5 * path_length(
         speed, high, urgent, settings.urgent_path
-    ) + (
-        MIN_LANE_CHANGE_GAP
-    )
+    ) + (MIN_LANE_CHANGE_GAP)
     # its old lane's follower now (this step's car following; an obstacle's 0) and
     # once it has left
     old_now, old_after = 0.0, 0.0

@@ -15,8 +15,6 @@ The vehicles' entries keep last step's order and are put right by an insertion s
 come sorted by x, are merged in.
 """
 
-import math
-
 from twin.core.jit import kernel
 
 LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x

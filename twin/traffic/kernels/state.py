@@ -42,12 +42,8 @@ Scratch = namedtuple(
     "entry_count entry_owner entry_group entry_key order_count order_owner order_lane "
     "marks sx slength sspeed saccel cf_accel need emergency command steer path_y",
 )
-Counters = namedtuple(
-    "Counters", "lane_changes emergency_steps safety_overrides refused_requests"
-)
-Traffic = namedtuple(
-    "Traffic", "vehicles obstacles drivers scratch settings counters actions"
-)
+Counters = namedtuple("Counters", "lane_changes emergency_steps safety_overrides refused_requests")
+Traffic = namedtuple("Traffic", "vehicles obstacles drivers scratch settings counters actions")
 
 #: ``Drivers.ctrl``: who decides a vehicle's acceleration.
 DRIVER = 0  # the traffic manager's driver (its car-following model, MOBIL)

@@ -69,9 +69,10 @@ def finish_changes(b, t):
         if not valid[b, i] or lane_from[b, i] == lane[b, i]:
             continue
         centre = x[b, i] + 0.5 * length[b, i]
-        if centre >= start_x[b, i] + path_length[b, i] and abs(
-            y[b, i] - centre_y(lane[b, i])
-        ) < SETTLED:
+        if (
+            centre >= start_x[b, i] + path_length[b, i]
+            and abs(y[b, i] - centre_y(lane[b, i])) < SETTLED
+        ):
             lane_from[b, i] = lane[b, i]
 
 
