@@ -251,8 +251,10 @@ class Batch:
             self.size, slots, ghosts, snapshot, table, cfg.steps if log else 0,
             cfg.ghost_log_every,
         )  # fmt: skip
-        self.core = layout.pack(self.state, shared.settings, shared.traffic_settings,
-                                shared.recording, shared.params, shared.behaviour_arrays)  # fmt: skip
+        self.core = layout.pack(
+            self.state, shared.settings, shared.traffic_settings, shared.recording,
+            shared.params, shared.behaviour_arrays,
+        )  # fmt: skip
         self.actions = self.state.actions
         self.placements: list[Placement | None] = [None] * self.size
         self._closest = tuple(np.empty(snapshot, t) for t in (np.int32, float, float, float))
@@ -333,7 +335,9 @@ class Batch:
                 raise CoreError(f"{actions.size} actions for a batch of {self.size}")
             bad = np.flatnonzero(~np.isfinite(actions) & ~self.done)
             if bad.size:
-                raise CoreError(f"episode {bad[0]}: the action {actions[bad[0]]!r} is not finite")
+                raise CoreError(
+                    f"episode {bad[0]}: the action {float(actions[bad[0]])} is not finite"
+                )
             self.actions[:] = actions
         step.step_batch(self.core)
         if self.state.episodes.overflow.any():
@@ -353,14 +357,22 @@ class Batch:
         what = [
             name
             for bit, name in (
-                (layout.SNAPSHOT_FULL, f"more than {self.state.snap.r.shape[1]} recorded "
-                 "vehicles in its windows (Batch snapshot=)"),
-                (layout.TABLE_FULL, f"more than {self.state.table.key.shape[1]} recorded "
-                 "vehicles met (Batch table=)"),
+                (
+                    layout.SNAPSHOT_FULL,
+                    f"more than {self.state.snap.r.shape[1]} recorded "
+                    "vehicles in its windows (Batch snapshot=)",
+                ),
+                (
+                    layout.TABLE_FULL,
+                    f"more than {self.state.table.key.shape[1]} recorded "
+                    "vehicles met (Batch table=)",
+                ),
                 (layout.PAIRS_FULL, "too many vehicles in contact at once"),
-                (layout.GHOSTS_FULL, f"more than {self.state.ghosts.r.shape[1]} ghosts "
-                 "(Batch ghosts=)"),
-            )  # fmt: skip
+                (
+                    layout.GHOSTS_FULL,
+                    f"more than {self.state.ghosts.r.shape[1]} ghosts (Batch ghosts=)",
+                ),
+            )
             if flags & bit
         ]
         raise CoreError(f"episode {b} outgrew the batch: {'; '.join(what)}")
