@@ -192,12 +192,12 @@ class WaveDampeningEnv(gym.Env):
         low, high = float(self.action_space.low[0]), float(self.action_space.high[0])
         actions = check_actions(action, low, high, np.ones(1, dtype=bool))
         episodes = self.episodes
+        fuel_before = float(episodes.stats[0, observe.FUEL_SEEN])
         episodes.step(actions)
         obs = self._observation()
         terminated = bool(episodes.collided[0])
         truncated = bool(episodes.done[0]) and not terminated
-        fuel = float(episodes.stats[0, observe.FUEL_SEEN])
-        info = {"fuel_g_total": fuel}
+        info = {"fuel_g": float(episodes.stats[0, observe.FUEL_SEEN]) - fuel_before}
         if terminated or truncated:
             info["metrics"] = episodes.metrics(0)
         return obs, float(episodes.reward[0]), terminated, truncated, info
@@ -211,7 +211,7 @@ class WaveDampeningEnv(gym.Env):
         obs = noisy(self.episodes.obs, self.obs_noise, [self.np_random], OBS_LOW, OBS_HIGH)[0]
         self._history.append(obs)
         del self._history[: -(self.latency_steps + 1)]
-        return self._history[0]
+        return self._history[0].copy()  # never the object returned before
 
 
 @dataclass(frozen=True)

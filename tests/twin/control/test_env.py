@@ -59,6 +59,7 @@ def test_an_episode_ends_truncated_with_the_benchmarks_metrics(data, world):
     assert truncated and not terminated and steps == 60  # 6 s at 10 Hz
     assert info["metrics"]["ego_and_followers_mpg"] is not None
     assert np.isfinite(reward) and reward < 0  # fuel is burnt
+    assert 0 < info["fuel_g"] <= -reward  # the step's fuel, the reward's main term
     env.close()
 
 
