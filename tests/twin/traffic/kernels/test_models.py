@@ -1,0 +1,40 @@
+"""The compiled car-following models are the registered models: every name of
+``MODELS`` has a kernel, and the kernel's acceleration is the vectorised model's."""
+
+import numpy as np
+import pytest
+
+from twin.traffic.kernels.models import MAX_ACCEL_COLUMN, MODEL_IDS, N_PARAMS, follow_accel
+from twin.traffic.models import MODELS
+
+
+def test_every_registered_model_has_a_kernel():
+    assert set(MODEL_IDS) == set(MODELS)
+    for name, model in MODELS.items():
+        assert len(model.names) <= N_PARAMS
+        assert model.names[MAX_ACCEL_COLUMN[MODEL_IDS[name]]] == "max_accel"
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_kernel_acceleration_is_the_models(name):
+    model = MODELS[name]
+    rng = np.random.default_rng(7)
+    n = 400
+    values = {}
+    for p in model.parameters:
+        low, high = p.bounds
+        values[p.name] = rng.uniform(low, high, n)
+    values["desired_speed"][:20] = 0.0  # a stop order
+    params = model.make(**values)
+    v = rng.uniform(0.0, 35.0, n)
+    v_lead = rng.uniform(0.0, 35.0, n)
+    gap = rng.uniform(0.5, 120.0, n)
+    gap[::7] = np.inf  # free roads
+    expected = model.accel(v, v_lead, gap, params)
+    row = np.zeros((n, N_PARAMS))
+    for column, p in enumerate(model.names):
+        row[:, column] = values[p]
+    got = np.array(
+        [follow_accel(MODEL_IDS[name], v[i], v_lead[i], gap[i], *row[i]) for i in range(n)]
+    )
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-9)
