@@ -3,7 +3,9 @@ the twin (the optional ``rl`` extra: ``pip install -e '.[rl]'``, stable-baseline
 PyTorch).
 
 - :func:`train_ppo` trains PPO (stable-baselines3's, an MLP policy) on the env's
-  ``train`` episodes and saves the model, atomically.
+  ``train`` episodes, one or many at once (:mod:`twin.control.sb3_vec_env`, the
+  batched vector env as a stable-baselines3 ``VecEnv``), and saves the model,
+  atomically.
 - ``twin.rl:policy`` is a controller factory: by default the linear speed policy the
   twin ships (trained by ``twin train``, :mod:`twin.control.train`; numpy alone), or
   ``--set controller.policy.model=PATH`` for another: a ``.json`` of ``twin train`` or
@@ -58,6 +60,7 @@ def train_ppo(
     action: str = "accel",
     seed: int = 0,
     n_steps: int = 512,
+    num_envs: int = 1,
 ) -> Path:
     """Train PPO on the env's ``train`` episodes and save it to ``out`` (``.zip``).
 
@@ -68,7 +71,10 @@ def train_ppo(
         duration: [s] each training episode.
         action: ``accel`` or ``speed`` (see :mod:`twin.control.env`).
         seed: seeds the episodes and PPO.
-        n_steps: env steps per PPO update.
+        n_steps: env steps per PPO update (per episode of the batch).
+        num_envs: 1: the single env (the physics world); more: that many episodes of
+            the kinematic world stepped together by the batched core
+            (:class:`twin.control.sb3_vec_env.Sb3VecEnv`), ``steps`` counted over all.
 
     Raises:
         RLError: the extra is missing. ValueError: a bad setting.
@@ -79,13 +85,22 @@ def train_ppo(
     out = Path(out)
     if out.suffix != ".zip":
         out = out.with_name(out.name + ".zip")
-    env = WaveDampeningEnv(data, split="train", duration=duration, action=action, seed=seed)
+    if not (isinstance(num_envs, int) and num_envs >= 1):
+        raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+    if num_envs == 1:
+        env = WaveDampeningEnv(data, split="train", duration=duration, action=action, seed=seed)
+    else:
+        from twin.control.sb3_vec_env import Sb3VecEnv
+
+        env = Sb3VecEnv(num_envs, data=data, split="train", duration=duration, action=action,
+                        seed=seed)  # fmt: skip
+    rollout = max(1, min(n_steps, steps // num_envs))
     try:
         model = sb3.PPO(
             "MlpPolicy",
             env,
-            n_steps=min(n_steps, steps),
-            batch_size=64,
+            n_steps=rollout,
+            batch_size=64 if num_envs == 1 else min(64 * num_envs, rollout * num_envs),
             seed=seed,
             device="cpu",
             verbose=0,

@@ -11,10 +11,14 @@ with the single env's spaces, observation, reward and metrics
     obs, info = envs.reset(seed=0)          # sub-env i draws its episodes from seed 0 + i
     obs, reward, terminated, truncated, info = envs.step(actions)   # actions (256, 1)
 
-Gymnasium's next-step autoreset: the step after an episode ended resets that sub-env
-(its observation is the new episode's first, its reward 0, neither flag set) while the
-others step. At an episode's end ``info["metrics"]`` holds each sub-env's figures (a
-dict of (N,) arrays, the sub-envs that did not end masked out by ``info["_metrics"]``).
+Gymnasium's next-step autoreset by default: the step after an episode ended resets
+that sub-env (its observation is the new episode's first, its reward 0, neither flag
+set) while the others step. With ``autoreset_mode="same_step"`` the step that ends an
+episode resets it at once: its observation is the new episode's first, and the ended
+episode's last is ``info["final_obs"]`` (masked by ``info["_final_obs"]``), the loop
+stable-baselines3 and most RL libraries expect (:class:`twin.control.rl.Sb3VecEnv`).
+At an episode's end ``info["metrics"]`` holds each sub-env's figures (a dict of (N,)
+arrays, the sub-envs that did not end masked out by ``info["_metrics"]``).
 
 Sub-env i is the single env with the seed ``s + i``: the same episodes, and an episode's
 steps are the same bytes alone or at any place in a batch of any size.
@@ -38,7 +42,17 @@ class VectorWaveDampeningEnv(VectorEnv):
         num_envs: N.
         world: must be ``kinematic`` (the physics world runs one episode at a time: use
             ``gymnasium.vector.AsyncVectorEnv`` of single envs there).
-        The others as :class:`~twin.control.env.WaveDampeningEnv`.
+        autoreset_mode: ``"next_step"`` (default) or ``"same_step"`` (module doc).
+        data: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        split: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        split_time: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        duration: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        action: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        reward: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        obs_noise: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        latency_steps: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        cosim: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        seed: as :class:`~twin.control.env.WaveDampeningEnv`'s.
 
     Raises:
         ValueError: a setting is impossible (named).
@@ -49,9 +63,17 @@ class VectorWaveDampeningEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, data: str | None = None, *, split="train",
                  split_time=None, duration=120.0, action="accel", reward=None, obs_noise=0.0,
                  latency_steps=0, cosim=SCENARIO_B, world: str | None = "kinematic",
-                 seed=0):  # fmt: skip
+                 seed=0, autoreset_mode: str = "next_step"):  # fmt: skip
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+        mode = modes.get(getattr(autoreset_mode, "value", autoreset_mode))
+        if mode is None:
+            raise ValueError(
+                f"autoreset_mode must be 'next_step' or 'same_step', got {autoreset_mode!r}"
+            )
+        self.metadata = {**self.metadata, "autoreset_mode": mode}
+        self._same_step = mode == AutoresetMode.SAME_STEP
         setup = EnvSetup.make(
             data, split=split, split_time=split_time, duration=duration, action=action,
             reward=reward, obs_noise=obs_noise, latency_steps=latency_steps, cosim=cosim,
@@ -72,16 +94,19 @@ class VectorWaveDampeningEnv(VectorEnv):
         self.episodes = setup.episodes(num_envs)
         self._rngs = [np.random.default_rng(seed + i) for i in range(num_envs)]
         self._ended = np.zeros(num_envs, dtype=bool)  # done at the last step: reset next
-        self._history: list[np.ndarray] = []
+        # the observations of the last latency_steps + 1 control steps, oldest first
+        self._history = np.zeros((latency_steps + 1, num_envs, len(OBS_LOW)), np.float32)
 
     def reset(self, *, seed=None, options: dict | None = None):
         """Every sub-env starts a new episode: with ``seed`` (an int), sub-env i draws
         from ``seed + i`` (a list gives each its own); ``options={"episode": [...]}``
         picks them."""
         if seed is not None:
-            seeds = seed if isinstance(seed, list | tuple | np.ndarray) else [
-                seed + i for i in range(self.num_envs)
-            ]
+            seeds = (
+                seed
+                if isinstance(seed, list | tuple | np.ndarray)
+                else [seed + i for i in range(self.num_envs)]
+            )
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} sub-envs")
             self._rngs = [np.random.default_rng(int(s)) for s in seeds]
@@ -90,8 +115,7 @@ class VectorWaveDampeningEnv(VectorEnv):
         for b in range(self.num_envs):
             episodes.reset(b, self._rngs[b], None if chosen is None else chosen[b])
         self._ended[:] = False
-        self._history = []
-        obs = self._observation()
+        obs = self._observation(np.ones(self.num_envs, dtype=bool))
         return obs, {"episode": episodes.episode.copy(),
                      "ego_record_id": np.array(episodes.record_id, dtype=object)}  # fmt: skip
 
@@ -118,17 +142,42 @@ class VectorWaveDampeningEnv(VectorEnv):
             info["_metrics"] = np.isin(np.arange(self.num_envs), ended)
         for b in restart:
             episodes.reset(int(b), self._rngs[b])
-        self._ended = terminated | truncated
-        return self._observation(), reward, terminated, truncated, info
+        fresh = np.isin(np.arange(self.num_envs), restart)
+        if not self._same_step:
+            self._ended = terminated | truncated
+            return self._observation(fresh), reward, terminated, truncated, info
+        final = self._observation(fresh)
+        for b in ended:
+            episodes.reset(int(b), self._rngs[b])
+        if ended.size:
+            mask = np.isin(np.arange(self.num_envs), ended)
+            info["final_obs"] = np.full(self.num_envs, None, dtype=object)
+            info["final_obs"][ended] = list(final[ended])
+            info["_final_obs"] = mask
+            obs = final.copy()
+            obs[ended] = self._observation(mask, only=mask)[ended]
+            return obs, reward, terminated, truncated, info
+        return final, reward, terminated, truncated, info
 
     def close_extras(self, **kwargs):
         self.episodes.close()
 
-    def _observation(self) -> np.ndarray:
-        obs = noisy(self.episodes.obs, self.obs_noise, self._rngs, OBS_LOW, OBS_HIGH)
-        self._history.append(obs)
-        del self._history[: -(self.latency_steps + 1)]
-        return self._history[0].copy()
+    def _observation(self, fresh: np.ndarray, only: np.ndarray | None = None) -> np.ndarray:
+        """The observations the agent sees now, ``latency_steps`` old; a sub-env whose
+        episode is ``fresh`` (just reset) sees its first observation until it has as
+        many. ``only``: update these sub-envs alone (a same-step reset; the others have
+        had this step's)."""
+        rows = slice(None) if only is None else only
+        rngs = self._rngs if only is None else [self._rngs[b] for b in np.flatnonzero(only)]
+        obs = noisy(self.episodes.obs[rows], self.obs_noise, rngs, OBS_LOW, OBS_HIGH)
+        history = self._history
+        if only is None:
+            history[:-1] = history[1:]
+            history[-1] = obs
+        else:
+            history[-1, only] = obs
+        history[:, fresh] = history[-1, fresh]
+        return history[0].copy()
 
 
 def _column(values: list, rows: np.ndarray, n: int) -> np.ndarray:

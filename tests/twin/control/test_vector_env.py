@@ -89,13 +89,13 @@ def test_the_next_step_after_an_episode_ends_resets_that_sub_env(data):
     envs = _vector(data, 2, duration=2.0)  # 20 control steps
     envs.reset(seed=3)
     for _ in range(20):
-        obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 1), np.float32))
+        _obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 1), np.float32))
     assert truncated.all() and not terminated.any()
     assert info["_metrics"].all() and np.all(info["metrics"]["simulated_s"] == 2.0)
-    obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 1), np.float32))
+    _obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 1), np.float32))
     assert not (terminated | truncated).any() and np.all(reward == 0.0)  # the new episodes
     assert "metrics" not in info
-    obs, reward, *_ = envs.step(np.zeros((2, 1), np.float32))
+    _, reward, *_ = envs.step(np.zeros((2, 1), np.float32))
     assert np.all(reward < 0.0)  # they run: fuel is burnt
     envs.close()
 
@@ -123,8 +123,94 @@ def test_gymnasiums_vector_wrappers_run_on_it(data):
     envs.reset(seed=1)
     returns = []
     for _ in range(22):
-        _, _, terminated, truncated, info = envs.step(envs.action_space.sample() * 0)
+        *_, info = envs.step(envs.action_space.sample() * 0)
         if "episode" in info:
             returns.extend(info["episode"]["r"][info["_episode"]])
     assert len(returns) == 2 and all(r < 0 for r in returns)
     envs.close()
+
+
+def _single_through_two_episodes(data, seed, steps, **settings):
+    """The single env with ``seed``: its observations over ``steps`` steps, reset
+    (without a seed) where its episode ends, as an agent's loop does."""
+    single = gym.make(twin.env.ENV_ID, data=data, world="kinematic", duration=2.0, **settings)
+    obs, _ = single.reset(seed=seed)
+    seen, finals = [obs], {}
+    for k in range(steps):
+        obs, _, terminated, truncated, _ = single.step(_actions(k, 1)[0])
+        if terminated or truncated:
+            finals[k] = obs
+            obs, _ = single.reset()
+        seen.append(obs)
+    single.close()
+    return seen, finals
+
+
+@pytest.mark.parametrize("settings", [{}, {"latency_steps": 2, "obs_noise": 0.05}])
+def test_same_step_autoreset_gives_the_new_episode_and_the_last_observation(data, settings):
+    """autoreset_mode="same_step": the step that ends an episode returns the next
+    episode's first observation and the ended one's last in info["final_obs"]: sub-env i
+    is still the single env with seed s + i, latency and noise included."""
+    envs = VectorWaveDampeningEnv(2, data, duration=2.0, autoreset_mode="same_step", **settings)
+    assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    obs, _ = envs.reset(seed=4)
+    rows, finals = [obs], {}
+    for k in range(26):
+        obs, reward, terminated, truncated, info = envs.step(np.repeat(_actions(k, 1), 2, 0))
+        if "final_obs" in info:
+            assert info["_final_obs"].all() and truncated.all() and np.all(reward < 0)
+            finals[k] = np.stack(info["final_obs"])
+        rows.append(obs)
+    envs.close()
+    for i in range(2):
+        seen, single_finals = _single_through_two_episodes(data, 4 + i, 26, **settings)
+        assert sorted(finals) == sorted(single_finals) == [19]
+        assert finals[19][i].tobytes() == single_finals[19].tobytes()
+        for k, obs in enumerate(seen):
+            assert rows[k][i].tobytes() == obs.tobytes(), k
+
+
+def test_next_step_autoreset_keeps_latency_and_noise_per_sub_env(data):
+    settings = {"latency_steps": 2, "obs_noise": 0.05}
+    envs = VectorWaveDampeningEnv(2, data, duration=2.0, **settings)
+    obs, _ = envs.reset(seed=6)
+    rows = [obs]
+    for k in range(27):
+        j = k if k < 20 else k - 1  # the step after the end resets: no action taken
+        obs, *_ = envs.step(np.repeat(_actions(j, 1), 2, 0))
+        rows.append(obs)
+    envs.close()
+    for i in range(2):
+        seen, finals = _single_through_two_episodes(data, 6 + i, 26, **settings)
+        assert rows[20][i].tobytes() == finals[19].tobytes()  # the ended episode's last
+        vector = rows[:20] + rows[21:]  # then the reset step shows what reset gave
+        for k, obs in enumerate(seen):
+            assert vector[k][i].tobytes() == obs.tobytes(), k
+
+
+def test_stable_baselines3_trains_on_it(data, tmp_path):
+    """The adapter (twin.control.sb3_vec_env): PPO's rollouts from the batched env, the
+    ended episodes' last observations and time limits handed over as SB3 expects."""
+    pytest.importorskip("stable_baselines3", reason="the rl extra is not installed")
+    from stable_baselines3 import PPO
+
+    from twin.control.rl import train_ppo
+    from twin.control.sb3_vec_env import Sb3VecEnv
+
+    envs = Sb3VecEnv(2, data=data, duration=2.0, seed=3)
+    envs.seed(3)
+    first = envs.reset()
+    assert first.shape == (2, len(twin.env.OBSERVATION))
+    for _ in range(20):
+        obs, reward, done, infos = envs.step(np.zeros((2, 1), np.float32))
+    assert done.all() and reward.dtype == np.float32
+    assert all(info["TimeLimit.truncated"] for info in infos)
+    assert all(info["terminal_observation"].shape == first.shape[1:] for info in infos)
+    assert all(info["metrics"]["simulated_s"] == 2.0 for info in infos)
+    assert not np.array_equal(obs, np.stack([i["terminal_observation"] for i in infos]))
+    model = PPO("MlpPolicy", envs, n_steps=16, batch_size=32, seed=0, device="cpu")
+    model.learn(total_timesteps=64)
+    envs.close()
+    saved = train_ppo(tmp_path / "ppo", steps=64, n_steps=16, data=data, duration=2.0,
+                      num_envs=4)  # fmt: skip
+    assert saved.is_file()
