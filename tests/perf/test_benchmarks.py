@@ -43,18 +43,32 @@ def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
 
 def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_store, capsys):
     argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--workers", "1"]
-    assert main([*argv, "--repeats", "1"]) == 0
+    assert main([*argv, "--repeats", "1", "--no-compile-times"]) == 0
     line = json.loads(capsys.readouterr().out.strip())
     assert line["bench"] == "env" and line["env_steps_per_s"] > 0
-    assert line["vector_workers"] == 1 and line["vector_env_steps_per_s"] > 0
+    assert line["vector"] == "AsyncVectorEnv" and line["vector_envs"] == 1
+    assert line["vector_env_steps_per_s"] > 0 and "cold_first_step_s" not in line
     assert main(["bench", "env", "--steps", "0"]) == 2
 
 
-def test_bench_env_times_the_kinematic_world(wave_store, capsys):
-    argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--workers", "1"]
-    assert main([*argv, "--repeats", "1", "--world", "kinematic"]) == 0
+def test_bench_env_times_the_kinematic_worlds_batched_vector_env(wave_store, capsys):
+    argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--num-envs", "3"]
+    assert main([*argv, "--repeats", "1", "--world", "kinematic", "--no-compile-times"]) == 0
     line = json.loads(capsys.readouterr().out.strip())
     assert line["world"] == "kinematic" and line["env_steps_per_s"] > 0
+    assert line["vector"] == "batched core" and line["vector_envs"] == 3
+    assert line["vector_vehicle_updates_per_s"] > line["vector_env_steps_per_s"] > 0
+    assert line["reset_ms"] > 0
+
+
+@pytest.mark.slow
+def test_bench_env_measures_the_kernels_cold_compile_and_warm_start(wave_store):
+    """A new process with an empty kernel cache compiles every kernel; one with the
+    machine's cache loads them (it needs less time)."""
+    from twin.perf.env_steps import first_call_times
+
+    times = first_call_times(str(wave_store.path), "kinematic")
+    assert times["cold_first_step_s"] > times["warm_first_step_s"] > 0
 
 
 def test_bench_worlds_compares_the_same_evaluation_in_both_worlds(

@@ -170,6 +170,12 @@ def _register_commands(benchmarks) -> None:
         default=256,
         help="episodes of the kinematic world's batched vector env",
     )
+    p.add_argument(
+        "--no-compile-times",
+        action="store_true",
+        help="skip the cold compile and warm start (each a new process; the cold one "
+        "compiles every kernel, about a minute)",
+    )
     add_world(p)
     _repeats(p, 3)
     p.set_defaults(handler=_env)
@@ -380,6 +386,7 @@ def _env(args) -> int:
             repeats=args.repeats,
             world=args.world or "physics",
             num_envs=args.num_envs,
+            compile_times=not args.no_compile_times,
         ),
         args,
     )
