@@ -238,7 +238,10 @@ class Batch:
         shared: what the episodes share.
         episodes: how many (B).
         log: keep every step's rows (for the metrics; training keeps none).
-        slots, ghosts, snapshot, table: capacities (module constants).
+        slots: vehicles an episode holds at once (:data:`SLOTS`).
+        ghosts: ghosts an episode holds at once (:data:`GHOSTS`).
+        snapshot: recorded vehicles in an episode's windows at once (:data:`SNAPSHOT`).
+        table: recorded vehicles an episode can meet, a power of two (:data:`TABLE`).
     """
 
     def __init__(self, shared: Shared, episodes: int, *, log: bool = True, slots: int = SLOTS,
