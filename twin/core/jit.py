@@ -6,7 +6,7 @@ compiled by Numba with :func:`kernel`:
 
 * ``cache=True``: the machine code is kept beside the source (``__pycache__``), or
   under ``$NUMBA_CACHE_DIR``, or, where the package folder is read-only, under the
-  system's temporary folder (:func:`_cache_dir`), so that a process after the first
+  system's temporary folder, so that a process after the first
   loads it in a fraction of a second instead of compiling;
 * ``error_model="numpy"``: a float division by zero gives ``inf`` or ``nan`` as numpy
   does (the twin's numpy code relied on it), not a ZeroDivisionError;

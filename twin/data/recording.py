@@ -16,10 +16,12 @@ second of the recording (a bucket), the trajectories present in it, sorted by th
 least x they hold in it, and the most any of them moves within it.
 
 The arrays are built from the store's Parquet files once per machine (a time block
-at a time, so that a day of many gigabytes never sits in memory whole), kept in the
-cache (``$I24_TWIN_CACHE/recording-KEY-ROAD``) as ``.npy`` files, and memory-mapped by
-every process that needs them (:func:`load_recording`): worker processes share the
-pages, and no query reads Parquet again.
+at a time, so that a day of many gigabytes never sits in memory whole), kept as
+``.npy`` files inside the store (``STORE/.recording/ROAD-KEY``; where the store is
+read-only, in the twin's cache, ``$I24_TWIN_CACHE/recording-KEY-ROAD``), and
+memory-mapped by every process that needs them (:func:`load_recording`): worker
+processes share the pages, and no query reads Parquet again. A small road (fewer than
+``IN_MEMORY_SAMPLES`` samples) is built in memory by each process instead.
 
 Layout (:class:`RecordingArrays`; ``r`` numbers the road's trajectories, in store
 order): per trajectory ``tid`` (the store's), ``frame0`` (its first frame), ``count``
@@ -56,6 +58,7 @@ IN_MEMORY_SAMPLES = 2_000_000  # a road with fewer samples is built in memory, n
 FORMAT = "i24-twin-recording"
 VERSION = 1
 MARKER = "recording.json"
+CACHE_FOLDER = ".recording"  # inside a store: its cached recordings
 
 RecordingArrays = namedtuple(
     "RecordingArrays",
@@ -304,8 +307,9 @@ def load_recording(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
     ):
         _LOADED[key] = build(store, road)  # small: built faster than a cache is read
     if key not in _LOADED:
-        folder = cache_dir() / f"recording-{key[0]}-{road.value}"
+        folder = cached_folder(store, road)
         if not marked_as(folder, MARKER, FORMAT):
+            folder.parent.mkdir(parents=True, exist_ok=True)
             with build_lock(folder):
                 if not marked_as(folder, MARKER, FORMAT):
                     with AtomicFolder(
@@ -313,8 +317,32 @@ def load_recording(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
                         kind="recording", error=StoreError,
                     ) as out:  # fmt: skip
                         _write(build(store, road), out.tmp, store, road)
+                    _remove_stale(folder)
         _LOADED[key] = _read(folder)
     return _LOADED[key]
+
+
+def cached_folder(store: TrajectoryStore, road: Road | str) -> Path:
+    """Where the recording of ``road`` of ``store`` is cached: inside the store
+    (``STORE/.recording/ROAD-KEY``, removed with it, as ``calibration.json`` is kept
+    there), or where the store's folder is read-only, in the twin's cache folder
+    (``recording-KEY-ROAD``)."""
+    road = Road.parse(road)
+    key = store_key(store)
+    if os.access(store.path, os.W_OK):
+        return store.path / CACHE_FOLDER / f"{road.value}-{key}"
+    return cache_dir() / f"recording-{key}-{road.value}"
+
+
+def _remove_stale(folder: Path) -> None:
+    """Inside a store, the recordings of the same road under older keys (the store was
+    written again): they can never be read."""
+    if folder.parent.name != CACHE_FOLDER:
+        return
+    road = folder.name.split("-")[0]
+    for old in folder.parent.glob(f"{road}-*"):
+        if old != folder and marked_as(old, MARKER, FORMAT):
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def store_key(store: TrajectoryStore) -> str:
@@ -450,7 +478,8 @@ def clear_loaded() -> None:
 def remove_cached(store: TrajectoryStore) -> None:
     """Remove the cached recordings of ``store`` (all roads)."""
     key = store_key(store)
-    for folder in cache_dir().glob(f"recording-{key}-*"):
+    for folder in [*cache_dir().glob(f"recording-{key}-*"),
+                   *(store.path / CACHE_FOLDER).glob(f"*-{key}")]:  # fmt: skip
         shutil.rmtree(folder, ignore_errors=True)
     for k in [k for k in _LOADED if k[0] == key]:
         del _LOADED[k]

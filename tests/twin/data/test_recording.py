@@ -1,0 +1,86 @@
+"""The recording in memory (``twin/data/recording.py``): a large road is cached inside
+its store and memory-mapped, the same arrays as built in memory; a store written again
+gets a new cache and the old one goes; a read-only store caches in the twin's cache
+folder; the window index finds exactly the vehicles a scan of every trajectory finds."""
+
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from twin.data import recording
+from twin.data.store import TrajectoryStore
+
+
+@pytest.fixture
+def store(wave_store, tmp_path):
+    """A private copy of the session's wave store (the tests write into it)."""
+    shutil.copytree(wave_store.path, tmp_path / "store")
+    recording.clear_loaded()
+    yield TrajectoryStore(tmp_path / "store")
+    recording.clear_loaded()
+
+
+def _same(a, b):
+    for name in a._fields:
+        va, vb = getattr(a, name), getattr(b, name)
+        if isinstance(va, np.ndarray):
+            np.testing.assert_array_equal(np.asarray(va), np.asarray(vb), err_msg=name)
+        else:
+            assert va == vb, name
+
+
+def test_a_large_road_is_cached_inside_its_store_and_memory_mapped(store, monkeypatch):
+    monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
+    loaded = recording.load_recording(store, "westbound")
+    folder = recording.cached_folder(store, "westbound")
+    assert folder.parent == store.path / ".recording" and (folder / "recording.json").is_file()
+    assert isinstance(loaded.x, np.memmap)
+    _same(loaded, recording.build(store, "westbound"))
+    recording.clear_loaded()
+    assert recording.load_recording(store, "westbound").x.filename == loaded.x.filename
+
+
+def test_a_store_written_again_gets_a_new_cache_and_the_old_one_goes(store, monkeypatch):
+    monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
+    recording.load_recording(store, "westbound")
+    old = recording.cached_folder(store, "westbound")
+    parquet = store.path / "samples_westbound.parquet"
+    os.utime(parquet, ns=(parquet.stat().st_atime_ns, parquet.stat().st_mtime_ns + 10**9))
+    again = TrajectoryStore(store.path)
+    recording.load_recording(again, "westbound")
+    new = recording.cached_folder(again, "westbound")
+    assert new != old and new.is_dir() and not old.exists()
+
+
+def test_a_read_only_store_caches_in_the_twins_cache_folder(store, monkeypatch, tmp_path):
+    monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
+    monkeypatch.setenv("I24_TWIN_CACHE", str(tmp_path / "cache"))
+    writable = os.access
+    monkeypatch.setattr(
+        recording.os, "access", lambda p, m: False if str(p) == str(store.path) else writable(p, m)
+    )
+    recording.load_recording(store, "westbound")
+    folder = recording.cached_folder(store, "westbound")
+    assert folder.parent == tmp_path / "cache" and folder.is_dir()
+    assert not (store.path / ".recording").exists()
+    recording.remove_cached(store)
+    assert not folder.exists()
+
+
+def test_the_window_index_finds_what_a_scan_of_every_trajectory_finds(store):
+    rec = recording.load_recording(store, "westbound")
+    t0, t1 = store.time_range("westbound")
+    rng = np.random.default_rng(3)
+    out = tuple(np.empty(2048, t) for t in (np.int32, float, float, float))
+    for t, x0 in zip(rng.uniform(t0, t1, 25), rng.uniform(0.0, 1500.0, 25), strict=True):
+        n = recording.window(rec, t, x0, x0 + 300.0, *out)
+        found = sorted(int(r) for r in out[0][:n])
+        expected = []
+        for r in range(rec.tid.size):
+            present, x, _, _ = recording.replay(rec, r, t)
+            if present and x0 <= x <= x0 + 300.0:
+                expected.append(r)
+        assert found == expected
+        assert np.all(np.diff(out[1][:n]) >= 0)  # sorted by x
