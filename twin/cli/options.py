@@ -223,13 +223,13 @@ def open_store(path: Path | None):
         StoreError: an unknown ``embedded:NAME``, or the folder is not a store.
     """
     from twin.data.embedded import default_store, embedded_name, embedded_store
-    from twin.data.store import TrajectoryStore
+    from twin.data.store import open_store
 
     if path is None:
         return default_store()
     if (name := embedded_name(path)) is not None:
         return embedded_store(name)
-    return TrajectoryStore(path)
+    return open_store(path)
 
 
 def _check_embedded(name: str) -> None:

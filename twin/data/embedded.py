@@ -20,7 +20,7 @@ from twin.core.paths import asset, cache_dir
 from twin.data import day_files, synth
 from twin.data import ingest as ingest_module
 from twin.data.ingest import IngestOptions, ingest
-from twin.data.store import TrajectoryStore, is_store
+from twin.data.store import TrajectoryStore, is_store, open_store
 from twin.data.synth import config, presets, recording, simulation
 from twin.traffic import drivers, lanes, mobil
 from twin.traffic.models import base, gipps, idm
@@ -88,7 +88,7 @@ def embedded_store(
         with build_lock(folder):  # another process may be building it
             if not is_store(folder):
                 build_default_store(folder, seed=seed, progress=progress, presets=EMBEDDED[name][1])
-    return TrajectoryStore(folder)
+    return open_store(folder)
 
 
 def build_default_store(

@@ -25,7 +25,7 @@ from twin.core.errors import NoVehicleNearError
 from twin.core.i24 import Road
 from twin.core.timeutil import format_local
 from twin.data.recording import window
-from twin.data.store import TrajectoryStore
+from twin.data.store import TrajectoryStore, open_store
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,7 +126,7 @@ class EmpiricalTraffic:
     """
 
     def __init__(self, store: TrajectoryStore | str):
-        self.store = store if isinstance(store, TrajectoryStore) else TrajectoryStore(store)
+        self.store = store if isinstance(store, TrajectoryStore) else open_store(store)
         self._out = tuple(np.empty(1024, t) for t in (np.int32, float, float, float))
         self._recordings: dict = {}
         self._local: dict = {}

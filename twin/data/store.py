@@ -103,8 +103,31 @@ class StoreWriter(AtomicFolder):
         (self.tmp / METADATA).write_text(json.dumps(content, indent=2, sort_keys=True) + "\n")
 
 
+_OPEN: dict[tuple, "TrajectoryStore"] = {}
+
+
+def open_store(path: str | os.PathLike) -> "TrajectoryStore":
+    """The store at ``path``, opened once per process: the same object (its tables read
+    once) while its ``metadata.json`` is the same file; a store written again is opened
+    anew.
+
+    Raises:
+        StoreError: as :class:`TrajectoryStore`.
+    """
+    path = Path(path)
+    try:
+        stat = (path / METADATA).stat()
+        key = (str(path.resolve()), stat.st_ino, stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        return TrajectoryStore(path)  # names what is missing
+    store = _OPEN.get(key)
+    if store is None:
+        store = _OPEN[key] = TrajectoryStore(path)
+    return store
+
+
 class TrajectoryStore:
-    """Read access to a store folder.
+    """Read access to a store folder (:func:`open_store` opens one once per process).
 
     Raises:
         StoreError: when the folder is missing, is not a store, or lacks a file.

@@ -22,7 +22,7 @@ from functools import cache
 from pathlib import Path
 
 from twin.core.errors import TwinError
-from twin.data.store import TrajectoryStore
+from twin.data.store import TrajectoryStore, open_store
 
 ENGINES = ("local", "ray")
 POLL_S = 0.2  # [s] how often the local engine passes workers' progress on
@@ -211,4 +211,4 @@ def worker_data(location: tuple[str, str, str]):
     bundle = load_map(Path(map_folder)) if is_map(Path(map_folder)) else default_map()
     if bundle.key != key:
         raise TwinError(f"this node has no map {key} (looked in {map_folder})")
-    return TrajectoryStore(store_path), bundle
+    return open_store(store_path), bundle

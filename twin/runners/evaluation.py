@@ -180,7 +180,7 @@ class EvalResult:
 
     folder: Path
     summary: dict
-    runs_done_now: int
+    runs_done_now: int  # episode runs (an episode under one controller) made now
     total_s: float
 
 
@@ -255,7 +255,7 @@ def evaluate(
                 error_type=EvaluationError,
             )
         summary = assemble(out, config, specs, extension)
-        return EvalResult(out, summary, len(jobs), time.perf_counter() - start)
+        return EvalResult(out, summary, todo, time.perf_counter() - start)
 
 
 def draw_specs(config: EvalConfig, store: TrajectoryStore, bundle) -> list[EpisodeSpec]:

@@ -38,7 +38,7 @@ from twin.cosim.config import ConfigError, CosimConfig, to_toml
 from twin.cosim.cosimulator import Cosimulator
 from twin.cosim.log import write_parquet
 from twin.data.empirical import EmpiricalTraffic
-from twin.data.store import TrajectoryStore, is_store
+from twin.data.store import TrajectoryStore, is_store, open_store
 from twin.metrics.measure import RUN_FORMAT, measure
 from twin.traffic.controller_api import EgoController
 
@@ -150,7 +150,7 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
     if path.is_dir():
         if not is_store(path) and not (path / "metadata.json").exists():
             raise StoreError(f"--data {path} is a folder but not an i24-twin store")
-        return TrajectoryStore(path)  # a damaged store's error names the file
+        return open_store(path)  # a damaged store's error names the file
     if path.suffix.lower() != ".json":
         raise StoreError(f"--data {path}: expected a store folder or an I-24 MOTION .json file")
     digest = hashlib.sha256()
@@ -162,7 +162,7 @@ def open_data(data: str | os.PathLike | None, *, progress: bool = True) -> Traje
         with build_lock(folder):  # another process may be ingesting it
             if not is_store(folder):
                 ingest([path], folder, progress=progress)
-    return TrajectoryStore(folder)
+    return open_store(folder)
 
 
 def run_episode(

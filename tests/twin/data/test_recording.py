@@ -16,7 +16,9 @@ from twin.data.store import TrajectoryStore
 @pytest.fixture
 def store(wave_store, tmp_path):
     """A private copy of the session's wave store (the tests write into it)."""
-    shutil.copytree(wave_store.path, tmp_path / "store")
+    shutil.copytree(
+        wave_store.path, tmp_path / "store", ignore=shutil.ignore_patterns(".recording")
+    )
     recording.clear_loaded()
     yield TrajectoryStore(tmp_path / "store")
     recording.clear_loaded()

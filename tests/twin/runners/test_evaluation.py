@@ -112,3 +112,28 @@ def test_fidelity_png_titles_each_panel_by_its_metric_with_units(tmp_path, monke
     ]
     assert top[0].get_ylabel() == "ego speed RMSE [m/s]"
     assert all(ax.get_ylabel() for ax in drawn[0].axes)
+
+
+@pytest.mark.slow
+def test_kinematic_episodes_run_in_batches_and_are_counted_one_by_one(
+    calibrated, built_map, tmp_path
+):
+    """The kinematic world's episodes run in batches of the core (one job holds several):
+    the runs made now are counted by episode, and the rows are those of one batch or
+    another (two workers split the episodes differently)."""
+    from dataclasses import replace
+
+    from twin.cosim.config import switch_world
+
+    config = _config(episodes=3, duration=4.0, behaviours=("paper",))
+    config = replace(config, cosim=switch_world(config.cosim, "kinematic"))
+    one = evaluate(calibrated, tmp_path / "one", config, workers=1, bundle=built_map,
+                   progress=False)  # fmt: skip
+    assert one.runs_done_now == 3
+    two = evaluate(calibrated, tmp_path / "two", config, workers=2, bundle=built_map,
+                   progress=False)  # fmt: skip
+    assert two.runs_done_now == 3
+    columns = ["episode", "ego_speed_rmse_mps", "speed_field_rmse_mps", "lane_changes_simulated"]
+    rows_one = pd.read_parquet(tmp_path / "one" / "episodes.parquet")[columns]
+    rows_two = pd.read_parquet(tmp_path / "two" / "episodes.parquet")[columns]
+    pd.testing.assert_frame_equal(rows_one, rows_two)
