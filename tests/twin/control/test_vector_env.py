@@ -158,7 +158,8 @@ def test_same_step_autoreset_gives_the_new_episode_and_the_last_observation(data
     for k in range(26):
         obs, reward, terminated, truncated, info = envs.step(np.repeat(_actions(k, 1), 2, 0))
         if "final_obs" in info:
-            assert info["_final_obs"].all() and truncated.all() and np.all(reward < 0)
+            assert info["_final_obs"].all() and truncated.all() and not terminated.any()
+            assert np.all(reward < 0)
             finals[k] = np.stack(info["final_obs"])
         rows.append(obs)
     envs.close()
