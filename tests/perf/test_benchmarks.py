@@ -20,6 +20,19 @@ def test_bench_run_prints_the_loop_figures(wave_store, capsys):
     assert 0 < line["ghost_reload_ms"] < line["step_ms"] and line["vehicles_mean"] > 10
 
 
+def test_bench_run_times_the_kinematic_world_beside_sumo(wave_store, capsys):
+    """The same episode exported and run by SUMO, timed beside the twin's loop."""
+    pytest.importorskip("sumo", reason="eclipse-sumo (the test extra) is not installed")
+    argv = ["bench", "run", "--data", str(wave_store.path), "--repeats", "1", "--world",
+            "kinematic", "--duration", "10", "--sumo"]  # fmt: skip
+    assert main(argv) == 0
+    line = json.loads(capsys.readouterr().out.strip())
+    assert line["world"] == "kinematic" and line["t_max"] == 10.0 and line["loop_s"] > 0
+    assert line["sumo_s"] > 0 and line["sumo_vehicles"] > 10
+    assert line["sumo_over_twin"] == pytest.approx(line["sumo_s"] / line["loop_s"], rel=0.02)
+    assert main(["bench", "run", "--duration", "-1"]) == 2
+
+
 @pytest.mark.slow
 def test_bench_dataset_prints_frames_per_second_by_workers(wave_store, capsys):
     argv = ["bench", "dataset", "--data", str(wave_store.path), "--episodes", "2"]

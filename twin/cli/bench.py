@@ -4,6 +4,7 @@ with; ``twin bench report`` makes the benchmarks page of such lines
 (:mod:`twin.perf.report`)."""
 
 import json
+import math
 from pathlib import Path
 
 from twin.cli.evaluate import add_eval_options
@@ -113,6 +114,19 @@ def _register_parts(benchmarks) -> None:
         help="the paper's scenario timed",
     )
     add_data(p, STORE_HELP)
+    add_world(p)
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="the episode [s] (default: the scenario's)",
+    )
+    p.add_argument(
+        "--sumo",
+        action="store_true",
+        help="also run SUMO (eclipse-sumo) on the same episode exported (twin export "
+        "--format sumo) and time it beside the twin's loop, start-up included",
+    )
     _repeats(p, 3)
     p.set_defaults(handler=_run)
     p = benchmarks.add_parser(
@@ -333,8 +347,14 @@ def _traffic(args) -> int:
 def _run(args) -> int:
     from twin.perf.bench import run_bench
 
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration must be > 0 s, got {args.duration}")
     store = open_store(args.data)
-    return _emit("run", run_bench(store, scenario=args.scenario, repeats=args.repeats), args)
+    figures = run_bench(
+        store, scenario=args.scenario, repeats=args.repeats, world=args.world or "physics",
+        duration=args.duration, sumo=args.sumo,
+    )  # fmt: skip
+    return _emit("run", figures, args)
 
 
 def _camera(args) -> int:
