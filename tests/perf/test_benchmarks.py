@@ -3,6 +3,7 @@ import json
 import pytest
 
 from twin.cli import main
+from twin.cosim.core.step import PHASES
 
 
 def test_bench_query_prints_one_json_line(wave_store, capsys):
@@ -66,8 +67,13 @@ def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_stor
 
 def test_bench_env_times_the_kinematic_worlds_batched_vector_env(wave_store, capsys):
     argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--num-envs", "3"]
-    assert main([*argv, "--repeats", "1", "--world", "kinematic", "--no-compile-times"]) == 0
+    assert main([*argv, "--repeats", "1", "--world", "kinematic", "--no-compile-times",
+                 "--profile"]) == 0  # fmt: skip
     line = json.loads(capsys.readouterr().out.strip())
+    profile = line["profile_us_per_episode_step"]
+    assert set(profile) == {*PHASES, "observe", "total"} and profile["decisions"] > 0
+    assert profile["total"] == pytest.approx(sum(profile[k] for k in profile if k != "total"),
+                                             abs=0.1)  # fmt: skip
     assert line["world"] == "kinematic" and line["env_steps_per_s"] > 0
     assert line["vector"] == "batched core" and line["vector_envs"] == 3
     assert line["vector_vehicle_updates_per_s"] > line["vector_env_steps_per_s"] > 0

@@ -185,6 +185,12 @@ def _register_commands(benchmarks) -> None:
         help="episodes of the kinematic world's batched vector env",
     )
     p.add_argument(
+        "--profile",
+        action="store_true",
+        help="kinematic: also time the batched core's step phase by phase and the "
+        "observation [us per episode step]",
+    )
+    p.add_argument(
         "--no-compile-times",
         action="store_true",
         help="skip the cold compile and warm start (each a new process; the cold one "
@@ -407,6 +413,7 @@ def _env(args) -> int:
             world=args.world or "physics",
             num_envs=args.num_envs,
             compile_times=not args.no_compile_times,
+            profile=args.profile,
         ),
         args,
     )

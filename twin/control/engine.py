@@ -9,13 +9,14 @@ physics world (one episode) runs the cosimulator's facade, pybullet integrating 
 steps of 0.01 s under the kernels' decisions.
 """
 
+import time
 from dataclasses import replace
 
 import numpy as np
 
 from twin.control import observe
 from twin.cosim.core.batch import Batch, Shared
-from twin.cosim.core.step import step_batch
+from twin.cosim.core.step import PHASES, phase_batch, step_batch
 from twin.traffic.kernels import state as kinds
 
 CONTROL_DT = 0.1  # [s] the agent's step
@@ -126,10 +127,23 @@ class Episodes:
             tid = sim.ego.tid
         self.record_id[b] = str(self.shared.store.trajectory_arrays["id"][tid])
 
-    def step(self, actions: np.ndarray) -> None:
-        """One control step of every running episode with the agents' ``actions`` (B,)."""
+    def step(self, actions: np.ndarray, times: np.ndarray | None = None) -> None:
+        """One control step of every running episode with the agents' ``actions`` (B,);
+        with ``times`` (len(PHASES) + 1,) [s], the kinematic world's step runs phase by
+        phase (the same bytes) and each phase's wall time, then the observation's, is
+        added to it (``twin bench env --profile``)."""
         before = self.done.copy()
         self.state.actions[:] = actions
+        if self.kinematic and times is not None:
+            for k in range(len(PHASES)):
+                start = time.perf_counter()
+                phase_batch(self.core, k)
+                times[k] += time.perf_counter() - start
+            self.batch.check_all()
+            start = time.perf_counter()
+            self._observe(before)
+            times[-1] += time.perf_counter() - start
+            return
         if self.kinematic:
             step_batch(self.core)
             self.batch.check_all()

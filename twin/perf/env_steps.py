@@ -41,6 +41,7 @@ def env_bench(
     world: str = "physics",
     num_envs: int = NUM_ENVS,
     compile_times: bool = True,
+    profile: bool = False,
 ) -> dict:
     """Env steps per second of ``i24twin/WaveDampening-v0`` (10 Hz control over the
     ``world``'s default step: 0.01 s physics, 0.1 s kinematic; the default windows, no
@@ -52,7 +53,9 @@ def env_bench(
       episodes (one kernel call a step; with the vehicles it updated per second), in
       the physics world an ``AsyncVectorEnv`` of ``workers`` envs (default: the cores);
     * ``compile_times``: the first reset and step of a new process with an empty kernel
-      cache (the cold compile) and with this machine's cache (the warm start).
+      cache (the cold compile) and with this machine's cache (the warm start);
+    * ``profile`` (kinematic): where the vector env's step goes, phase by phase of the
+      core's step and the observation, in microseconds per episode step.
 
     Medians over the repeats; scaling is the vector env's steps per second over one's."""
     import gymnasium as gym
@@ -99,8 +102,38 @@ def env_bench(
     }
     if kinematic:
         out["vector_vehicle_updates_per_s"] = round(median(updates), 0)
+    if kinematic and profile:
+        out["profile_us_per_episode_step"] = step_profile(data, n, steps, duration)
     if compile_times:
         out.update(first_call_times(data, world))
+    return out
+
+
+def step_profile(data: str, num_envs: int, steps: int, duration: float) -> dict:
+    """[us per episode step] each phase of the batched core's step
+    (:data:`twin.cosim.core.step.PHASES`) and the observation, over ``steps`` steps of
+    a vector env of ``num_envs`` episodes (each phase over every episode in turn: the
+    same bytes as the step), and their total."""
+    import gymnasium as gym
+
+    from twin.control.env import ENV_ID
+    from twin.cosim.core.step import PHASES
+
+    envs = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        data=data, duration=duration, world="kinematic")  # fmt: skip
+    envs.reset(seed=0)
+    episodes = envs.unwrapped.episodes
+    episodes.step(np.zeros(num_envs), np.zeros(len(PHASES) + 1))  # compiled, not timed
+    times = np.zeros(len(PHASES) + 1)
+    episode_steps = 0
+    for k in range(steps):
+        running = int((~episodes.done).sum())
+        episodes.step(np.full(num_envs, 0.3 * np.sin(0.1 * k)), times)
+        episode_steps += running
+    envs.close()
+    us = 1e6 * times / max(episode_steps, 1)
+    out = {name: round(float(v), 2) for name, v in zip((*PHASES, "observe"), us, strict=True)}
+    out["total"] = round(float(us.sum()), 2)
     return out
 
 

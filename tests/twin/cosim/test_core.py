@@ -67,6 +67,21 @@ def test_an_episode_is_the_same_bytes_alone_or_anywhere_in_a_batch(shared):
     assert _rows(again, 0) == _rows(alone, 0)
 
 
+def test_the_steps_phases_in_turn_over_every_episode_are_the_step(shared):
+    """twin bench env --profile times the phases apart: the same bytes as the step."""
+    from twin.cosim.core.step import PHASES, phase_batch
+
+    stepped = _run(shared, [EGO_X, EGO_X - 50.0], [5, 6])
+    phased = Batch(shared, 2)
+    for b, (x, seed) in enumerate(((EGO_X, 5), (EGO_X - 50.0, 6))):
+        phased.reset(b, lane=-2, x=x, time=T0, seed=seed)
+    while not phased.done.all():
+        for k in range(len(PHASES)):
+            phase_batch(phased.core, k)
+    for b in range(2):
+        assert _rows(phased, b) == _rows(stepped, b)
+
+
 def test_a_full_slot_table_refuses_and_counts_spawns(shared):
     full = _run(shared, [EGO_X], [5], slots=12)
     ep, st = full.state.episodes, full.state

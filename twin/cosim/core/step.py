@@ -11,6 +11,11 @@ paper's loop, ``docs/cosim.md``), one pure pass per episode::
     enter_and_reload 7. and the ghost set reloaded
     record              the log row, the AV's fuel
 
+The kinematic world's step is these as named phases (:data:`PHASES`: desired speeds,
+decisions, move, contacts, leave, read windows, enter, close); :func:`phase_batch`
+runs one phase over every episode, so that ``twin bench env --profile`` times them
+apart (the same bytes as :func:`step_batch`, since episodes are independent).
+
 Every kernel takes the packed core (:data:`twin.cosim.core.layout.Core`). Episodes
 never read each other's slots, and every draw is keyed by the episode's seed and the
 vehicle's record, so an episode's rows are the same alone or at any place in a batch
@@ -124,15 +129,8 @@ def before_world(b, core):
     """Step 3 (desired speeds, strategic targets) and the traffic manager's decisions
     of episode ``b``: each body's commanded acceleration (``drivers.accel``) and front
     wheels' angle (the traffic scratch's ``steer``)."""
-    ep, cs = core.episodes, core.settings
-    step = ep.step[b]
-    lead_speeds(b, core)
-    if cs.targets and step % core.traffic.settings.decision_steps == 0:
-        update_targets(b, core)
-    decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
-    speed, before = core.bodies.speed, ep.speed_prev
-    for i in range(core.bodies.top[b]):
-        before[b, i] = speed[b, i]
+    desired_speeds(b, core)
+    decisions(b, core)
 
 
 @kernel
@@ -140,6 +138,58 @@ def after_world(b, core):
     """After the world's step of episode ``b``: the clock, the contacts (the kinematic
     world's footprints, else the pairs the world gave), the spawns' speed check, the
     vehicles off the road, the ego's range, then steps 5 to 7 and the log row."""
+    contacts(b, core)
+    leave(b, core)
+    read_windows(b, core)
+    enter(b, core)
+    close_step(b, core)
+
+
+# The step's phases, in order (step_batch runs them episode by episode; since episodes
+# never read each other's slots, running each phase over every episode in turn gives
+# the same bytes, which is how twin bench env --profile times them).
+
+
+@kernel
+def desired_speeds(b, core):
+    """Step 3: the lane leads ahead of the ego take their ghost's speed; strategic
+    targets on the decision grid."""
+    lead_speeds(b, core)
+    if core.settings.targets and core.episodes.step[b] % core.traffic.settings.decision_steps == 0:
+        update_targets(b, core)
+
+
+@kernel
+def decisions(b, core):
+    """The traffic manager: every body's commanded acceleration and steering."""
+    ep, cs = core.episodes, core.settings
+    step = ep.step[b]
+    decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
+    speed, before = core.bodies.speed, ep.speed_prev
+    for i in range(core.bodies.top[b]):
+        before[b, i] = speed[b, i]
+
+
+@kernel
+def move(b, core):
+    """Step 4 in the kinematic world: the bodies integrated over the step."""
+    integrate(
+        b,
+        core.bodies,
+        core.traffic.drivers.accel,
+        core.traffic.scratch.steer,
+        core.traffic.drivers.accel,
+        core.traffic.drivers.accel,
+        core.settings.profile,
+        core.settings.dt,
+    )  # fmt: skip  (never raw drive and brake)
+
+
+@kernel
+def contacts(b, core):
+    """The clock, the spawns' speed check and the vehicles off the road, the contacts
+    (the kinematic world's footprints, else the pairs the world gave), the ego's
+    range."""
     bo, sl, ep, cs = core.bodies, core.slots, core.episodes, core.settings
     ep.step[b] += 1
     step = ep.step[b]
@@ -157,16 +207,43 @@ def after_world(b, core):
     if not cs.limit_lo <= ego_x <= cs.limit_hi and ep.ended[b] == 0:
         ep.ended[b] = EGO_LEFT
         ep.ended_x[b] = ego_x
-    set_windows(b, core, ego_x)
+
+
+@kernel
+def leave(b, core):
+    """Step 5: the windows follow the ego; visible vehicles outside are removed."""
+    set_windows(b, core, core.bodies.x[b, core.episodes.ego[b]])
     despawn_outside(b, core)
-    snapshot(b, core, ep.t0[b] + step * cs.dt)
-    ep.spawned[b] += enter_and_reload(b, core, False)
+
+
+@kernel
+def read_windows(b, core):
+    """Step 6: the recording in the windows now."""
+    ep = core.episodes
+    snapshot(b, core, ep.t0[b] + ep.step[b] * core.settings.dt)
+
+
+@kernel
+def enter(b, core):
+    """Step 7: entering vehicles spawned where there is room, the ghost set reloaded."""
+    core.episodes.spawned[b] += enter_and_reload(b, core, False)
+
+
+@kernel
+def close_step(b, core):
+    """The AV group's fuel, the log row, and whether the episode is over."""
+    ep = core.episodes
     fuel, distance = _fuel(b, core)
     ep.fuel[b] = fuel
     ep.fuel_sum[b] += fuel
     ep.group_distance[b] += distance
-    record(b, core, step)
-    ep.done[b] = step >= ep.steps[b] or ep.ended[b] != 0
+    record(b, core, ep.step[b])
+    ep.done[b] = ep.step[b] >= ep.steps[b] or ep.ended[b] != 0
+
+
+#: The kinematic world's step, phase by phase (names for twin bench env --profile).
+PHASES = ("desired_speeds", "decisions", "move", "contacts", "leave", "read_windows",
+          "enter", "close_step")  # fmt: skip
 
 
 @kernel
@@ -311,11 +388,35 @@ def record(b, core, step):
 def step_batch(core):
     """One step of every running episode of the batch (the kinematic world)."""
     done = core.episodes.done
-    bodies, accel, steer = core.bodies, core.traffic.drivers.accel, core.traffic.scratch.steer
-    profile, dt = core.settings.profile, core.settings.dt
     for b in range(done.size):
         if done[b]:
             continue
         before_world(b, core)
-        integrate(b, bodies, accel, steer, accel, accel, profile, dt)  # never raw
+        move(b, core)
         after_world(b, core)
+
+
+@kernel
+def phase_batch(core, phase):
+    """Phase ``phase`` (an index of :data:`PHASES`) of every running episode: the
+    phases in turn are one :func:`step_batch` (for timing them apart)."""
+    done = core.episodes.done
+    for b in range(done.size):
+        if done[b]:
+            continue
+        if phase == 0:
+            desired_speeds(b, core)
+        elif phase == 1:
+            decisions(b, core)
+        elif phase == 2:
+            move(b, core)
+        elif phase == 3:
+            contacts(b, core)
+        elif phase == 4:
+            leave(b, core)
+        elif phase == 5:
+            read_windows(b, core)
+        elif phase == 6:
+            enter(b, core)
+        else:
+            close_step(b, core)
