@@ -140,7 +140,7 @@ def window(rec, t, x_lo, x_hi, out_r, out_x, out_y, out_v):
     for e in range(lo, b):
         if rec.bucket_x[e] > x_hi:
             break
-        r = rec.bucket_r[e]
+        r = np.int64(rec.bucket_r[e])  # as every caller's r: one compilation of replay
         present, x, y, v = replay(rec, r, t)
         if not present or x < x_lo or x > x_hi:
             continue

@@ -24,12 +24,14 @@ from twin.traffic.drivers import CLIP_SD
 from twin.traffic.kernels.lane_change import FIRST_DECISION_STREAM, clear_target
 from twin.traffic.kernels.models import GIPPS
 
-TRAIT_STREAM = 0x54  # the random streams of the draws made at a spawn
-HOV_STREAM = 0x48
-BEHAVIOUR_STREAM = 0x42
-SPEED_STREAM = 0x53
-AV_STREAM = 0x41565F
-STRATEGIC_STREAM = 0x737472
+# The random streams of the draws made at a spawn (numpy integers: a kernel called with
+# a Python int constant is compiled once per value)
+TRAIT_STREAM = np.int64(0x54)
+HOV_STREAM = np.int64(0x48)
+BEHAVIOUR_STREAM = np.int64(0x42)
+SPEED_STREAM = np.int64(0x53)
+AV_STREAM = np.int64(0x41565F)
+STRATEGIC_STREAM = np.int64(0x737472)
 PAPER, CALIBRATED, RECORDED = 0, 1, 2
 RECORDED_SPAN = 100.0  # [m] a recorded change's urgency grows over this distance
 PLANNED_LATE = 100.0  # [m] a recorded change not started this far past its place is dropped
@@ -64,19 +66,21 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time):
     model, vel_default = core.traffic.settings.model, core.settings.vel_default
     c = vehicle_class
     # the class table's traits (twin.traffic.drivers.DriverDistribution.draw)
-    v0 = beh.v0_scale * (beh.class_v0[c] + beh.class_v0_sd[c] * _z(seed, TRAIT_STREAM, key, 0))
+    v0 = beh.v0_scale * (
+        beh.class_v0[c] + beh.class_v0_sd[c] * _z(seed, TRAIT_STREAM, key, np.int64(0))
+    )
     headway = (
         beh.time_headway_scale * beh.class_time_headway[c]
-        * math.exp(beh.time_headway_sd_log * _z(seed, TRAIT_STREAM, key, 1))
+        * math.exp(beh.time_headway_sd_log * _z(seed, TRAIT_STREAM, key, np.int64(1)))
     )  # fmt: skip
-    min_gap = beh.min_gap + beh.min_gap_sd * _z(seed, TRAIT_STREAM, key, 2)
+    min_gap = beh.min_gap + beh.min_gap_sd * _z(seed, TRAIT_STREAM, key, np.int64(2))
     max_accel = (
         beh.max_accel_scale * beh.class_max_accel[c]
-        * math.exp(beh.max_accel_sd_log * _z(seed, TRAIT_STREAM, key, 3))
+        * math.exp(beh.max_accel_sd_log * _z(seed, TRAIT_STREAM, key, np.int64(3)))
     )  # fmt: skip
     decel = beh.decel
     if beh.decel_sd > 0.0:
-        decel += beh.decel_sd * _z(seed, TRAIT_STREAM, key, 4)
+        decel += beh.decel_sd * _z(seed, TRAIT_STREAM, key, np.int64(4))
     p = drivers.cf
     if model == GIPPS:  # twin.traffic.models.gipps.from_traits
         p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, max_accel, 2.0 * decel
@@ -84,10 +88,10 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time):
     else:
         p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, headway, min_gap
         p[b, i, 3], p[b, i, 4], p[b, i, 5] = max_accel, decel, beh.delta
-    lucky = uniform(seed, HOV_STREAM, key, 0) < beh.hov_share
+    lucky = uniform(seed, HOV_STREAM, key, np.int64(0)) < beh.hov_share
     drivers.hov_eligible[b, i] = lane == HOV_LANE or (beh.class_hov[c] and lucky)
     drivers.next_decision[b, i] = time + beh.decision_interval * uniform(
-        seed, FIRST_DECISION_STREAM, key, 0
+        seed, FIRST_DECISION_STREAM, key, np.int64(0)
     )
     drivers.politeness[b, i] = beh.politeness
     drivers.threshold[b, i] = beh.threshold
@@ -141,7 +145,7 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
                 drivers.cf[b, i, beh.dist_columns[d]] = value
     if beh.speed_source == 1:
         k = -lane - 1
-        z = _z(seed, SPEED_STREAM, key, 0)
+        z = _z(seed, SPEED_STREAM, key, np.int64(0))
         desired = max(beh.lane_speed_mean[k] + beh.lane_speed_sd[k] * z, 1.0)
     return desired
 
@@ -149,7 +153,7 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
 @kernel(inline=True)
 def is_av(seed, key, share):
     """Whether recorded vehicle ``key`` is an AV at ``share`` (one draw per vehicle)."""
-    return share > 0.0 and uniform(seed, AV_STREAM, key, 0) < share
+    return share > 0.0 and uniform(seed, AV_STREAM, key, np.int64(0)) < share
 
 
 # -- strategic targets -----------------------------------------------------------------------

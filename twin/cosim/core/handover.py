@@ -10,6 +10,8 @@ reload, seen in the windows before, waiting for room to spawn.
 
 import math
 
+import numpy as np
+
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.cosim.core import drivers as behaviour
@@ -60,7 +62,7 @@ def entry(keys, flags, slots, b, r, insert):
 @kernel(inline=True)
 def flags_of(keys, flags, slots, b, r):
     """The flags of ``r`` (0 where absent)."""
-    h = entry(keys, flags, slots, b, r, False)
+    h = entry(keys, flags, slots, b, r, np.bool_(False))
     return flags[b, h] if h >= 0 else 0
 
 
@@ -98,7 +100,7 @@ def despawn_outside(b, core):
 def remove(b, core, i):
     """Free slot ``i``: its vehicle is simulated no more."""
     table, dr = core.table, core.traffic.drivers
-    h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], False)
+    h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], np.bool_(False))
     if h >= 0:
         table.flags[b, h] &= ~SIMULATED
         table.slot[b, h] = -1
@@ -209,7 +211,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
         behaviour.first_target(b, i, core, seed, x)
     table = core.table
-    h = entry(table.key, table.flags, table.slot, b, r, True)
+    h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h >= 0:
         table.flags[b, h] = (table.flags[b, h] | SIMULATED) & ~WAITING
         table.slot[b, h] = i
@@ -262,13 +264,13 @@ def spawn_recorded(b, core, k, retry):
     if not (-N_LANES <= lane <= -1) or speed > MAX_SPEED:
         ep.skipped_invalid[b] += 1
         return False
-    h = entry(table.key, table.flags, table.slot, b, r, True)
+    h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h < 0:
         ep.overflow[b] |= TABLE_FULL
         return False
     slot = -1
     if fits(b, core, x, y, speed, rec.length[r], rec.width[r]):
-        slot = spawn(b, core, r, x, y, speed, 0.0, -1)
+        slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
         if slot < 0:
             ep.skipped_full[b] += 1
     if slot >= 0:
@@ -310,19 +312,20 @@ def _bound(values, count, x, right):
 
 
 @kernel
-def enter_and_reload(b, core, initial):
+def enter_and_reload(b, core):
     """Steps 6 and 7 on the episode's snapshot: the ghosts now inside the visible window,
-    the tracks first seen inside it and the vehicles waiting for room are spawned
-    (``initial``: the visible set at the reset, the ego's own track left out), then the
-    ghost set is reloaded. Returns how many were spawned."""
+    the tracks first seen inside it and the vehicles waiting for room are spawned (at
+    the reset, step 0: the visible set, the ego's own track left out), then the ghost
+    set is reloaded. Returns how many were spawned."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
+    initial = ep.step[b] == 0  # a value, not a literal argument: one compilation
     keys, flags, tslot = core.table.key, core.table.flags, core.table.slot
     sr, sx, sy, sspeed = sn.r, sn.x, sn.y, sn.speed
     n = sn.count[b]
-    a = _bound(sx[b], n, ep.windows[b, 0], False)
-    v0 = _bound(sx[b], n, ep.windows[b, 1], False)
-    v1 = _bound(sx[b], n, ep.windows[b, 2], True)
-    d = _bound(sx[b], n, ep.windows[b, 3], True)
+    a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))
+    v0 = _bound(sx[b], n, ep.windows[b, 1], np.bool_(False))
+    v1 = _bound(sx[b], n, ep.windows[b, 2], np.bool_(True))
+    d = _bound(sx[b], n, ep.windows[b, 3], np.bool_(True))
     spawned = 0
     for k in range(v0, v1):
         r = sr[b, k]
@@ -342,7 +345,7 @@ def enter_and_reload(b, core, initial):
             spawned += 1
     overflow = False
     for k in range(n):
-        h = entry(keys, flags, tslot, b, sr[b, k], True)
+        h = entry(keys, flags, tslot, b, np.int64(sr[b, k]), np.bool_(True))
         if h >= 0:
             flags[b, h] |= SEEN
         else:
@@ -350,7 +353,7 @@ def enter_and_reload(b, core, initial):
     # 7. the ghost set: the recorded vehicles of the ghost windows not simulated
     gr, glane, gx, gy, gspeed, glength = gh.r, gh.lane, gh.x, gh.y, gh.speed, gh.length
     for g in range(gh.count[b]):
-        h = entry(keys, flags, tslot, b, gr[b, g], False)
+        h = entry(keys, flags, tslot, b, np.int64(gr[b, g]), np.bool_(False))
         if h >= 0:
             flags[b, h] &= ~GHOST
     count = 0
@@ -368,7 +371,7 @@ def enter_and_reload(b, core, initial):
         gr[b, count], glane[b, count] = r, lane
         gx[b, count], gy[b, count] = sx[b, k], sy[b, k]
         gspeed[b, count], glength[b, count] = sspeed[b, k], rec.length[r]
-        h = entry(keys, flags, tslot, b, r, True)
+        h = entry(keys, flags, tslot, b, r, np.bool_(True))
         if h >= 0:
             flags[b, h] |= GHOST
         count += 1

@@ -92,9 +92,9 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.ego_id[b] = bo.id[b, ego]
     set_windows(b, core, ego_x)
     snapshot(b, core, t0)
-    ep.spawned_initially[b] = enter_and_reload(b, core, True)
+    ep.spawned_initially[b] = enter_and_reload(b, core)
     _followers(b, core)
-    record(b, core, 0)
+    record(b, core, ep.step[b])  # 0 (a variable: a literal 0 compiles record twice)
     ep.done[b] = steps <= 0
 
 
@@ -226,7 +226,7 @@ def read_windows(b, core):
 @kernel
 def enter(b, core):
     """Step 7: entering vehicles spawned where there is room, the ghost set reloaded."""
-    core.episodes.spawned[b] += enter_and_reload(b, core, False)
+    core.episodes.spawned[b] += enter_and_reload(b, core)
 
 
 @kernel

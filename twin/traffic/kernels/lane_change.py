@@ -17,6 +17,8 @@ come from counters: the run's seed, the driver's key and its count of such draws
 
 import math
 
+import numpy as np
+
 from twin.core.i24 import HOV_LANE, N_LANES
 from twin.core.jit import kernel, uniform
 from twin.traffic.kernels.longitudinal import MIN_SPEED_PATH, cf, urgency
@@ -25,9 +27,11 @@ from twin.traffic.kernels.neighbours import around
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
 GIVE_UP = 150.0  # [m] past strategic_by a strategic change is no longer tried
-DECISION_STREAM = 0x44  # the random streams of the next decision and the manoeuvre time
-DURATION_STREAM = 0x4D
-FIRST_DECISION_STREAM = 0x46
+# The random streams of the next decision and the manoeuvre time (numpy integers: a
+# kernel called with a Python int constant is compiled once per value)
+DECISION_STREAM = np.int64(0x44)
+DURATION_STREAM = np.int64(0x4D)
+FIRST_DECISION_STREAM = np.int64(0x46)
 
 
 @kernel(inline=True)
