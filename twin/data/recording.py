@@ -383,7 +383,10 @@ def _write(arrays: RecordingArrays, folder: Path, store: TrajectoryStore, road: 
 
 def _read(folder: Path) -> RecordingArrays:
     meta = json.loads((folder / MARKER).read_text())
-    arrays = {name: np.load(folder / f"{name}.npy", mmap_mode="r") for name in _ARRAYS}
+    # copy-on-write maps: writable arrays (the kernels never write them, so the file and
+    # the shared pages stay as they are), typed as the in-memory ones are; read-only
+    # maps would be another type and compile every kernel a second time
+    arrays = {name: np.load(folder / f"{name}.npy", mmap_mode="c") for name in _ARRAYS}
     # small arrays are read whole: the kernels take plain arrays (a memory map is one)
     return RecordingArrays(base=float(meta["base"]), dt=float(meta["dt"]),
                            bucket_s=float(meta["bucket_s"]), **arrays)  # fmt: skip

@@ -86,3 +86,16 @@ def test_the_window_index_finds_what_a_scan_of_every_trajectory_finds(store):
                 expected.append(r)
         assert found == expected
         assert np.all(np.diff(out[1][:n]) >= 0)  # sorted by x
+
+
+def test_a_memory_mapped_recording_has_the_in_memory_ones_kernel_types(store, monkeypatch):
+    """Read-only maps are another Numba type: every kernel would compile twice."""
+    import numba
+
+    monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
+    mapped = recording.load_recording(store, "westbound")
+    assert isinstance(mapped.x, np.memmap)
+    assert numba.typeof(mapped) == numba.typeof(recording.build(store, "westbound"))
+    before = mapped.x[0]
+    recording.clear_loaded()
+    assert recording.load_recording(store, "westbound").x[0] == before  # the file unchanged
