@@ -21,9 +21,7 @@ import numpy as np
 import pandas as pd
 
 from twin.core import i24
-from twin.core.errors import NoVehicleNearError
 from twin.core.i24 import Road
-from twin.core.timeutil import format_local
 from twin.data.recording import window
 from twin.data.store import TrajectoryStore, open_store
 
@@ -284,23 +282,15 @@ class EmpiricalTraffic:
             NoVehicleNearError: when no vehicle is within the tolerances; the message
                 names the request and what the store covers.
         """
-        from twin.data.recording import closest
+        from twin.data.recording import closest_vehicle
 
         road = Road.parse(road)
         if lane not in i24.LANES:
             raise ValueError(f"lane must be one of {i24.LANES}, got {lane!r}")
         rec = self.recording(road)
-        r, t_best, x_best, y_best, v_best = closest(
-            rec, int(lane), float(x), float(t), float(max_distance), float(max_time),
-            float(speed_scale), *self._out,
-        )  # fmt: skip
-        if r < 0:
-            t_min, t_max = self.store.time_range(road)
-            raise NoVehicleNearError(
-                f"no recorded vehicle in lane {lane} of {road.value} within {max_distance:g} m of "
-                f"x = {x:g} m and {max_time:g} s of {format_local(t)} CST (unix {t:.2f}); "
-                f"the store covers {format_local(t_min)} to {format_local(t_max)} CST on this road"
-            )
+        r, t_best, x_best, y_best, v_best = closest_vehicle(
+            self.store, road, rec, lane, x, t, max_distance, max_time, speed_scale, self._out
+        )
         tid = int(rec.tid[r])
         return RecordedVehicle(
             tid=tid,

@@ -42,11 +42,12 @@ from pathlib import Path
 import numpy as np
 
 from twin.core.atomic import AtomicFolder, marked_as
-from twin.core.errors import StoreError
+from twin.core.errors import NoVehicleNearError, StoreError
 from twin.core.i24 import LANE_WIDTH, N_LANES, Road
 from twin.core.jit import kernel
 from twin.core.locks import build_lock
 from twin.core.paths import cache_dir
+from twin.core.timeutil import format_local
 from twin.data.store import TrajectoryStore
 
 GRID_DT = 0.04  # [s] the grid's step (the data's 25 Hz)
@@ -182,6 +183,28 @@ def replay_many(rec, r, times, present, x, y, speed):
     [m] and its speed [m/s] (0 where absent)."""
     for k in range(r.size):
         present[k], x[k], y[k], speed[k] = replay(rec, r[k], times[k])
+
+
+def closest_vehicle(store: TrajectoryStore, road: Road, rec, lane: int, x: float, t: float,
+                    max_distance: float, max_time: float, speed_scale: float,
+                    out) -> tuple:  # fmt: skip
+    """:func:`closest` of ``road``'s recording ``rec`` (``out``: its four working
+    arrays): (r, time [s], x [m], y [m], speed [m/s]).
+
+    Raises:
+        NoVehicleNearError: none within the tolerances; the message names the request
+            and what the store covers.
+    """
+    found = closest(rec, int(lane), float(x), float(t), float(max_distance), float(max_time),
+                    float(speed_scale), *out)  # fmt: skip
+    if found[0] < 0:
+        t_min, t_max = store.time_range(road)
+        raise NoVehicleNearError(
+            f"no recorded vehicle in lane {lane} of {road.value} within {max_distance:g} m of "
+            f"x = {x:g} m and {max_time:g} s of {format_local(t)} CST (unix {t:.2f}); "
+            f"the store covers {format_local(t_min)} to {format_local(t_max)} CST on this road"
+        )
+    return found
 
 
 @kernel

@@ -22,9 +22,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from twin.core.errors import NoVehicleNearError, TwinError
+from twin.core.errors import TwinError
 from twin.core.i24 import Road
-from twin.core.timeutil import format_local
 from twin.cosim.core import drivers as behaviour_kernels
 from twin.cosim.core import layout, step
 from twin.cosim.windows import ScenarioError, road_limits
@@ -284,16 +283,9 @@ class Batch:
                 f"{road.value} ({lo:.0f} to {hi:.0f} m)"
             )
         rec = sh.recording
-        r, t0, ex, ey, ev = recording_module.closest(rec, int(lane), float(x), float(time),
-                                                     50.0, 5.0, 10.0, *self._closest)  # fmt: skip
-        if r < 0:
-            t_min, t_max_data = sh.store.time_range(road)
-            raise NoVehicleNearError(
-                f"no recorded vehicle in lane {lane} of {road.value} within 50 m of "
-                f"x = {x:g} m and 5 s of {format_local(time)} CST (unix {time:.2f}); the "
-                f"store covers {format_local(t_min)} to {format_local(t_max_data)} CST on "
-                "this road"
-            )
+        r, t0, ex, ey, ev = recording_module.closest_vehicle(
+            sh.store, road, rec, lane, x, time, 50.0, 5.0, 10.0, self._closest
+        )
         t_last = sh.store.time_range(road)[1]
         if t0 + t_max > t_last:
             raise ScenarioError(
