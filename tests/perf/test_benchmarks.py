@@ -80,14 +80,22 @@ def test_bench_env_times_the_kinematic_worlds_batched_vector_env(wave_store, cap
     assert line["reset_ms"] > 0
 
 
-@pytest.mark.slow
-def test_bench_env_measures_the_kernels_cold_compile_and_warm_start(wave_store):
-    """A new process with an empty kernel cache compiles every kernel; one with the
-    machine's cache loads them (it needs less time)."""
+def test_bench_env_times_a_new_process_with_an_empty_and_with_the_machines_kernel_cache():
+    """The cold process gets a kernel cache of its own, empty; the warm one the
+    machine's (a stand-in script reports what it was given: a whole compile of the
+    core is a minute, which the README's first run and twin bench env show)."""
     from twin.perf.env_steps import first_call_times
 
-    times = first_call_times(str(wave_store.path), "kinematic")
-    assert times["cold_first_step_s"] > times["warm_first_step_s"] > 0
+    script = (
+        "import json, os, sys\n"
+        "cold = os.environ.get('NUMBA_CACHE_DIR', '')\n"
+        "empty = bool(cold) and os.path.isdir(cold) and not os.listdir(cold)\n"
+        "print(json.dumps({'import_s': 1.0 if empty else 0.5,\n"
+        "                  'first_step_s': 2.0 if sys.argv[1:] == ['D', 'kinematic'] else -1}))\n"
+    )
+    times = first_call_times("D", "kinematic", script=script)
+    assert times == {"cold_import_s": 1.0, "cold_first_step_s": 2.0, "warm_import_s": 0.5,
+                     "warm_first_step_s": 2.0}  # fmt: skip
 
 
 def test_bench_worlds_compares_the_same_evaluation_in_both_worlds(

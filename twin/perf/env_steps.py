@@ -155,15 +155,16 @@ def _steps_per_second(env, n_envs: int, seed, steps: int) -> tuple[float, float]
     return n_envs * steps / elapsed, vehicles / elapsed
 
 
-def first_call_times(data: str, world: str) -> dict:
+def first_call_times(data: str, world: str, script: str = _FIRST_CALL) -> dict:
     """[s] a new process's import and first reset and step of the env, with an empty
     kernel cache (``cold_*``: every kernel compiled) and with the machine's cache
-    (``warm_*``: loaded)."""
+    (``warm_*``: loaded). ``script`` is what the process runs (with ``data`` and
+    ``world`` as its arguments; it prints ``import_s`` and ``first_step_s`` as JSON)."""
     out = {}
     with tempfile.TemporaryDirectory(prefix="twin-cold-cache-") as cold:
         for name, env in (("cold", {"NUMBA_CACHE_DIR": cold}), ("warm", {})):
             result = subprocess.run(
-                [sys.executable, "-c", _FIRST_CALL, data, world],
+                [sys.executable, "-c", script, data, world],
                 env={**os.environ, **env}, capture_output=True, text=True, check=True,
             )  # fmt: skip
             times = json.loads(result.stdout.strip().splitlines()[-1])
