@@ -219,7 +219,8 @@ def run_bench(store=None, *, scenario: str = "B", repeats: int = 3, world: str =
         out["targets"]["loop_s"] = "<= 0.1"
     if sumo:
         out.update(_against_sumo(replace(base, seed=0), traffic.store, bundle))
-        out["sumo_over_twin"] = round(out["sumo_s"] / out["loop_s"], 2)
+        ratio = out["sumo_s"] / out["loop_s"]
+        out["sumo_over_twin"] = float(f"{ratio:.3g}")  # three figures at any size
     return out
 
 
