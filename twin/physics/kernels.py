@@ -166,6 +166,14 @@ def place(b, i, bodies, prof):
     )  # fmt: skip
 
 
+@kernel
+def place_slots(b, slots, bodies, prof):
+    """:func:`place` for each slot of ``slots`` (one call for all the bodies that
+    another integrator moved)."""
+    for k in range(slots.size):
+        place(b, slots[k], bodies, prof)
+
+
 @kernel(inline=True)
 def _place(b, i, x, y, length, cg_height, z, grade, lane, road, stations, heights, slopes,
            spacing):  # fmt: skip
