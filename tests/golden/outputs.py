@@ -184,8 +184,9 @@ def synth_digest(work: Path) -> dict[str, str]:
 
 def fingerprint() -> dict[str, str]:
     """What the digests depend on besides the code: the libraries that compute and the
-    CPU features numpy dispatches its loops on (a different machine may round its
-    last bits differently, and a new library release may too)."""
+    CPU features numpy dispatches its loops on and Numba compiles the kernels for (a
+    different machine may round its last bits differently, and a new library release
+    may too)."""
     import platform
     from importlib.metadata import version
 
@@ -193,6 +194,7 @@ def fingerprint() -> dict[str, str]:
 
     libraries = (
         "numpy",
+        "numba",  # compiles the traffic core's kernels
         "scipy",
         "pandas",
         "pyarrow",

@@ -15,9 +15,10 @@ def test_bench_query_prints_one_json_line(wave_store, capsys):
 
 @pytest.mark.slow
 def test_bench_run_prints_the_loop_figures(wave_store, capsys):
-    assert main(["bench", "run", "--data", str(wave_store.path), "--repeats", "1"]) == 0
+    argv = ["bench", "run", "--data", str(wave_store.path), "--repeats", "1", "--duration", "3"]
+    assert main(argv) == 0
     line = json.loads(capsys.readouterr().out.strip())
-    assert line["bench"] == "run" and line["real_time_factor"] > 0
+    assert line["bench"] == "run" and line["real_time_factor"] > 0 and line["t_max"] == 3.0
     assert 0 < line["ghost_reload_ms"] < line["step_ms"] and line["vehicles_mean"] > 10
 
 
@@ -57,9 +58,10 @@ def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
 
 def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_store, capsys):
     argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--workers", "1"]
-    assert main([*argv, "--repeats", "1", "--no-compile-times"]) == 0
+    assert main([*argv, "--repeats", "1", "--resets", "2", "--no-compile-times"]) == 0
     line = json.loads(capsys.readouterr().out.strip())
     assert line["bench"] == "env" and line["env_steps_per_s"] > 0
+    assert line["resets"] == 2 and line["reset_ms"] > 0
     assert line["vector"] == "AsyncVectorEnv" and line["vector_envs"] == 1
     assert line["vector_env_steps_per_s"] > 0 and "cold_first_step_s" not in line
     assert main(["bench", "env", "--steps", "0"]) == 2

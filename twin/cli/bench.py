@@ -185,6 +185,12 @@ def _register_commands(benchmarks) -> None:
         help="episodes of the kinematic world's batched vector env",
     )
     p.add_argument(
+        "--resets",
+        type=at_least_one,
+        help="resets timed per repeat (default 50; a reset of the physics world builds "
+        "its bodies anew, about a second on 2 cores)",
+    )
+    p.add_argument(
         "--profile",
         action="store_true",
         help="kinematic: also time the batched core's step phase by phase and the "
@@ -412,6 +418,7 @@ def _env(args) -> int:
             repeats=args.repeats,
             world=args.world or "physics",
             num_envs=args.num_envs,
+            resets=args.resets,
             compile_times=not args.no_compile_times,
             profile=args.profile,
         ),

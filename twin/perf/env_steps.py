@@ -40,6 +40,7 @@ def env_bench(
     repeats: int = 3,
     world: str = "physics",
     num_envs: int = NUM_ENVS,
+    resets: int | None = None,
     compile_times: bool = True,
     profile: bool = False,
 ) -> dict:
@@ -48,7 +49,7 @@ def env_bench(
     cameras) on ``data`` (default: the embedded morning), each env stepping ``steps``
     times with a small varying action after a reset (not timed):
 
-    * one env, and its reset [ms];
+    * one env, and its reset [ms] (the mean of ``resets`` resets, default 50);
     * vectorised: in the kinematic world the batched vector env of ``num_envs``
       episodes (one kernel call a step; with the vehicles it updated per second), in
       the physics world an ``AsyncVectorEnv`` of ``workers`` envs (default: the cores);
@@ -68,16 +69,17 @@ def env_bench(
     def make():
         return gym.make(ENV_ID, data=data, duration=duration, world=world)
 
-    one, resets, vector, updates = [], [], [], []
+    resets = resets or RESETS
+    one, reset_ms, vector, updates = [], [], [], []
     kinematic = world == "kinematic"
     n = num_envs if kinematic else workers or cores()
     for k in range(repeats):
         env = make()
         one.append(_steps_per_second(env, 1, k, steps)[0])
         start = time.perf_counter()
-        for j in range(RESETS):
+        for j in range(resets):
             env.reset(seed=1000 * k + j)
-        resets.append(1e3 * (time.perf_counter() - start) / RESETS)
+        reset_ms.append(1e3 * (time.perf_counter() - start) / resets)
         env.close()
         if kinematic:
             envs = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
@@ -94,7 +96,8 @@ def env_bench(
         "steps": steps,
         "repeats": repeats,
         "env_steps_per_s": round(single, 2),
-        "reset_ms": round(median(resets), 3),
+        "reset_ms": round(median(reset_ms), 3),
+        "resets": resets,
         "vector": "batched core" if kinematic else "AsyncVectorEnv",
         "vector_envs": n,
         "vector_env_steps_per_s": round(many, 2),
