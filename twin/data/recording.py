@@ -502,11 +502,16 @@ def clear_loaded() -> None:
 
 
 def remove_cached(store: TrajectoryStore) -> None:
-    """Remove the cached recordings of ``store`` (all roads)."""
+    """Remove the cached recordings of ``store`` (all roads) and the files kept beside
+    them under the same key (derived data, such as the recording's lane changes)."""
     key = store_key(store)
-    for folder in [*cache_dir().glob(f"recording-{key}-*"),
-                   *(store.path / CACHE_FOLDER).glob(f"*-{key}")]:  # fmt: skip
-        shutil.rmtree(folder, ignore_errors=True)
+    for path in [*cache_dir().glob(f"recording-{key}-*"),
+                 *(store.path / CACHE_FOLDER).glob(f"*-{key}"),
+                 *(store.path / CACHE_FOLDER).glob(f"*-{key}.*")]:  # fmt: skip
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
     for k in [k for k in _LOADED if k[0] == key]:
         del _LOADED[k]
 

@@ -13,10 +13,10 @@ import math
 import numpy as np
 
 from twin import __version__
-from twin.calibration import following
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
 from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
+from twin.metrics.recorded_changes import recorded_lane_changes
 
 RUN_FORMAT = "i24-twin-run"
 COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
@@ -168,22 +168,3 @@ def _physics(sim: Cosimulator) -> dict:
 
 def _round(value: float) -> float:
     return round(float(value), 6) if math.isfinite(value) else None
-
-
-_CHANGES: dict = {}
-
-
-def recorded_lane_changes(store: TrajectoryStore, road, t0: float, t1: float):
-    """The recording's lane changes on ``road`` between unix ``t0`` and ``t1`` [s]
-    (:func:`twin.calibration.following.lane_changes`), found once per process over the
-    whole recording."""
-    from dataclasses import replace
-
-    key = (str(store.path), str(road))
-    if key not in _CHANGES:
-        first, last = store.time_range(road)
-        _CHANGES[key] = following.lane_changes(following.load_grid(store, road, first, last))
-    changes = _CHANGES[key]
-    keep = (changes.time >= t0) & (changes.time <= t1)
-    per_change = ("tid", "time", "x", "lane_from", "lane_to", "speed_from", "speed_to")
-    return replace(changes, **{name: getattr(changes, name)[keep] for name in per_change})
