@@ -1,6 +1,8 @@
 """Shared fixtures: hand-built I-24 documents and small synthetic stores."""
 
 import json
+import os
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -76,6 +78,24 @@ def wave_store(tmp_path_factory, wave_config) -> TrajectoryStore:
     day = write_i24_json(synthesize(wave_config), folder / "wave.json")
     ingest([day], folder / "store", progress=False)
     return TrajectoryStore(folder / "store")
+
+
+@pytest.fixture
+def private_wave_store(wave_store, tmp_path) -> TrajectoryStore:
+    """A private copy of ``wave_store`` without its cached recording (for tests that
+    write into the store or its caches)."""
+    shutil.copytree(
+        wave_store.path, tmp_path / "store", ignore=shutil.ignore_patterns(".recording")
+    )
+    return TrajectoryStore(tmp_path / "store")
+
+
+def store_written_again(store: TrajectoryStore) -> TrajectoryStore:
+    """``store`` as after it was written again (its samples' time moved on): a new
+    store object, whose caches have a new key."""
+    parquet = store.path / "samples_westbound.parquet"
+    os.utime(parquet, ns=(parquet.stat().st_atime_ns, parquet.stat().st_mtime_ns + 10**9))
+    return TrajectoryStore(store.path)
 
 
 @pytest.fixture(scope="session")

@@ -4,23 +4,19 @@ gets a new cache and the old one goes; a read-only store caches in the twin's ca
 folder; the window index finds exactly the vehicles a scan of every trajectory finds."""
 
 import os
-import shutil
 
 import numpy as np
 import pytest
 
+from tests.conftest import store_written_again
 from twin.data import recording
-from twin.data.store import TrajectoryStore
 
 
 @pytest.fixture
-def store(wave_store, tmp_path):
+def store(private_wave_store):
     """A private copy of the session's wave store (the tests write into it)."""
-    shutil.copytree(
-        wave_store.path, tmp_path / "store", ignore=shutil.ignore_patterns(".recording")
-    )
     recording.clear_loaded()
-    yield TrajectoryStore(tmp_path / "store")
+    yield private_wave_store
     recording.clear_loaded()
 
 
@@ -48,9 +44,7 @@ def test_a_store_written_again_gets_a_new_cache_and_the_old_one_goes(store, monk
     monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
     recording.load_recording(store, "westbound")
     old = recording.cached_folder(store, "westbound")
-    parquet = store.path / "samples_westbound.parquet"
-    os.utime(parquet, ns=(parquet.stat().st_atime_ns, parquet.stat().st_mtime_ns + 10**9))
-    again = TrajectoryStore(store.path)
+    again = store_written_again(store)
     recording.load_recording(again, "westbound")
     new = recording.cached_folder(again, "westbound")
     assert new != old and new.is_dir() and not old.exists()

@@ -3,13 +3,12 @@ store and kept beside its cached recording; a later process reads the same chang
 a damaged file is found again, an unwritable place costs only time, a store written
 again leaves no stale file; a run's window selects them by time."""
 
-import os
-import shutil
 from dataclasses import fields
 
 import numpy as np
 import pytest
 
+from tests.conftest import store_written_again
 from twin.calibration.following import lane_changes, load_grid
 from twin.data import recording
 from twin.data.store import TrajectoryStore
@@ -17,13 +16,10 @@ from twin.metrics import recorded_changes as rc
 
 
 @pytest.fixture
-def store(wave_store, tmp_path):
+def store(private_wave_store):
     """A private copy of the session's wave store (the tests write into it)."""
-    shutil.copytree(
-        wave_store.path, tmp_path / "store", ignore=shutil.ignore_patterns(".recording")
-    )
     rc.clear_loaded()
-    yield TrajectoryStore(tmp_path / "store")
+    yield private_wave_store
     rc.clear_loaded()
 
 
@@ -68,9 +64,7 @@ def test_a_place_that_cannot_be_written_costs_only_time(store, monkeypatch, tmp_
 def test_a_store_written_again_leaves_no_stale_file(store):
     rc.whole_recording(store, "westbound")
     old = rc.changes_path(store, "westbound")
-    parquet = store.path / "samples_westbound.parquet"
-    os.utime(parquet, ns=(parquet.stat().st_atime_ns, parquet.stat().st_mtime_ns + 10**9))
-    again = TrajectoryStore(store.path)
+    again = store_written_again(store)
     rc.whole_recording(again, "westbound")
     new = rc.changes_path(again, "westbound")
     assert new != old and new.is_file() and not old.exists()
