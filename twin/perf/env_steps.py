@@ -69,7 +69,7 @@ def env_bench(
     def make():
         return gym.make(ENV_ID, data=data, duration=duration, world=world)
 
-    resets = resets or RESETS
+    resets = RESETS if resets is None else resets
     one, reset_ms, vector, updates = [], [], [], []
     kinematic = world == "kinematic"
     n = num_envs if kinematic else workers or cores()

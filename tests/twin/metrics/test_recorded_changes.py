@@ -1,8 +1,11 @@
 """The recording's lane changes (``twin/metrics/recorded_changes.py``): found once per
-store and kept beside its cached recording; a later process reads the same changes;
-a damaged file is found again, an unwritable place costs only time, a store written
-again leaves no stale file; a run's window selects them by time."""
+store and kept beside its cached recording (in the twin's cache for a read-only
+store); a later process reads the same arrays; a damaged file is found again, an
+unwritable place costs only time, a store written again leaves no stale file and
+spares the other roads' and the recordings' files; a run's window selects them by
+time."""
 
+import os
 from dataclasses import fields
 
 import numpy as np
@@ -25,7 +28,9 @@ def store(private_wave_store):
 
 def _same(a, b):
     for f in fields(a):
-        np.testing.assert_array_equal(getattr(a, f.name), getattr(b, f.name), err_msg=f.name)
+        va, vb = getattr(a, f.name), getattr(b, f.name)
+        assert va.dtype == vb.dtype and va.shape == vb.shape, f.name
+        np.testing.assert_array_equal(va, vb, err_msg=f.name)
 
 
 def _found(store):
@@ -44,14 +49,33 @@ def test_the_changes_are_found_once_kept_beside_the_recording_and_read_again(sto
     _same(rc.whole_recording(TrajectoryStore(store.path), "westbound"), first)
 
 
-def test_a_damaged_file_is_found_again_and_replaced(store):
+@pytest.mark.parametrize("damage", ["not an npz file", "truncated", "arrays of other lengths"])
+def test_a_damaged_file_is_found_again_and_replaced(store, damage):
     expected = rc.whole_recording(store, "westbound")
     path = rc.changes_path(store, "westbound")
-    path.write_bytes(b"not an npz file")
+    if damage == "not an npz file":
+        path.write_bytes(b"not an npz file")
+    elif damage == "truncated":
+        path.write_bytes(path.read_bytes()[:300])
+    else:
+        arrays = {f.name: getattr(expected, f.name) for f in fields(expected)}
+        np.savez(path, **{**arrays, "tid": arrays["tid"][:-1]})
     rc.clear_loaded()
     _same(rc.whole_recording(store, "westbound"), expected)
     rc.clear_loaded()
     _same(rc._read(path), expected)
+
+
+def test_a_read_only_store_keeps_them_in_the_twins_cache(store, monkeypatch, tmp_path):
+    monkeypatch.setenv("I24_TWIN_CACHE", str(tmp_path / "cache"))
+    writable = os.access
+    monkeypatch.setattr(
+        recording.os, "access", lambda p, m: False if str(p) == str(store.path) else writable(p, m)
+    )
+    rc.whole_recording(store, "westbound")
+    path = rc.changes_path(store, "westbound")
+    assert path.parent == tmp_path / "cache" and path.is_file()
+    assert not (store.path / ".recording").exists()
 
 
 def test_a_place_that_cannot_be_written_costs_only_time(store, monkeypatch, tmp_path):
@@ -64,11 +88,17 @@ def test_a_place_that_cannot_be_written_costs_only_time(store, monkeypatch, tmp_
 def test_a_store_written_again_leaves_no_stale_file(store):
     rc.whole_recording(store, "westbound")
     old = rc.changes_path(store, "westbound")
+    cache = store.path / ".recording"
+    other_road = cache / old.name.replace("westbound-", "eastbound-")
+    other_road.write_bytes(b"")
+    (cache / old.name.split(".")[0]).mkdir()  # a cached recording's folder
+    (cache / old.name.split(".")[0] / "recording.json").write_text("{}")
     again = store_written_again(store)
     rc.whole_recording(again, "westbound")
     new = rc.changes_path(again, "westbound")
     assert new != old and new.is_file() and not old.exists()
     assert recording.store_key(again) in new.name
+    assert other_road.exists() and (cache / old.name.split(".")[0] / "recording.json").exists()
 
 
 def test_a_window_keeps_the_changes_inside_it(store):
