@@ -283,6 +283,8 @@ class Cosimulator:
         self._av_ids: list[int] = []
         self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
         self._controllers.clear()
+        if self.config.world == "physics" and self._bodies.size:
+            self.world.clear()  # a second episode: the core numbers its vehicles from 0
         self._bodies = np.empty(0, np.int64)
         self._core_key = None
         self._mirror_bodies()

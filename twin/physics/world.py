@@ -200,6 +200,14 @@ class PhysicsWorld(ActiveVehicles):
         self._read = self._states = None
         return ids
 
+    def clear(self) -> None:
+        """Remove every vehicle and start the ids and the clock from 0 again: a new
+        episode in the same world (the bodies stay pooled for its spawns)."""
+        if self._ids.size:
+            self.despawn(self._ids.copy())
+        self._next_id = itertools.count()
+        self.time = 0.0
+
     def despawn(self, ids: np.ndarray) -> None:
         """Return the vehicles' bodies to the pool.
 

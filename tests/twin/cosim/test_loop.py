@@ -307,3 +307,22 @@ def test_same_seed_same_run_bit_for_bit(cosim):
             sim.step()
         frames.append(sim.log.vehicles())
     assert frames[0].equals(frames[1])
+
+
+def test_a_second_reset_starts_a_new_episode_in_the_same_physics_world(cosim):
+    """The core numbers a new episode's vehicles from 0: the world's bodies of the
+    first episode go and its ids start again, so both agree."""
+    docs = [vehicle(2, -2, EGO_X + 40.0, 20.0), ego_doc(), vehicle(3, -3, EGO_X + 10.0, 20.0)]
+    sim = cosim(docs)
+    for _ in range(30):
+        sim.step()
+    first = np.sort(sim.world.states().id)
+    sim.reset()
+    states = sim.world.states()
+    core = sim.state.bodies
+    assert np.array_equal(np.sort(states.id), np.sort(core.id[0][core.valid[0]]))
+    assert np.array_equal(np.sort(states.id), first)  # the same three vehicles, ids from 0
+    assert sim.world.time == 0.0 and sim.step_index == 0
+    for _ in range(30):
+        sim.step()
+    assert sim.counters.collisions == [] and len(sim.world.states().id) == 3
