@@ -271,14 +271,7 @@ class Cosimulator:
         cfg = self.config
         placed = self.batch.reset(0, lane=cfg.lane, x=cfg.x, time=cfg.time, seed=cfg.seed)
         self.t0 = placed.t0
-        rec = self.shared.recording
-        meta = self.traffic.store.trajectory_arrays
-        self.ego = RecordedVehicle(
-            tid=placed.tid, id=str(meta["id"][placed.tid]), road=self.road, t=placed.t0,
-            x=placed.x, y=placed.y, lane=_lane(placed.y), speed=placed.speed,
-            length=float(rec.length[placed.r]), width=float(rec.width[placed.r]),
-            height=float(rec.height[placed.r]), vehicle_class=int(rec.vehicle_class[placed.r]),
-        )  # fmt: skip
+        self.ego = _placed_ego(self.shared, placed, self.road)
         self.ego_id = int(self.state.episodes.ego_id[0])
         self._av_ids: list[int] = []
         self.log = TrajectoryLog(self.t0, self.direction, cfg.dt)
@@ -446,12 +439,11 @@ class Cosimulator:
         bo.x[0, at], bo.y[0, at] = states.x, states.y
         bo.speed[0, at], bo.yaw_rate[0, at] = states.speed, states.yaw_rate
         bo.yaw[0, at] = _wrap(states.heading - self._heading[self.direction])
-        bo.lane[0, at] = states.lane
         bo.drive_power[0, at] = states.drive_power
         from twin.physics.kernels import place_slots
 
         place_slots(0, at, bo, self.shared.settings.profile)  # the map's grade under them
-        bo.z[0, at] = states.position[:, 2]
+        bo.z[0, at] = states.position[:, 2]  # the body's, not the map's
         bo.lane[0, at] = states.lane
         pairs = self.world.vehicle_contacts()
         k = min(len(pairs), st.pairs.shape[1])
@@ -534,6 +526,17 @@ def _compiled_specs() -> set[str]:
     from twin.cosim.core.batch import COMPILED
 
     return set(COMPILED)
+
+
+def _placed_ego(shared: Shared, placed, road) -> RecordedVehicle:
+    """The recorded vehicle an episode's placement chose as its ego."""
+    rec, meta = shared.recording, shared.store.trajectory_arrays
+    return RecordedVehicle(
+        tid=placed.tid, id=str(meta["id"][placed.tid]), road=road, t=placed.t0,
+        x=placed.x, y=placed.y, lane=_lane(placed.y), speed=placed.speed,
+        length=float(rec.length[placed.r]), width=float(rec.width[placed.r]),
+        height=float(rec.height[placed.r]), vehicle_class=int(rec.vehicle_class[placed.r]),
+    )  # fmt: skip
 
 
 def _lane(y: float) -> int:
@@ -793,14 +796,7 @@ class Finished:
         self.t0 = placed.t0
         self.step_index = int(st.episodes.step[b])
         self.ego_id = int(st.episodes.ego_id[b])
-        rec = shared.recording
-        meta = shared.store.trajectory_arrays
-        self.ego = RecordedVehicle(
-            tid=placed.tid, id=str(meta["id"][placed.tid]), road=self.road, t=placed.t0,
-            x=placed.x, y=placed.y, lane=_lane(placed.y), speed=placed.speed,
-            length=float(rec.length[placed.r]), width=float(rec.width[placed.r]),
-            height=float(rec.height[placed.r]), vehicle_class=int(rec.vehicle_class[placed.r]),
-        )  # fmt: skip
+        self.ego = _placed_ego(shared, placed, self.road)
         self.log = TrajectoryLog(self.t0, self.direction, config.dt)
         heading = shared.bundle.road.heading(self.direction)
         append_steps(self.log, shared, st, b, 0, self.step_index, config.dt, heading)
