@@ -143,10 +143,12 @@ def step_profile(data: str, num_envs: int, steps: int, duration: float) -> dict:
 def _steps_per_second(env, n_envs: int, seed, steps: int) -> tuple[float, float]:
     """(env steps a second, vehicle updates a second) of ``env`` (``n_envs`` envs,
     vectorised where more than one) over ``steps`` steps, after a reset with ``seed``
-    (not timed); the vehicles are counted for the batched core's env only."""
+    and one step (not timed: a process's first step loads the kernels it calls from
+    their cache); the vehicles are counted for the batched core's env only."""
     env.reset(seed=seed)
     shape = (n_envs, 1) if n_envs > 1 else (1,)
     actions = [np.full(shape, 0.3 * np.sin(0.1 * k), np.float32) for k in range(steps)]
+    env.step(actions[0])
     core_state = getattr(getattr(env.unwrapped, "episodes", None), "state", None)
     vehicles = 0
     start = time.perf_counter()
