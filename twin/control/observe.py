@@ -39,26 +39,26 @@ STATS = (
  FUEL_SEEN, STEPS) = range(len(STATS))  # fmt: skip
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def observe_batch(core, done_before, obs, reward, collided, stats, weights, low, high,
-                  control_dt, first, snap_r, snap_x, snap_y, snap_v):  # fmt: skip
+                  control_dt, first, snap_r, snap_x, snap_y, snap_v, bins):  # fmt: skip
     """After a control step (``first``: after the reset): each running episode's
     observation (B, N_OBS), clipped to ``low``/``high``; its reward (B,) with
     ``weights`` (fuel [1/g], gap, gap_max [s], ttc, ttc_min [s]); whether its AV
     collided in the step (B,); its running ``stats`` (B, STATS). ``done_before`` (B,)
     the episodes that were over before the step (left as they are); ``snap_*`` working
-    arrays of a recording query."""
+    arrays of a recording query, ``bins`` (24,) of the speeds ahead."""
     ep = core.episodes
     for b in range(ep.done.size):
         if done_before[b] and not first[b]:
             continue
         _observe(b, core, obs, reward, collided, stats, weights, low, high, control_dt,
-                 first[b], snap_r, snap_x, snap_y, snap_v)  # fmt: skip
+                 first[b], snap_r, snap_x, snap_y, snap_v, bins)  # fmt: skip
 
 
 @kernel
 def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_dt, first,
-             snap_r, snap_x, snap_y, snap_v):  # fmt: skip
+             snap_r, snap_x, snap_y, snap_v, bins):  # fmt: skip
     bo, ep, cs = core.bodies, core.episodes, core.settings
     dr, gh = core.traffic.drivers, core.ghosts
     valid, x, lanes, speeds, length, ids = bo.valid, bo.x, bo.lane, bo.speed, bo.length, bo.id
@@ -106,7 +106,7 @@ def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_
     o[0], o[1] = speed, accel
     o[2], o[3] = min(lead_gap, GAP_CAP), lead_speed
     o[4], o[5] = min(follow_gap, GAP_CAP), follow_speed
-    _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v)
+    _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v, bins)
     for k in range(N_OBS):
         o[k] = min(max(o[k], low[k]), high[k])
     # the figures and the reward of the step
@@ -141,12 +141,14 @@ def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_
 
 
 @kernel(inline=True)
-def _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v):
-    """The recorded mean speed per lane -1..-4 in each bin ahead (o[6:18])."""
+def _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v, bins):
+    """The recorded mean speed per lane -1..-4 in each bin ahead (o[6:18]); ``bins``
+    (24,) holds the sums and counts."""
     t = core.episodes.t0[b] + core.episodes.step[b] * core.settings.dt
     n = window(core.rec, t, ego_x, ego_x + AHEAD_EDGES[3], snap_r, snap_x, snap_y, snap_v)
-    sums = np.zeros(12)
-    counts = np.zeros(12)
+    sums, counts = bins[:12], bins[12:]
+    for j in range(24):
+        bins[j] = 0.0
     for k in range(max(n, 0)):
         lane = lane_of(snap_y[k])
         if lane == 0:

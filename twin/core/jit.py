@@ -11,7 +11,12 @@ compiled by Numba with :func:`kernel`:
 * ``error_model="numpy"``: a float division by zero gives ``inf`` or ``nan`` as numpy
   does (the twin's numpy code relied on it), not a ZeroDivisionError;
 * no ``fastmath``: results are bit for bit those of IEEE arithmetic, the same in any
-  batch and on any machine with the same build.
+  batch and on any machine with the same build;
+* no reference counting (``nrt=False``) unless asked for: a kernel makes no arrays,
+  and the arrays it reads live as long as the Python objects holding them, so
+  counting them (an atomic increment and decrement per array read or passed on) was
+  pure cost; kernels that make arrays or structs, or that Python calls with a packed
+  struct (:func:`register_struct`), take ``nrt=True``.
 
 Random draws inside kernels come from :func:`uniform` and :func:`normal`, a hash of
 counters (the run's seed, a stream, a vehicle's key, an event number): the same draw
@@ -27,7 +32,18 @@ import tempfile
 
 import numba
 import numpy as np
-from numba.core import types
+from numba.core import cgutils, imputils, types
+from numba.core.datamodel import default_manager, models
+from numba.core.extending import (
+    NativeValue,
+    box,
+    infer_getattr,
+    lower_getattr_generic,
+    lower_setattr_generic,
+    unbox,
+)
+from numba.core.runtime.nrtdynmod import _meminfo_struct_type
+from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
 
 if not os.environ.get("NUMBA_CACHE_DIR") and not os.access(os.path.dirname(__file__), os.W_OK):
@@ -37,10 +53,11 @@ if not os.environ.get("NUMBA_CACHE_DIR") and not os.access(os.path.dirname(__fil
 INLINE_IR = os.environ.get("TWIN_INLINE_IR") == "1"
 
 
-def kernel(function=None, *, inline: bool = False):
+def kernel(function=None, *, inline: bool = False, nrt: bool = False):
     """Compile ``function`` as a kernel of the core (see the module doc); with
-    ``inline=True`` it is inlined where it is called (small scalar helpers)."""
-    options = {"cache": True, "error_model": "numpy", "nogil": True}
+    ``inline=True`` it is inlined where it is called (small scalar helpers); with
+    ``nrt=True`` it may make arrays or structs (Numba's reference counting on)."""
+    options = {"cache": True, "error_model": "numpy", "nogil": True, "_nrt": nrt}
     if inline and INLINE_IR:
         options["inline"] = "always"
     if function is None:
@@ -83,7 +100,7 @@ def normal(seed, stream, key, event):
     return math.sqrt(-2.0 * math.log(1.0 - u1)) * math.cos(2.0 * math.pi * u2)
 
 
-@kernel
+@kernel(nrt=True)
 def uniforms(seed, stream, keys, event):
     """(n,) :func:`uniform` of each of ``keys`` (n,) int64 at one ``event`` (for Python)."""
     out = np.empty(keys.size)
@@ -98,6 +115,89 @@ class StructType(types.StructRef):
 
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+def register_struct(struct_type, proxy):
+    """Register ``struct_type`` (a :class:`StructType`) and its Python ``proxy`` (a
+    ``StructRefProxy``) for kernels, as ``numba.experimental.structref``'s ``register``
+    and ``define_boxing`` do, except that reading a field works
+    in a kernel compiled without reference counting (``nrt=False``, the default of
+    :func:`kernel`): there it is a plain load of a borrowed reference. Counting every
+    array a kernel reads from the struct (an atomic increment and decrement, in a call
+    LLVM may not inline) cost more than the arithmetic of a vehicle's step; the
+    struct's arrays stay alive because the Python side holds them for the whole call.
+    Setting a field (only the packers do) still needs reference counting, and so does
+    taking the struct from Python: a kernel without it would never release the
+    reference its call takes, and the struct's arrays would live for ever, so such a
+    call raises a TypeError that names the fix."""
+    default_manager.register(struct_type, models.StructRefModel)
+    meminfo_type = types.MemInfoPointer(types.voidptr)
+
+    @infer_getattr
+    class _Fields(AttributeTemplate):
+        key = struct_type
+
+        def generic_resolve(self, typ, attr):
+            return typ.field_dict.get(attr)
+
+    @lower_getattr_generic(struct_type)
+    def _get(context, builder, typ, value, attr):
+        payload = _payload(context, builder, typ, value)
+        # a new reference where counting is on (as structref's own), else borrowed
+        return imputils.impl_ret_borrowed(context, builder, typ.field_dict[attr],
+                                          getattr(payload, attr))  # fmt: skip
+
+    @lower_setattr_generic(struct_type)
+    def _set(context, builder, signature, args, attr):
+        typ, value_type = signature.args
+        instance, value = args
+        payload = _payload(context, builder, typ, instance)
+        new = context.cast(builder, value, value_type, typ.field_dict[attr])
+        old = getattr(payload, attr)
+        context.nrt.incref(builder, value_type, new)
+        context.nrt.decref(builder, value_type, old)  # last: the new may be the old
+        setattr(payload, attr, new)
+
+    @box(struct_type)
+    def _box(typ, value, c):
+        ref = cgutils.create_struct_proxy(typ)(c.context, c.builder, value=value)
+        meminfo = c.box(meminfo_type, ref.meminfo)
+        make = c.pyapi.unserialize(c.pyapi.serialize_object(proxy._numba_box_))
+        typ_object = c.pyapi.unserialize(c.pyapi.serialize_object(typ))
+        out = c.pyapi.call_function_objargs(make, [typ_object, meminfo])
+        for held in (make, typ_object, meminfo):
+            c.pyapi.decref(held)
+        return out
+
+    @unbox(struct_type)
+    def _unbox(typ, obj, c):
+        ref = cgutils.create_struct_proxy(typ)(c.context, c.builder)
+        if not c.context.enable_nrt:  # every kernel has a wrapper; only a call fails
+            c.pyapi.err_set_string(
+                "PyExc_TypeError",
+                f"a kernel taking a {typ.__class__.__name__} from Python needs reference "
+                "counting: compile it with @kernel(nrt=True)",
+            )
+            return NativeValue(ref._getvalue(), is_error=cgutils.true_bit)
+        held = c.pyapi.object_getattr_string(obj, "_meminfo")
+        ref.meminfo = c.unbox(meminfo_type, held).value
+        c.pyapi.decref(held)
+        return NativeValue(ref._getvalue())
+
+    return struct_type
+
+
+def _payload(context, builder, typ, value):
+    """The struct's payload behind its meminfo, read as Numba's own
+    ``NRT_MemInfo_data_fast`` reads it (the data pointer, the meminfo's fourth field),
+    without needing the runtime in the kernel."""
+    ref = cgutils.create_struct_proxy(typ)(context, builder, value=value)
+    meminfo = builder.bitcast(ref.meminfo, _meminfo_struct_type.as_pointer())
+    data = builder.load(cgutils.gep(builder, meminfo, 0, 3))
+    payload_type = typ.get_data_type()
+    pointer = context.data_model_manager[payload_type].get_value_type().as_pointer()
+    return cgutils.create_struct_proxy(payload_type)(context, builder,
+                                                     ref=builder.bitcast(data, pointer))  # fmt: skip
 
 
 def packing(struct_type, group):

@@ -38,7 +38,7 @@ from twin.traffic.controlled import apply_controllers
 from twin.traffic.controller_api import EgoController, lane_change_direction
 from twin.traffic.drivers import DriverTraits
 from twin.traffic.kernels import state
-from twin.traffic.kernels.decide import decide
+from twin.traffic.kernels.decide import decide_from_python
 from twin.traffic.kernels.decide import settings as kernel_settings
 from twin.traffic.kernels.models import N_PARAMS
 from twin.traffic.models import car_following_model
@@ -436,7 +436,7 @@ class TrafficManager:
             if not traffic.vehicles.valid[b].any():
                 continue
             t = traffic._replace(settings=self._settings[road])
-            decide(b, self._steps, self.time, self.config.seed, state.pack(t))
+            decide_from_python(b, self._steps, self.time, self.config.seed, state.pack(t))
             if self._controllers:
                 mine = {
                     int(i): self._controllers[int(self._ids[i])]

@@ -110,6 +110,32 @@ def test_an_action_that_is_not_finite_names_the_episode(shared):
         batch.step(np.array([0.0, np.nan]))
 
 
+def test_the_kernels_called_from_python_release_the_struct(shared):
+    """Kernels run without reference counting (twin.core.jit.register_struct); those
+    Python calls with the packed struct count it, so that it is released: a leak would
+    keep every array of every batch alive for the life of the process."""
+    from twin.cosim.core.step import PHASES, phase_batch
+
+    batch = Batch(shared, 2)
+    held = batch.core._meminfo.refcount
+    batch.reset(0, lane=-2, x=EGO_X, time=T0, seed=1)
+    for _ in range(3):
+        batch.step()
+        phase_batch(batch.core, len(PHASES) - 1)
+    assert batch.core._meminfo.refcount == held
+
+
+def test_a_kernel_without_counting_refuses_the_struct_from_python(shared):
+    from twin.cosim.core.step import move
+
+    batch = Batch(shared, 1)
+    held = batch.core._meminfo.refcount
+    with pytest.raises(TypeError, match=r"needs reference counting: compile it with "
+                       r"@kernel\(nrt=True\)"):  # fmt: skip
+        move(0, batch.core)
+    assert batch.core._meminfo.refcount == held
+
+
 @pytest.mark.slow
 def test_no_kernel_reads_or_writes_out_of_bounds(tmp_path):
     """Whole episodes with Numba's bounds checking on (its own compile cache): an

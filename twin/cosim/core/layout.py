@@ -31,7 +31,7 @@ import numpy as np
 from numba.core.extending import overload
 from numba.experimental import structref
 
-from twin.core.jit import StructType, kernel, packing
+from twin.core.jit import StructType, kernel, packing, register_struct
 from twin.physics import kernels as physics
 from twin.traffic.kernels import state as traffic
 
@@ -179,7 +179,6 @@ def pack(state: State, settings, traffic_settings, rec, params, beh) -> "CoreStr
     )  # fmt: skip
 
 
-@structref.register
 class CoreType(StructType):
     """The kernels' type of a packed :data:`Core`."""
 
@@ -188,7 +187,7 @@ class CoreStruct(structref.StructRefProxy):
     """A packed :data:`Core` as Python holds it."""
 
 
-structref.define_boxing(CoreType, CoreStruct)
+register_struct(CoreType, CoreStruct)
 
 
 def _pack(group):
@@ -200,6 +199,6 @@ def _pack_overload(group):
     return packing(CoreType, group)
 
 
-@kernel
+@kernel(nrt=True)
 def _pack_kernel(group):
     return _pack(group)

@@ -51,7 +51,7 @@ CoreSettings = namedtuple(
 )
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     """Steps 1 and 2 for episode ``b``: the ego (recorded trajectory ``ego_r`` at back
     x, y [m] and speed [m/s] at unix ``t0``) and the recorded vehicles of the visible
@@ -124,7 +124,7 @@ def _followers(b, core):
     ep.follower_count[b] = count
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def before_world(b, core):
     """Step 3 (desired speeds, strategic targets) and the traffic manager's decisions
     of episode ``b``: each body's commanded acceleration (``drivers.accel``) and front
@@ -133,7 +133,7 @@ def before_world(b, core):
     decisions(b, core)
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def after_world(b, core):
     """After the world's step of episode ``b``: the clock, the contacts (the kinematic
     world's footprints, else the pairs the world gave), the spawns' speed check, the
@@ -384,7 +384,7 @@ def record(b, core, step):
             log.ghost_speed[b, row, g] = gspeed[b, g]
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def step_batch(core):
     """One step of every running episode of the batch (the kinematic world)."""
     done = core.episodes.done
@@ -396,7 +396,7 @@ def step_batch(core):
         after_world(b, core)
 
 
-@kernel
+@kernel(nrt=True)  # called from Python with the struct: counted
 def phase_batch(core, phase):
     """Phase ``phase`` (an index of :data:`PHASES`) of every running episode: the
     phases in turn are one :func:`step_batch` (for timing them apart)."""

@@ -138,6 +138,13 @@ def decide(b, step, time, seed, t):
     steer(b, t)
 
 
+@kernel(nrt=True)
+def decide_from_python(b, step, time, seed, t):
+    """:func:`decide` called from Python (with reference counting, so that the struct
+    ``t`` passed in is released after the call; :func:`twin.core.jit.register_struct`)."""
+    decide(b, step, time, seed, t)
+
+
 @kernel(inline=True)
 def _emergency(b, top, valid, need, cf_accel, emergency, command, threshold, steps):
     """Where staying clear needs more than ``threshold`` [m/s^2], the command brakes as

@@ -26,7 +26,7 @@ import numpy as np
 from numba.core.extending import overload
 from numba.experimental import structref
 
-from twin.core.jit import StructType, kernel, packing
+from twin.core.jit import StructType, kernel, packing, register_struct
 from twin.traffic.kernels.models import N_PARAMS
 
 Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length wheelbase mu")
@@ -94,7 +94,6 @@ def counters(b: int) -> Counters:
     return Counters(*(np.zeros(b, np.int64) for _ in Counters._fields))
 
 
-@structref.register
 class TrafficType(StructType):
     """The kernels' type of a packed :data:`Traffic`."""
 
@@ -103,7 +102,7 @@ class TrafficStruct(structref.StructRefProxy):
     """A packed :data:`Traffic` as Python holds it (pass it to the kernels)."""
 
 
-structref.define_boxing(TrafficType, TrafficStruct)
+register_struct(TrafficType, TrafficStruct)
 
 
 def _pack(group):
@@ -115,7 +114,7 @@ def _pack_overload(group):
     return packing(TrafficType, group)
 
 
-@kernel
+@kernel(nrt=True)
 def _pack_kernel(group):
     return _pack(group)
 
