@@ -22,16 +22,15 @@ so a second run does not rebuild.
 """
 
 import hashlib
+import importlib.metadata
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
-from trimesh.visual.material import PBRMaterial
 
 from mapgen import sources as sources_module
-from mapgen.meshes import SceneMeshes, build_meshes
 from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
@@ -41,6 +40,11 @@ from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import MapError
 from twin.core.locks import build_lock
 from twin.core.paths import asset, cache_dir
+
+if TYPE_CHECKING:  # trimesh (and scipy under it) is imported only to build a map: a
+    import trimesh  # process that loads one (every twin run and worker) starts faster
+
+    from mapgen.meshes import SceneMeshes
 
 FORMAT = "i24-twin-map"
 FORMAT_VERSION = 2
@@ -126,7 +130,7 @@ def map_key(seed: int = DEFAULT_SEED) -> str:
     inputs = (asset(MAP_TOML), asset(SEMANTIC_CSV), asset(VEHICLE_CSV))
     for path in (*inputs, *sources_module.source_paths()):
         digest.update(path.name.encode() + path.read_bytes())
-    digest.update(f"{FORMAT_VERSION}:{trimesh.__version__}:{int(seed)}".encode())
+    digest.update(f"{FORMAT_VERSION}:{importlib.metadata.version('trimesh')}:{int(seed)}".encode())
     return digest.hexdigest()[:16]
 
 
@@ -160,6 +164,8 @@ def build_map(out: Path, *, seed: int = DEFAULT_SEED) -> MapBundle:
     params = load_params()
     sources = sources_module.load_sources()
     road = RoadModel.from_sources(sources, params)
+    from mapgen.meshes import build_meshes
+
     meshes = build_meshes(road, params, sources, np.random.default_rng(int(seed)))
     tiles = _tiles(meshes, road)
     description = _describe(road, params, meshes, int(seed), tiles)
@@ -250,7 +256,7 @@ def load_map(folder: Path) -> MapBundle:
     )
 
 
-def _tiles(meshes: SceneMeshes, road: RoadModel) -> list[tuple[dict, trimesh.Trimesh]]:
+def _tiles(meshes: "SceneMeshes", road: RoadModel) -> "list[tuple[dict, trimesh.Trimesh]]":
     """Each visual part cut by face centre into TILE_LENGTH tiles of road station, as
     (description entry, shaded mesh) pairs in part then station order."""
     tiles = []
@@ -270,7 +276,7 @@ def _tiles(meshes: SceneMeshes, road: RoadModel) -> list[tuple[dict, trimesh.Tri
 
 
 def _describe(
-    road: RoadModel, params: MapParams, meshes: SceneMeshes, seed: int, tiles: list
+    road: RoadModel, params: MapParams, meshes: "SceneMeshes", seed: int, tiles: list
 ) -> dict:
     lane_width = i24.LANE_WIDTH
     return {
@@ -334,7 +340,7 @@ def _describe(
     }
 
 
-def _shaded(name: str, mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+def _shaded(name: str, mesh: "trimesh.Trimesh") -> "trimesh.Trimesh":
     """Flat parts get a vertex per face corner, so their normals are the face normals."""
     if name in SMOOTH_PARTS:
         return mesh
@@ -343,7 +349,9 @@ def _shaded(name: str, mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return flat
 
 
-def _write_obj(mesh: trimesh.Trimesh, path: Path, *, normals: bool) -> None:
+def _write_obj(mesh: "trimesh.Trimesh", path: Path, *, normals: bool) -> None:
+    import trimesh
+
     path.write_text(
         trimesh.exchange.obj.export_obj(
             mesh, include_normals=normals, include_color=False, include_texture=False, digits=6
@@ -351,7 +359,10 @@ def _write_obj(mesh: trimesh.Trimesh, path: Path, *, normals: bool) -> None:
     )
 
 
-def _glb(meshes: SceneMeshes, params: MapParams, description: dict) -> bytes:
+def _glb(meshes: "SceneMeshes", params: MapParams, description: dict) -> bytes:
+    import trimesh
+    from trimesh.visual.material import PBRMaterial
+
     scene = trimesh.Scene()
     for name, mesh in meshes.parts.items():
         part = params.parts[name]
