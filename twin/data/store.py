@@ -378,4 +378,3 @@ def _by_tid_then_t(tid: np.ndarray, t: np.ndarray) -> np.ndarray:
     if np.all((sorted_tid[1:] != sorted_tid[:-1]) | (sorted_t[1:] >= sorted_t[:-1])):
         return order
     return np.lexsort((t, tid))
-
