@@ -228,9 +228,14 @@ class EmpiricalTraffic:
 
     def recorded_speeds(self, road: Road | str, tids, times) -> tuple[np.ndarray, np.ndarray]:
         """(present, speed [m/s]) of recorded vehicles ``tids`` (m,) at ``times`` (m,)."""
-        r = self._local_index(road)[np.asarray(tids, np.int64)]
-        present, _, _, speed = self._replay(road, r, np.asarray(times, np.float64))
+        present, _, _, speed = self.recorded_states(road, tids, times)
         return present, speed
+
+    def recorded_states(self, road: Road | str, tids, times) -> tuple[np.ndarray, ...]:
+        """(present, x [m], y [m], speed [m/s]) of recorded vehicles ``tids`` (m,) at
+        unix ``times`` (m,) [s]; the values are 0 where a vehicle is absent."""
+        r = self._local_index(road)[np.asarray(tids, np.int64)]
+        return self._replay(road, r, np.asarray(times, np.float64))
 
     def _local_index(self, road) -> np.ndarray:
         """Per store tid, its index in the road's recording (-1: not of the road)."""

@@ -5,7 +5,8 @@
 Sections: ``ego`` (the simulated ego against its recording), ``traffic`` (speeds and
 the speed field against the recording), ``energy`` (:mod:`twin.metrics.economy`),
 ``control`` (:mod:`twin.metrics.wave_dampening`), ``counts``, ``lane_flows``
-(:mod:`twin.metrics.lane_flow_fidelity`), ``physics`` and ``timing``.
+(:mod:`twin.metrics.lane_flow_fidelity`), ``handover`` (the ghost-cell boundary's
+jumps, :mod:`twin.metrics.handover`), ``physics`` and ``timing``.
 """
 
 import math
@@ -16,6 +17,7 @@ from twin import __version__
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
 from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
+from twin.metrics.handover import handover_section
 from twin.metrics.recorded_changes import recorded_lane_changes
 
 RUN_FORMAT = "i24-twin-run"
@@ -66,6 +68,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             lane_flow_fidelity.recorded_changes_in_window(recorded_changes, windows, sim.t0),
             windows,
         ),
+        "handover": handover_section(vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt),
         "physics": _physics(sim),
         "timing": {
             "reset_s": round(reset_s, 3),

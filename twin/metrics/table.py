@@ -19,6 +19,8 @@ WITH_CONTROLLER = "runs with an ego controller"
 WITH_AV_SHARE = "runs with --av-share"
 WITH_RECORDING = "runs whose ego's recording has a slow spell"
 WITH_LANE_TRAFFIC = "runs with recorded traffic in the lane"
+WITH_HANDOVER = "runs with a hand-over to the recording"
+WITH_GHOST_SPAWN = "runs with a spawn from the ghost cells"
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,27 @@ METRICS: tuple[Metric, ...] = (
            ("counts", "lane_changes"), summary="sum"),
     Metric("lane_changes_recorded", "count", "lane changes the recording makes in the same "
            "moving window", ("counts", "lane_changes_recorded_in_window"), summary="sum"),
+    Metric("handovers_to_ghost", "count", "visible vehicles handed back to their recordings "
+           "inside the windows", ("handover", "visible_to_ghost", "count"), summary="sum"),
+    Metric("handover_to_ghost_jump_p90_m", "m", "p90 over the episode's hand-overs to the "
+           "recording of the one-step position jump (the recording one step later against "
+           "the simulated vehicle carried on at its speed)",
+           ("handover", "visible_to_ghost", "position_jump_m", "p90"), produced_by=WITH_HANDOVER),
+    Metric("handover_to_ghost_jump_max_m", "m", "the largest of those jumps",
+           ("handover", "visible_to_ghost", "position_jump_m", "max"), produced_by=WITH_HANDOVER),
+    Metric("handover_to_ghost_speed_jump_max_mps", "m/s", "the largest speed jump of a "
+           "hand-over to the recording",
+           ("handover", "visible_to_ghost", "speed_jump_mps", "max"), produced_by=WITH_HANDOVER),
+    Metric("handovers_backwards", "count", "hand-overs to the recording that moved the vehicle "
+           "more than 0.5 m against travel", ("handover", "visible_to_ghost", "backwards"),
+           summary="sum"),
+    Metric("handovers_left_windows", "count", "visible vehicles removed whose recordings are "
+           "outside the windows or absent then (they vanish)",
+           ("handover", "visible_to_ghost", "left_windows"), summary="sum"),
+    Metric("handover_from_ghost_jump_max_m", "m", "the largest one-step position jump of a "
+           "spawn from the ghost cells (the spawn against its ghost carried on at its speed)",
+           ("handover", "ghost_to_visible", "position_jump_m", "max"),
+           produced_by=WITH_GHOST_SPAWN),
     Metric("collisions", "count", "new contacts between vehicle bodies",
            ("physics", "collisions"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",

@@ -1,0 +1,80 @@
+"""The ghost-cell boundary's jumps (twin.metrics.handover) on a hand-made log."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from twin.core.i24 import Road
+from twin.metrics.handover import handover_section
+
+T0, DT = 1000.0, 0.1
+
+
+class Recording:
+    """Recorded states by (tid, step); absent elsewhere."""
+
+    def __init__(self, states):
+        self.states = states
+
+    def recorded_states(self, road, tids, times):
+        steps = np.round((np.asarray(times) - T0) / DT).astype(int)
+        rows = [self.states.get((int(tid), int(k))) for tid, k in zip(tids, steps, strict=True)]
+        present = np.array([row is not None for row in rows])
+        x = np.array([row[0] if row else 0.0 for row in rows])
+        speed = np.array([row[1] if row else 0.0 for row in rows])
+        return present, x, np.zeros(len(rows)), speed
+
+
+def _log(rows):
+    vehicles = pd.DataFrame(rows, columns=["step", "id", "tid", "role", "x", "speed"])
+    vehicles["time"] = vehicles.pop("step") * DT
+    windows = pd.DataFrame({"time": np.arange(5) * DT, "g0": 0.0, "x0": 100.0, "x1": 300.0,
+                            "g1": 400.0})  # fmt: skip
+    return vehicles, windows
+
+
+@pytest.fixture
+def section():
+    rows = [(k, 0, 1, 0, 200.0 + 3 * k, 30.0) for k in range(5)]  # the ego: not counted
+    rows += [(k, 1, 7, 1, 290.0 + 3 * k, 30.0) for k in range(3)]  # removed at step 3
+    rows += [(k, 2, 8, 1, 150.0, 10.0) for k in range(2)]  # removed, recording absent
+    rows += [(k, 3, 9, 1, 110.0, 10.0) for k in range(2)]  # removed, recording visible
+    rows += [(k, 4, 10, 1, 105.0, 10.0) for k in range(2)]  # removed, recording behind
+    rows += [(k, 5, 11, 1, 95.0 + 2 * (k - 2), 20.0) for k in range(2, 5)]  # spawned
+    rows += [(k, 6, 12, 1, 250.0, 0.0) for k in range(5)]  # stays to the end
+    recording = Recording({
+        (7, 3): (310.0, 29.0),  # in the front ghost cell: 11 m ahead of 296 + 3
+        (9, 2): (200.0, 10.0),  # inside the visible window: 89 m ahead of 110 + 1
+        (10, 2): (90.0, 12.0),  # in the rear ghost cell: 16 m behind 105 + 1
+        (11, 1): (92.9, 20.0),  # a ghost the step before its spawn: 92.9 + 2 = 94.9
+    })  # fmt: skip
+    vehicles, windows = _log(rows)
+    return handover_section(vehicles, windows, recording, Road.WESTBOUND, T0, DT)
+
+
+def test_a_vehicle_handed_back_jumps_to_its_recording_and_the_jump_is_measured(section):
+    out = section["visible_to_ghost"]
+    assert out["count"] == 3  # 7, 9 and 10: their recordings are in the windows
+    assert out["into_visible_window"] == 1  # 9
+    assert out["left_windows"] == 1  # 8: its recording is absent
+    assert out["backwards"] == 1  # 10
+    assert out["position_jump_m"]["max"] == pytest.approx(89.0)
+    assert out["position_jump_m"]["median"] == pytest.approx(16.0)
+    assert out["speed_jump_mps"]["max"] == pytest.approx(2.0)
+
+
+def test_a_spawn_from_the_ghost_cells_is_measured_against_its_ghost(section):
+    out = section["ghost_to_visible"]
+    assert out["count"] == 1
+    assert out["position_jump_m"]["max"] == pytest.approx(0.1)
+    assert out["speed_jump_mps"]["max"] == pytest.approx(0.0)
+    assert out["backwards"] == 0
+
+
+def test_no_hand_over_gives_counts_of_zero_and_no_figures():
+    vehicles, windows = _log([(k, 0, 1, 0, 200.0, 30.0) for k in range(5)])
+    out = handover_section(vehicles, windows, Recording({}), Road.WESTBOUND, T0, DT)
+    assert out["visible_to_ghost"]["count"] == 0
+    assert out["visible_to_ghost"]["position_jump_m"] == {"median": None, "p90": None,
+                                                          "max": None}  # fmt: skip
+    assert out["ghost_to_visible"]["count"] == 0

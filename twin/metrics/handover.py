@@ -1,0 +1,124 @@
+"""The seam of the ghost-cell boundary, measured: how far and how fast a vehicle jumps
+in the step it is handed from the visible window to its recording (a ghost), or from
+its recording to the visible window (a spawn), the ``handover`` section of
+``metrics.json``.
+
+A visible vehicle (not the ego) whose last row is at step k, in an episode that goes
+on, was removed at step k + 1. Its recording at step k + 1 is where the boundary puts
+it next: a ghost where the recording lies in the windows then (``count``; of them
+``into_visible_window`` lie inside the visible window, where the recording is spawned
+again when there is room), and it left the windows (``left_windows``) where the
+recording is absent or outside them: it vanishes from the scene. The jump is the
+recording's position at step k + 1 against the simulated vehicle's at step k carried
+on at its speed for one step, and the difference of the speeds.
+
+A vehicle spawned after the start (its first row at step k > 0) whose recording lay
+in the ghost cells at step k - 1 was a ghost before: its jump is its spawn position
+against the recording at step k - 1 carried on at the recorded speed, and the
+difference of the speeds.
+
+Position jumps are signed along travel (a positive one moves the vehicle forward)
+and summarised by their size; ``backwards`` counts the jumps of more than
+:data:`BACKWARDS_M` against travel.
+"""
+
+import numpy as np
+import pandas as pd
+
+from twin.core.i24 import Road
+
+BACKWARDS_M = 0.5  # [m] a jump against travel larger than this is counted as backwards
+
+
+def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, road: Road,
+                     t0: float, dt: float) -> dict:  # fmt: skip
+    """The ``handover`` section of an episode's metrics (module doc).
+
+    Args:
+        vehicles: the log's vehicle rows (``time`` [s from t0], ``id``, ``tid``,
+            ``role``, ``x`` [m], ``speed`` [m/s]).
+        windows: the log's windows per step (``time``, ``g0``, ``x0``, ``x1``, ``g1``).
+        traffic: the recorded traffic (``EmpiricalTraffic``).
+        road: the episode's carriageway. t0: [s unix] its start. dt: [s] its step.
+    """
+    steps = np.round(windows["time"].to_numpy() / dt).astype(np.int64)
+    edges = np.full((int(steps.max(initial=-1)) + 1, 4), np.nan)
+    edges[steps] = windows[["g0", "x0", "x1", "g1"]].to_numpy()
+    others = vehicles[vehicles["role"] != 0]
+    step = np.round(others["time"].to_numpy() / dt).astype(np.int64)
+    frame = pd.DataFrame({
+        "id": others["id"].to_numpy(), "tid": others["tid"].to_numpy(), "step": step,
+        "x": others["x"].to_numpy(), "speed": others["speed"].to_numpy(),
+    }).sort_values(["id", "step"], kind="stable")  # fmt: skip
+    first = frame.groupby("id", sort=True).head(1)
+    last = frame.groupby("id", sort=True).tail(1)
+    removed = last[last["step"] < edges.shape[0] - 1]  # the episode went on after them
+    spawned = first[first["step"] > 0]  # after the start
+    return {
+        "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt),
+        "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),
+    }
+
+
+def _to_recording(rows, edges, traffic, road, t0, dt) -> dict:
+    """The visible vehicles removed: where their recordings put them one step later."""
+    after = rows["step"].to_numpy() + 1
+    present, x, speed = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + after * dt)
+    place = _place(x, edges[after])
+    carried = rows["x"].to_numpy() + rows["speed"].to_numpy() * dt
+    kept = present & (place >= 0)
+    return {
+        "count": int(kept.sum()),
+        **_jumps(x[kept] - carried[kept], speed[kept] - rows["speed"].to_numpy()[kept]),
+        "into_visible_window": int((present & (place == 0)).sum()),
+        "left_windows": int((~kept).sum()),
+    }
+
+
+def _from_recording(rows, edges, traffic, road, t0, dt) -> dict:
+    """The vehicles spawned from the ghost cells: their spawn against their ghost."""
+    before = rows["step"].to_numpy() - 1
+    present, x, speed = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + before * dt)
+    ghost = present & (_place(x, edges[before]) == 1)
+    carried = x + speed * dt
+    return {
+        "count": int(ghost.sum()),
+        **_jumps(
+            rows["x"].to_numpy()[ghost] - carried[ghost],
+            rows["speed"].to_numpy()[ghost] - speed[ghost],
+        ),
+    }
+
+
+def _recorded(traffic, road, tids, times):
+    """(present, x [m], speed [m/s]) of recorded vehicles ``tids`` at unix ``times``."""
+    present, x, _, speed = traffic.recorded_states(road, tids, times)
+    return np.asarray(present, bool), x, speed
+
+
+def _place(x, edges) -> np.ndarray:
+    """Per position, 0 in the visible window, 1 in a ghost cell, -1 outside the windows
+    (``edges``: g0, x0, x1, g1 per row)."""
+    g0, x0, x1, g1 = edges.T
+    inside = (x >= g0) & (x <= g1)
+    visible = (x >= x0) & (x <= x1)
+    return np.where(visible, 0, np.where(inside, 1, -1))
+
+
+def _jumps(position: np.ndarray, speed: np.ndarray) -> dict:
+    """Median, p90 and max of the jumps' sizes, and the backward ones."""
+    return {
+        "position_jump_m": _summary(np.abs(position)),
+        "speed_jump_mps": _summary(np.abs(speed)),
+        "backwards": int((position < -BACKWARDS_M).sum()),
+    }
+
+
+def _summary(values: np.ndarray) -> dict:
+    if values.size == 0:
+        return {"median": None, "p90": None, "max": None}
+    return {
+        "median": round(float(np.median(values)), 4),
+        "p90": round(float(np.percentile(values, 90)), 4),
+        "max": round(float(values.max()), 4),
+    }
