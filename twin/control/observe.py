@@ -179,6 +179,17 @@ def _ego_collided(b, core, ego_id):
     return hit
 
 
+def collision_pairs(core_state, b: int) -> int:
+    """Episode ``b``'s collisions: the pairs of bodies that touched, however often
+    (:mod:`twin.metrics.collisions`); each contact past the first COLLISIONS_KEPT, whose
+    pairs are not kept, counts as one."""
+    ep = core_state.episodes
+    contacts = int(ep.collisions[b])
+    kept = min(contacts, ep.collision_log.shape[1])
+    pairs = {(int(a), int(c)) for _, a, c in ep.collision_log[b, :kept]}
+    return len(pairs) + contacts - kept
+
+
 def metrics(stats: np.ndarray, core_state, b: int, dt: float) -> dict:
     """The figures of episode ``b`` so far (the env's ``info["metrics"]``): the names of
     :mod:`twin.metrics.table` where a figure is one of its metrics."""
@@ -199,7 +210,7 @@ def metrics(stats: np.ndarray, core_state, b: int, dt: float) -> dict:
         "ego_and_followers_mpg": mpg(group_distance, group_fuel),
         "ego_and_followers_fuel_g": round(group_fuel, 4),
         "ego_distance_m": round(float(st[EGO_DIST]), 3),
-        "collisions": int(ep.collisions[b]),
+        "collisions": collision_pairs(core_state, b),
         "lane_changes_simulated": int(counters.lane_changes[b]),
         "min_ttc_s": round(float(st[MIN_TTC]), 4) if math.isfinite(st[MIN_TTC]) else None,
         "accel_rms_mps2": round(math.sqrt(st[ACCEL_SQ] / steps), 4),

@@ -64,6 +64,7 @@ class Counters:
     skipped_full: int = 0  # spawns refused: every vehicle slot of the episode was taken
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
     collisions: list = field(default_factory=list)  # (time [s], id, id) of new contacts
+    contacts: int = 0  # new contacts, also past the first COLLISIONS_KEPT listed above
     off_road: int = 0  # vehicles ever outside the four lanes
     ended: str = ""  # why the run ended before t_max ("" when it did not)
 
@@ -589,7 +590,8 @@ def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
     c.skipped_full, c.off_road = int(ep.skipped_full[b]), int(ep.off_road[b])
     n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
     c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
-    m = min(int(ep.collisions[b]), layout.COLLISIONS_KEPT)
+    c.contacts = int(ep.collisions[b])
+    m = min(c.contacts, layout.COLLISIONS_KEPT)
     c.collisions = [(float(t), int(x), int(y)) for t, x, y in ep.collision_log[b, :m]]
     if ep.ended[b] == layout.EGO_LEFT and not c.ended:
         c.ended = (

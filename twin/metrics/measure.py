@@ -17,11 +17,11 @@ from twin import __version__
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
 from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
+from twin.metrics.collisions import collision_section
 from twin.metrics.handover import handover_section
 from twin.metrics.recorded_changes import recorded_lane_changes
 
 RUN_FORMAT = "i24-twin-run"
-COLLISIONS_LISTED = 20  # the first collisions are listed in metrics.json
 
 
 def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: float):
@@ -69,7 +69,7 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             windows,
         ),
         "handover": handover_section(vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt),
-        "physics": _physics(sim),
+        "physics": _physics(sim, vehicles),
         "timing": {
             "reset_s": round(reset_s, 3),
             "loop_s": round(loop_s, 3),
@@ -151,8 +151,9 @@ def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> d
     }
 
 
-def _physics(sim: Cosimulator) -> dict:
-    """The physical checks: spawn speeds, collisions, vehicles off the road."""
+def _physics(sim: Cosimulator, vehicles) -> dict:
+    """The physical checks: spawn speeds, collisions (explained,
+    :mod:`twin.metrics.collisions`), vehicles off the road."""
     counters = sim.counters
     errors = np.array(counters.spawn_speed_error)
     return {
@@ -160,11 +161,7 @@ def _physics(sim: Cosimulator) -> dict:
         "spawn_speed_error_max": _round(errors.max()) if errors.size else None,
         "spawn_speed_error_median": _round(np.median(errors)) if errors.size else None,
         "spawns_above_0.5_percent": int(np.count_nonzero(errors > 0.005)),
-        "collisions": len(counters.collisions),
-        "collision_list": [
-            {"time_s": round(t, 3), "ids": [a, b]}
-            for t, a, b in counters.collisions[:COLLISIONS_LISTED]
-        ],
+        **collision_section(counters.collisions, vehicles, counters.contacts),
         "vehicles_off_road": counters.off_road,
     }
 

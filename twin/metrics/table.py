@@ -128,8 +128,16 @@ METRICS: tuple[Metric, ...] = (
            "spawn from the ghost cells (the spawn against its ghost carried on at its speed)",
            ("handover", "ghost_to_visible", "position_jump_m", "max"),
            produced_by=WITH_GHOST_SPAWN),
-    Metric("collisions", "count", "new contacts between vehicle bodies",
+    Metric("collisions", "count", "pairs of vehicle bodies that touched (however often)",
            ("physics", "collisions"), summary="sum"),
+    Metric("contacts", "count", "new contacts between vehicle bodies (a pair that touches "
+           "again counts again)", ("physics", "contacts"), summary="sum"),
+    *(
+        Metric(f"collisions_{cause}", "count", f"collisions of cause {cause.replace('_', ' ')} "
+               "(twin/metrics/collisions.py)", ("physics", "collisions_by_cause", cause),
+               summary="sum")
+        for cause in ("rear_end", "lane_change", "spawn", "other")
+    ),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
     Metric("vehicles_off_road", "count", "vehicles that left the road",

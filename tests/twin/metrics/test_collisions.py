@@ -1,0 +1,57 @@
+"""Collisions explained (twin.metrics.collisions) on a hand-made log."""
+
+import numpy as np
+import pandas as pd
+
+from twin.metrics.collisions import collision_section
+
+DT = 0.5
+
+
+def _rows(vehicle_id, role, lanes, speeds, start=0):
+    return [
+        (start + k * DT, vehicle_id, role, lane, speed)
+        for k, (lane, speed) in enumerate(zip(lanes, speeds, strict=True))
+    ]
+
+
+def _log():
+    n = 40  # 20 s
+    rows = _rows(0, 0, [-2] * n, [10.0] * n)  # the ego, following in lane -2
+    rows += _rows(1, 1, [-2] * n, [0.0] * n)  # stopped in lane -2 all along: stalled
+    rows += _rows(2, 1, [-3] * 30 + [-2] * 10, [12.0] * n)  # into lane -2 at 15 s
+    rows += _rows(3, 1, [-4] * 4, [20.0] * 4, start=17.0)  # spawned at 17 s
+    rows += _rows(4, 1, [-4] * n, [22.0] * n)
+    return pd.DataFrame(rows, columns=["time", "id", "role", "lane", "speed"])
+
+
+def test_each_pair_is_one_collision_with_both_vehicles_and_a_cause():
+    contacts = [
+        (12.0, 1, 0),  # the ego runs into the stalled vehicle: rear-end
+        (12.5, 0, 1),  # the same pair again: one collision, two contacts
+        (15.5, 2, 0),  # vehicle 2 changing into the ego's lane
+        (17.2, 3, 4),  # vehicle 3 spawned just before
+    ]
+    out = collision_section(contacts, _log())
+    assert out["contacts"] == 4 and out["collisions"] == 3
+    assert out["collisions_by_cause"] == {"spawn": 1, "lane_change": 1, "rear_end": 1,
+                                          "other": 0}  # fmt: skip
+    first, change, spawn = out["collision_list"]
+    assert first["ids"] == [0, 1] and first["contacts"] == 2 and first["cause"] == "rear_end"
+    ego, stalled = first["vehicles"]
+    assert ego == {"id": 0, "role": "ego", "lane": -2, "speed_mps": 10.0, "doing": "following"}
+    assert stalled["role"] == "visible" and stalled["doing"] == "stalled"
+    assert change["cause"] == "lane_change" and change["vehicles"][1]["doing"] == "changing_lanes"
+    assert spawn["cause"] == "spawn" and spawn["vehicles"][0]["doing"] == "just_spawned"
+
+
+def test_contacts_past_those_listed_are_counted_as_collisions_of_unknown_cause():
+    out = collision_section([(12.0, 0, 1)], _log(), total=3)
+    assert out["contacts"] == 3 and out["collisions"] == 3
+    assert out["collisions_by_cause"]["unknown"] == 2
+
+
+def test_no_contact_gives_no_collision():
+    out = collision_section([], _log())
+    assert out["contacts"] == 0 and out["collisions"] == 0 and out["collision_list"] == []
+    assert not any(np.asarray(list(out["collisions_by_cause"].values())))
