@@ -82,6 +82,9 @@ def test_the_dataset_has_every_sample_and_its_manifest(dataset):
     assert stats["truncation_levels"]["none"] == stats["vehicles_kept"] - stats["truncated"]
     per_sample = stats["kept_per_sample_quantiles"]
     assert per_sample["min"] <= stats["kept_per_sample"] <= per_sample["max"]
+    # the motion check followed the labelled vehicles from frame to frame
+    motion = stats["motion"]
+    assert motion["pairs"] > 0 and 0 <= motion["violations"] <= motion["pairs"]
     # the light of each episode (the sun over the segment at its time, by default) is in
     # the manifest and in every label file
     assert all(e["light"]["sun"] == "recorded" for e in episodes)

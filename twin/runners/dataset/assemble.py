@@ -26,6 +26,7 @@ from twin.runners.dataset.config import (
     DatasetError,
 )
 from twin.runners.dataset.folder import episode_folder, is_episode
+from twin.runners.dataset.motion import motion_check
 from twin.runners.episodes import (
     EpisodeSpec,
 )
@@ -220,4 +221,5 @@ def statistics(episodes: list[dict], labels: list[dict]) -> dict:
         "distance_m": quantiles([v["distance_m"] for v in kept]),
         "height_px": quantiles([v["visible_box"][3] - v["visible_box"][1] + 1 for v in kept]),
         "speed_mps": quantiles([v["speed_mps"] for v in kept]),
+        "motion": motion_check(labels),
     }

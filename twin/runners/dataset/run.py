@@ -248,6 +248,12 @@ def summary(result: DatasetResult) -> str:
         lines.append(
             f"distance median {d['median']} m (max {d['max']}), box height median {h['median']} px"
         )
+    motion = stats.get("motion")  # absent in a manifest written before the check
+    if motion and motion["pairs"]:
+        lines.append(
+            f"motion: {motion['violations']} of {motion['pairs']} frame-to-frame moves beyond "
+            f"what the speed allows (largest excess {motion['max_excess_m']} m)"
+        )
     if result.samples_rendered:
         lines.append(
             f"rendered {result.samples_rendered} samples in {result.render_s:.1f} s: "
