@@ -196,8 +196,8 @@ def _payload(context, builder, typ, value):
     data = builder.load(cgutils.gep(builder, meminfo, 0, 3))
     payload_type = typ.get_data_type()
     pointer = context.data_model_manager[payload_type].get_value_type().as_pointer()
-    return cgutils.create_struct_proxy(payload_type)(context, builder,
-                                                     ref=builder.bitcast(data, pointer))  # fmt: skip
+    payload = cgutils.create_struct_proxy(payload_type)
+    return payload(context, builder, ref=builder.bitcast(data, pointer))
 
 
 def packing(struct_type, group):

@@ -15,7 +15,8 @@ times). Each collision is listed with both vehicles at its first contact:
   :data:`STALLED_SPEED` for the :data:`STALLED_S` before), else ``following``.
 
 and a ``cause``, the first that holds: ``spawn`` (either just spawned), ``lane_change``
-(either changing lanes), ``rear_end`` (the same lane), else ``other``.
+(either changing lanes), ``rear_end`` (the same lane), else ``other``; a contact past
+those the core keeps (64 an episode) counts as a collision of cause ``unknown``.
 """
 
 import numpy as np
@@ -26,7 +27,7 @@ CHANGE_BEFORE_S = 3.0  # [s]
 CHANGE_AFTER_S = 1.0  # [s]
 STALLED_SPEED = 0.5  # [m/s]
 STALLED_S = 10.0  # [s]
-CAUSES = ("spawn", "lane_change", "rear_end", "other")
+CAUSES = ("spawn", "lane_change", "rear_end", "other")  # and "unknown": past those kept
 LISTED = 20  # the first collisions are listed
 
 
@@ -63,8 +64,7 @@ def collision_section(contacts, vehicles: pd.DataFrame, total: int | None = None
             listed.append({"time_s": round(time, 3), "ids": list(pair), "contacts": touches,
                            "cause": cause, "vehicles": states})  # fmt: skip
     unlisted = max((len(contacts) if total is None else int(total)) - len(contacts), 0)
-    if unlisted:
-        by_cause["unknown"] = unlisted
+    by_cause["unknown"] = unlisted
     return {
         "contacts": len(contacts) + unlisted,
         "collisions": len(first) + unlisted,

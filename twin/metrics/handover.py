@@ -41,6 +41,8 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
         traffic: the recorded traffic (``EmpiricalTraffic``).
         road: the episode's carriageway. t0: [s unix] its start. dt: [s] its step.
     """
+    if windows.empty:  # nothing was stepped: nobody was handed over
+        return _empty()
     steps = np.round(windows["time"].to_numpy() / dt).astype(np.int64)
     edges = np.full((int(steps.max(initial=-1)) + 1, 4), np.nan)
     edges[steps] = windows[["g0", "x0", "x1", "g1"]].to_numpy()
@@ -53,7 +55,7 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
     first = frame.groupby("id", sort=True).head(1)
     last = frame.groupby("id", sort=True).tail(1)
     removed = last[last["step"] < edges.shape[0] - 1]  # the episode went on after them
-    spawned = first[first["step"] > 0]  # after the start
+    spawned = first[first["step"].between(1, edges.shape[0] - 1)]  # after the start
     return {
         "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt),
         "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),
@@ -87,6 +89,14 @@ def _from_recording(rows, edges, traffic, road, t0, dt) -> dict:
             rows["x"].to_numpy()[ghost] - carried[ghost],
             rows["speed"].to_numpy()[ghost] - speed[ghost],
         ),
+    }
+
+
+def _empty() -> dict:
+    none = _jumps(np.zeros(0), np.zeros(0))
+    return {
+        "visible_to_ghost": {"count": 0, **none, "into_visible_window": 0, "left_windows": 0},
+        "ghost_to_visible": {"count": 0, **none},
     }
 
 

@@ -136,7 +136,7 @@ METRICS: tuple[Metric, ...] = (
         Metric(f"collisions_{cause}", "count", f"collisions of cause {cause.replace('_', ' ')} "
                "(twin/metrics/collisions.py)", ("physics", "collisions_by_cause", cause),
                summary="sum")
-        for cause in ("rear_end", "lane_change", "spawn", "other")
+        for cause in ("rear_end", "lane_change", "spawn", "other", "unknown")
     ),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),

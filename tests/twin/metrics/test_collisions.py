@@ -35,7 +35,7 @@ def test_each_pair_is_one_collision_with_both_vehicles_and_a_cause():
     out = collision_section(contacts, _log())
     assert out["contacts"] == 4 and out["collisions"] == 3
     assert out["collisions_by_cause"] == {"spawn": 1, "lane_change": 1, "rear_end": 1,
-                                          "other": 0}  # fmt: skip
+                                          "other": 0, "unknown": 0}  # fmt: skip
     first, change, spawn = out["collision_list"]
     assert first["ids"] == [0, 1] and first["contacts"] == 2 and first["cause"] == "rear_end"
     ego, stalled = first["vehicles"]

@@ -78,3 +78,9 @@ def test_no_hand_over_gives_counts_of_zero_and_no_figures():
     assert out["visible_to_ghost"]["position_jump_m"] == {"median": None, "p90": None,
                                                           "max": None}  # fmt: skip
     assert out["ghost_to_visible"]["count"] == 0
+
+
+def test_a_log_without_windows_has_no_hand_over():
+    vehicles, windows = _log([(0, 0, 1, 0, 200.0, 30.0), (0, 3, 9, 1, 110.0, 10.0)])
+    out = handover_section(vehicles, windows.iloc[:0], Recording({}), Road.WESTBOUND, T0, DT)
+    assert out["visible_to_ghost"]["count"] == out["ghost_to_visible"]["count"] == 0
