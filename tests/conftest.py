@@ -98,6 +98,16 @@ def store_written_again(store: TrajectoryStore) -> TrajectoryStore:
     return TrajectoryStore(store.path)
 
 
+def read_only_store(store: TrajectoryStore, monkeypatch, cache: Path) -> None:
+    """Make ``store``'s folder read as not writable (``os.access``) for the rest of the
+    test, and the twin's cache folder ``cache``: what a store on a read-only disk sees."""
+    monkeypatch.setenv("I24_TWIN_CACHE", str(cache))
+    writable = os.access
+    monkeypatch.setattr(
+        os, "access", lambda p, m: False if str(p) == str(store.path) else writable(p, m)
+    )
+
+
 @pytest.fixture(scope="session")
 def light_result():
     """Preset A, two minutes around 06:45:50."""

@@ -3,12 +3,10 @@ its store and memory-mapped, the same arrays as built in memory; a store written
 gets a new cache and the old one goes; a read-only store caches in the twin's cache
 folder; the window index finds exactly the vehicles a scan of every trajectory finds."""
 
-import os
-
 import numpy as np
 import pytest
 
-from tests.conftest import store_written_again
+from tests.conftest import read_only_store, store_written_again
 from twin.data import recording
 
 
@@ -52,11 +50,7 @@ def test_a_store_written_again_gets_a_new_cache_and_the_old_one_goes(store, monk
 
 def test_a_read_only_store_caches_in_the_twins_cache_folder(store, monkeypatch, tmp_path):
     monkeypatch.setattr(recording, "IN_MEMORY_SAMPLES", 0)
-    monkeypatch.setenv("I24_TWIN_CACHE", str(tmp_path / "cache"))
-    writable = os.access
-    monkeypatch.setattr(
-        recording.os, "access", lambda p, m: False if str(p) == str(store.path) else writable(p, m)
-    )
+    read_only_store(store, monkeypatch, tmp_path / "cache")
     recording.load_recording(store, "westbound")
     folder = recording.cached_folder(store, "westbound")
     assert folder.parent == tmp_path / "cache" and folder.is_dir()

@@ -5,13 +5,12 @@ unwritable place costs only time, a store written again leaves no stale file and
 spares the other roads' and the recordings' files; a run's window selects them by
 time."""
 
-import os
 from dataclasses import fields
 
 import numpy as np
 import pytest
 
-from tests.conftest import store_written_again
+from tests.conftest import read_only_store, store_written_again
 from twin.calibration.following import lane_changes, load_grid
 from twin.data import recording
 from twin.data.store import TrajectoryStore
@@ -67,11 +66,7 @@ def test_a_damaged_file_is_found_again_and_replaced(store, damage):
 
 
 def test_a_read_only_store_keeps_them_in_the_twins_cache(store, monkeypatch, tmp_path):
-    monkeypatch.setenv("I24_TWIN_CACHE", str(tmp_path / "cache"))
-    writable = os.access
-    monkeypatch.setattr(
-        recording.os, "access", lambda p, m: False if str(p) == str(store.path) else writable(p, m)
-    )
+    read_only_store(store, monkeypatch, tmp_path / "cache")
     rc.whole_recording(store, "westbound")
     path = rc.changes_path(store, "westbound")
     assert path.parent == tmp_path / "cache" and path.is_file()
