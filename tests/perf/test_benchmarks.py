@@ -58,7 +58,7 @@ def test_bench_calibrate_and_eval_print_their_figures(wave_store, capsys):
 
 def test_bench_env_prints_steps_per_second_of_one_env_and_a_vector_env(wave_store, capsys):
     argv = ["bench", "env", "--data", str(wave_store.path), "--steps", "5", "--workers", "1"]
-    assert main([*argv, "--repeats", "1", "--resets", "2", "--no-compile-times"]) == 0
+    assert main([*argv, "--repeats", "1", "--resets", "2"]) == 0  # compile times not by default
     line = json.loads(capsys.readouterr().out.strip())
     assert line["bench"] == "env" and line["env_steps_per_s"] > 0
     assert line["resets"] == 2 and line["reset_ms"] > 0

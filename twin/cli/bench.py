@@ -3,6 +3,7 @@ one JSON line of figures with the options, commit, date and machine they were ta
 with; ``twin bench report`` makes the benchmarks page of such lines
 (:mod:`twin.perf.report`)."""
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -197,10 +198,11 @@ def _register_commands(benchmarks) -> None:
         "observation [us per episode step]",
     )
     p.add_argument(
-        "--no-compile-times",
-        action="store_true",
-        help="skip the cold compile and warm start (each a new process; the cold one "
-        "compiles every kernel, about a minute)",
+        "--compile-times",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="also time the cold compile and the warm start, each in a new process (the "
+        "cold one compiles every kernel, about a minute; default: not timed)",
     )
     add_world(p)
     _repeats(p, 3)
@@ -419,7 +421,7 @@ def _env(args) -> int:
             world=args.world or "physics",
             num_envs=args.num_envs,
             resets=args.resets,
-            compile_times=not args.no_compile_times,
+            compile_times=args.compile_times,
             profile=args.profile,
         ),
         args,

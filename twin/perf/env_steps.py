@@ -41,7 +41,7 @@ def env_bench(
     world: str = "physics",
     num_envs: int = NUM_ENVS,
     resets: int | None = None,
-    compile_times: bool = True,
+    compile_times: bool = False,
     profile: bool = False,
 ) -> dict:
     """Env steps per second of ``i24twin/WaveDampening-v0`` (10 Hz control over the
