@@ -64,8 +64,7 @@ class Episodes:
         self.episode = np.full(n, -1, np.int64)
         self.record_id = [""] * n
         self.specs: list = [None] * n
-        self._work = (*(np.empty(4096, t) for t in (np.int32, float, float, float)),
-                      np.empty(24))  # fmt: skip
+        self._work = observe.work_arrays()
 
     @property
     def done(self) -> np.ndarray:

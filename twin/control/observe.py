@@ -25,11 +25,14 @@ import numpy as np
 from twin.core.i24 import MILE
 from twin.core.jit import kernel
 from twin.data.recording import lane_of, replay, window
+from twin.metrics.collisions import count_collisions
 from twin.metrics.economy import GRAMS_PER_GALLON
 
 GAP_CAP = 200.0  # [m] gaps are reported up to this
 AHEAD_EDGES = (0.0, 200.0, 400.0, 600.0)  # [m] downstream of the AV, the bins' edges
-N_OBS = 18
+N_BINS = 4 * (len(AHEAD_EDGES) - 1)  # the lanes' bins ahead: o[6:6 + N_BINS]
+N_OBS = 6 + N_BINS
+SNAPSHOT_ROWS = 4096  # recorded vehicles a query of the road ahead holds
 #: The running figures' columns.
 STATS = (
     "ego_distance_m", "speed_error_sq", "samples", "min_ttc_s", "accel_sq", "jerk_sq",
@@ -47,7 +50,7 @@ def observe_batch(core, done_before, obs, reward, collided, stats, weights, low,
     ``weights`` (fuel [1/g], gap, gap_max [s], ttc, ttc_min [s]); whether its AV
     collided in the step (B,); its running ``stats`` (B, STATS). ``done_before`` (B,)
     the episodes that were over before the step (left as they are); ``snap_*`` working
-    arrays of a recording query, ``bins`` (24,) of the speeds ahead."""
+    arrays of a recording query, ``bins`` (2 N_BINS,) of the speeds ahead."""
     ep = core.episodes
     for b in range(ep.done.size):
         if done_before[b] and not first[b]:
@@ -142,12 +145,12 @@ def _observe(b, core, obs, reward, collided, stats, weights, low, high, control_
 
 @kernel(inline=True)
 def _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v, bins):
-    """The recorded mean speed per lane -1..-4 in each bin ahead (o[6:18]); ``bins``
-    (24,) holds the sums and counts."""
+    """The recorded mean speed per lane -1..-4 in each bin ahead (o[6:6 + N_BINS]); ``bins``
+    (2 N_BINS,) holds the sums and counts."""
     t = core.episodes.t0[b] + core.episodes.step[b] * core.settings.dt
     n = window(core.rec, t, ego_x, ego_x + AHEAD_EDGES[3], snap_r, snap_x, snap_y, snap_v)
-    sums, counts = bins[:12], bins[12:]
-    for j in range(24):
+    sums, counts = bins[:N_BINS], bins[N_BINS:]
+    for j in range(2 * N_BINS):
         bins[j] = 0.0
     for k in range(max(n, 0)):
         lane = lane_of(snap_y[k])
@@ -158,7 +161,7 @@ def _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v, bins):
             if AHEAD_EDGES[j] <= d < AHEAD_EDGES[j + 1]:
                 sums[3 * (-lane - 1) + j] += snap_v[k]
                 counts[3 * (-lane - 1) + j] += 1.0
-    for j in range(12):
+    for j in range(N_BINS):
         o[6 + j] = sums[j] / counts[j] if counts[j] > 0 else core.settings.vel_default
 
 
@@ -179,6 +182,13 @@ def _ego_collided(b, core, ego_id):
     return hit
 
 
+def work_arrays() -> tuple:
+    """The working arrays :func:`observe_batch` takes after ``first``: a recording
+    query's (``snap_r``, ``snap_x``, ``snap_y``, ``snap_v``) and ``bins``."""
+    query = (np.empty(SNAPSHOT_ROWS, t) for t in (np.int32, float, float, float))
+    return (*query, np.empty(2 * N_BINS))
+
+
 def collision_pairs(core_state, b: int) -> int:
     """Episode ``b``'s collisions: the pairs of bodies that touched, however often
     (:mod:`twin.metrics.collisions`); each contact past the first COLLISIONS_KEPT, whose
@@ -186,8 +196,7 @@ def collision_pairs(core_state, b: int) -> int:
     ep = core_state.episodes
     contacts = int(ep.collisions[b])
     kept = min(contacts, ep.collision_log.shape[1])
-    pairs = {(int(a), int(c)) for _, a, c in ep.collision_log[b, :kept]}
-    return len(pairs) + contacts - kept
+    return count_collisions(ep.collision_log[b, :kept], contacts)
 
 
 def metrics(stats: np.ndarray, core_state, b: int, dt: float) -> dict:

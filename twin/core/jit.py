@@ -56,7 +56,8 @@ INLINE_IR = os.environ.get("TWIN_INLINE_IR") == "1"
 def kernel(function=None, *, inline: bool = False, nrt: bool = False):
     """Compile ``function`` as a kernel of the core (see the module doc); with
     ``inline=True`` it is inlined where it is called (small scalar helpers); with
-    ``nrt=True`` it may make arrays or structs (Numba's reference counting on)."""
+    ``nrt=True`` it may make arrays or structs, or take a struct from Python (Numba's
+    reference counting on: an entry point called with a packed struct releases it)."""
     options = {"cache": True, "error_model": "numpy", "nogil": True, "_nrt": nrt}
     if inline and INLINE_IR:
         options["inline"] = "always"

@@ -63,7 +63,8 @@ class Counters:
     skipped_invalid: int = 0  # spawns refused: recorded state outside the lanes or too fast
     skipped_full: int = 0  # spawns refused: every vehicle slot of the episode was taken
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
-    collisions: list = field(default_factory=list)  # (time [s], id, id) of new contacts
+    collisions: list = field(default_factory=list)  # (time [s], id, id) of the new contacts
+    # kept (a collision is a pair: twin.metrics.collisions counts them)
     contacts: int = 0  # new contacts, also past the first COLLISIONS_KEPT listed above
     off_road: int = 0  # vehicles ever outside the four lanes
     ended: str = ""  # why the run ended before t_max ("" when it did not)

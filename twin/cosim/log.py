@@ -62,24 +62,6 @@ class TrajectoryLog:
         self._ghosts = {name: [] for name in _GHOST}
         self._windows = []  # (time, ghost_back0, visible0, visible1, ghost_front1) per step
 
-    def add_vehicles(self, time: float, states, tid: np.ndarray, ego_id: int, accel_cmd) -> None:
-        """Append the world's vehicles (``VehicleStates``) at ``time`` [s since t0];
-        ``tid`` (n,) their recorded vehicles, ``accel_cmd`` (n,) their commands."""
-        n = states.id.size
-        v = self._vehicles
-        v["time"].append(np.full(n, time))
-        v["id"].append(states.id)
-        v["tid"].append(tid)
-        v["role"].append(np.where(states.id == ego_id, 0, 1).astype(np.int8))
-        v["lane"].append(states.lane.astype(np.int8))
-        v["x"].append(states.x)
-        v["y"].append(states.y)
-        v["z"].append(states.position[:, 2])
-        v["speed"].append(states.speed)
-        v["accel_cmd"].append(np.asarray(accel_cmd, dtype=np.float64))
-        v["heading"].append(states.heading)
-        v["drive_power"].append(states.drive_power)
-
     def add_rows(self, *, time, id, tid, ego_id, lane, x, y, z, speed, accel_cmd, heading,
                  drive_power) -> None:  # fmt: skip
         """Append vehicles' rows at ``time`` [s since t0] from arrays (n,) (the core's
@@ -108,23 +90,10 @@ class TrajectoryLog:
         for name, value in (("tid", tid), ("lane", lane), ("x", x), ("y", y), ("speed", speed)):
             g[name].append(np.asarray(value))
 
-    def add_windows(self, time: float, windows) -> None:
-        """Append the windows (a ``Windows``) in force at ``time`` [s since t0]."""
-        self._windows.append(
-            (time, windows.ghost_back[0], *windows.visible, windows.ghost_front[1])
-        )
-
     def windows(self) -> pd.DataFrame:
         """Per step: ``time``, ``g0`` (back end of the rear ghost window), ``x0``, ``x1``
         (the visible window), ``g1`` (front end of the front ghost window), [m]."""
         return pd.DataFrame(self._windows, columns=["time", "g0", "x0", "x1", "g1"])
-
-    def add_ghosts(self, time: float, snap) -> None:
-        """Append the ghost set (a ``Snapshot``) at ``time`` [s since t0]."""
-        g = self._ghosts
-        g["time"].append(np.full(len(snap), time))
-        for name in _GHOST[1:]:
-            g[name].append(getattr(snap, name))
 
     def vehicles(self) -> pd.DataFrame:
         """The simulated vehicles' rows, with the measured acceleration."""

@@ -9,7 +9,7 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from twin.core.errors import TwinError
-from twin.data.empirical import EmpiricalTraffic, Snapshot
+from twin.data.empirical import EmpiricalTraffic
 
 MAP_MARGIN = 30.0  # [m] windows stay this far inside the map's ends (a body must fit)
 
@@ -27,34 +27,9 @@ class Windows:
     visible: tuple[float, float]
     ghost_front: tuple[float, float]
 
-    @classmethod
-    def around(
-        cls, x: float, w_visible: float, w_ghost: float, limits: tuple[float, float]
-    ) -> "Windows":
-        lo, hi = limits
-
-        def clip(a, b):
-            return (min(max(a, lo), hi), min(max(b, lo), hi))
-
-        return cls(
-            ghost_back=clip(x - w_visible - w_ghost, x - w_visible),
-            visible=clip(x - w_visible, x + w_visible),
-            ghost_front=clip(x + w_visible, x + w_visible + w_ghost),
-        )
-
     @property
     def span(self) -> tuple[float, float]:
         return self.ghost_back[0], self.ghost_front[1]
-
-    def in_visible(self, x: np.ndarray) -> np.ndarray:
-        return (x >= self.visible[0]) & (x <= self.visible[1])
-
-    def bounds(self, x: np.ndarray) -> tuple[int, int, int, int]:
-        """For ``x`` sorted: (a, b, c, d) such that ``x[a:b]`` is in the rear ghost
-        window, ``x[b:c]`` in the visible window and ``x[c:d]`` in the front one."""
-        a, b = x.searchsorted((self.ghost_back[0], self.visible[0]))
-        c, d = x.searchsorted((self.visible[1], self.ghost_front[1]), side="right")
-        return int(a), int(b), int(c), int(d)
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,21 +45,8 @@ class Ghosts:
     speed: np.ndarray
     length: np.ndarray
 
-    @classmethod
-    def take(cls, snap: Snapshot, rows: np.ndarray) -> "Ghosts":
-        return cls(
-            snap.tid[rows], snap.lane[rows], snap.x[rows], snap.y[rows], snap.speed[rows],
-            snap.length[rows],
-        )  # fmt: skip
-
     def __len__(self) -> int:
         return self.tid.size
-
-
-def no_ghosts() -> Ghosts:
-    """An empty ghost set."""
-    empty = np.empty(0)
-    return Ghosts(empty.astype(np.int32), empty.astype(np.int8), empty, empty, empty, empty)
 
 
 def road_limits(bundle: MapBundle, traffic: EmpiricalTraffic, road) -> tuple[float, float]:

@@ -16,28 +16,39 @@ times). Each collision is listed with both vehicles at its first contact:
 
 and a ``cause``, the first that holds: ``spawn`` (either just spawned), ``lane_change``
 (either changing lanes), ``rear_end`` (the same lane), else ``other``; a contact past
-those the core keeps (64 an episode) counts as a collision of cause ``unknown``.
+those the core keeps (:data:`~twin.cosim.core.layout.COLLISIONS_KEPT` an episode) counts as a
+collision of cause ``unknown``.
 """
 
 import numpy as np
-import pandas as pd
 
 JUST_SPAWNED_S = 1.0  # [s]
 CHANGE_BEFORE_S = 3.0  # [s]
 CHANGE_AFTER_S = 1.0  # [s]
 STALLED_SPEED = 0.5  # [m/s]
 STALLED_S = 10.0  # [s]
-CAUSES = ("spawn", "lane_change", "rear_end", "other")  # and "unknown": past those kept
+CAUSES = ("spawn", "lane_change", "rear_end", "other")
+UNKNOWN = "unknown"  # the cause of a contact past those the core keeps
+#: every cause, in the order of twin eval's columns
+COLUMNS = ("rear_end", "lane_change", "spawn", "other", UNKNOWN)
 LISTED = 20  # the first collisions are listed
 
 
-def collision_section(contacts, vehicles: pd.DataFrame, total: int | None = None) -> dict:
+def count_collisions(contacts, total: int) -> int:
+    """How many collisions ``total`` new contacts make, of which ``contacts`` (time, id,
+    id) are the first kept: the pairs among those kept, and each contact past them as
+    one of its own (its pair is not known)."""
+    pairs = {(min(int(a), int(b)), max(int(a), int(b))) for _, a, b in contacts}
+    return len(pairs) + max(int(total) - len(contacts), 0)
+
+
+def collision_section(contacts, vehicles, total: int | None = None) -> dict:
     """The collisions of an episode (module doc).
 
     Args:
         contacts: (time [s], id, id) of the new contacts, in time order (the core keeps
-            the first 64 of an episode).
-        vehicles: the log's vehicle rows (``time`` [s], ``id``, ``role``, ``lane``,
+            first COLLISIONS_KEPT of an episode).
+        vehicles: the log's vehicle rows, a DataFrame (``time`` [s], ``id``, ``role``, ``lane``,
             ``speed``).
         total: how many new contacts there were (default: as many as listed); each
             one past those listed counts as a collision of its own, cause
@@ -64,10 +75,10 @@ def collision_section(contacts, vehicles: pd.DataFrame, total: int | None = None
             listed.append({"time_s": round(time, 3), "ids": list(pair), "contacts": touches,
                            "cause": cause, "vehicles": states})  # fmt: skip
     unlisted = max((len(contacts) if total is None else int(total)) - len(contacts), 0)
-    by_cause["unknown"] = unlisted
+    by_cause[UNKNOWN] = unlisted
     return {
         "contacts": len(contacts) + unlisted,
-        "collisions": len(first) + unlisted,
+        "collisions": count_collisions(contacts, len(contacts) + unlisted),
         "collisions_by_cause": by_cause,
         "collision_list": listed,
     }

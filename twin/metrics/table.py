@@ -14,6 +14,8 @@ while it is out of date).
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from twin.metrics.collisions import COLUMNS
+
 EVERY_RUN = "every run"
 WITH_CONTROLLER = "runs with an ego controller"
 WITH_AV_SHARE = "runs with --av-share"
@@ -136,7 +138,7 @@ METRICS: tuple[Metric, ...] = (
         Metric(f"collisions_{cause}", "count", f"collisions of cause {cause.replace('_', ' ')} "
                "(twin/metrics/collisions.py)", ("physics", "collisions_by_cause", cause),
                summary="sum")
-        for cause in ("rear_end", "lane_change", "spawn", "other", "unknown")
+        for cause in COLUMNS
     ),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),

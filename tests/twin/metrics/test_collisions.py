@@ -3,7 +3,7 @@
 import numpy as np
 import pandas as pd
 
-from twin.metrics.collisions import collision_section
+from twin.metrics.collisions import CAUSES, COLUMNS, UNKNOWN, collision_section, count_collisions
 
 DT = 0.5
 
@@ -55,3 +55,14 @@ def test_no_contact_gives_no_collision():
     out = collision_section([], _log())
     assert out["contacts"] == 0 and out["collisions"] == 0 and out["collision_list"] == []
     assert not any(np.asarray(list(out["collisions_by_cause"].values())))
+
+
+def test_twin_evals_columns_are_every_cause_once():
+    assert sorted(COLUMNS) == sorted({*CAUSES, UNKNOWN}) and len(COLUMNS) == len(CAUSES) + 1
+    assert list(collision_section([], _log())["collisions_by_cause"]) == [*CAUSES, UNKNOWN]
+
+
+def test_collisions_count_pairs_and_each_contact_past_those_kept():
+    kept = [(1.0, 3, 5), (2.0, 5, 3), (3.0, 3, 6)]
+    assert count_collisions(kept, 3) == 2 and count_collisions(kept, 7) == 6
+    assert count_collisions([], 0) == 0

@@ -9,7 +9,8 @@ validity mask), made once and reused.
   store's ``tid``), its own desired speed, whether it is an AV, its strategic target's
   bookkeeping, and the checks of its spawn;
 * ``episodes`` (:data:`Episodes`, B): each episode's seed, clock, ego, windows,
-  counters, and the collisions it had;
+  counters, and the contacts it had (``collisions`` counts new contacts and
+  ``collision_log`` keeps the first; a collision is a pair, :mod:`twin.metrics.collisions`);
 * ``table`` (:data:`TidTable`, B x H): per episode, every recorded vehicle it has met,
   in an open-addressing hash by recording index: simulated now, a ghost after the
   last reload, seen in the windows before, waiting for room to spawn;
@@ -74,7 +75,7 @@ SIMULATED, GHOST, SEEN, WAITING = 1, 2, 4, 8
 RUNNING, EGO_LEFT = 0, 1
 #: ``Episodes.overflow``: what ran out (the batch's facade names it)
 SNAPSHOT_FULL, TABLE_FULL, PAIRS_FULL, GHOSTS_FULL = 1, 2, 4, 8
-COLLISIONS_KEPT = 64  # the first collisions of an episode are kept (time, id, id)
+COLLISIONS_KEPT = 64  # the first new contacts of an episode are kept (time, id, id)
 SPAWN_ERRORS_KEPT = 4096  # spawn speed errors kept per episode
 TOUCHING_KEPT = 256  # vehicle pairs in contact at once, per episode
 FOLLOWERS = 5  # the AV's followers whose fuel counts with its own

@@ -274,8 +274,9 @@ def _checks(b, top, valid, speed, lane, just_spawned, spawn_speed, off_road, acc
 
 @kernel
 def _contacts(b, core, time):
-    """New contacts among the pairs now touching (``core.pairs``, slots) are
-    collisions, (time [s], id, id) with the smaller id first, in id order."""
+    """The pairs now touching (``core.pairs``, slots) that were not touching at the
+    last step are new contacts, counted in ``collisions`` and kept in ``collision_log``
+    as (time [s], id, id) with the smaller id first, in id order."""
     ep, ids, pairs = core.episodes, core.bodies.id, core.pairs
     touching, log = ep.touching, ep.collision_log
     count = ep.pair_count[b]
