@@ -4,10 +4,15 @@ is cached, and the counter-based random numbers they draw.
 Every kernel of the batched core is a plain function over scalars and numpy arrays,
 compiled by Numba with :func:`kernel`:
 
-* ``cache=True``: the machine code is kept beside the source (``__pycache__``), or
-  under ``$NUMBA_CACHE_DIR``, or, where the package folder is read-only, under the
-  system's temporary folder, so that a process after the first
-  loads it in a fraction of a second instead of compiling;
+* ``cache=True``: the machine code is kept in a folder named by a digest of the
+  kernels' sources (:func:`sources_digest`: every module that defines kernels and
+  every twin module those import), under ``$NUMBA_CACHE_DIR``, else the twin's cache
+  folder (``kernels/``), else, where that cannot be written, the system's temporary
+  folder, so that a process after the first loads it in a fraction of a second
+  instead of compiling. Numba checks only the time stamp of a kernel's own file, so a
+  cache beside the sources kept a kernel compiled with an older version of a kernel
+  it calls in another module, or of a constant it reads from one; a new digest is a
+  new folder, compiled afresh;
 * ``error_model="numpy"``: a float division by zero gives ``inf`` or ``nan`` as numpy
   does (the twin's numpy code relied on it), not a ZeroDivisionError;
 * no ``fastmath``: results are bit for bit those of IEEE arithmetic, the same in any
@@ -26,9 +31,12 @@ every array access checked (the tests run the kernels so once, with a cache of t
 own).
 """
 
+import hashlib
 import math
 import os
+import re
 import tempfile
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -46,8 +54,70 @@ from numba.core.runtime.nrtdynmod import _meminfo_struct_type
 from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
 
-if not os.environ.get("NUMBA_CACHE_DIR") and not os.access(os.path.dirname(__file__), os.W_OK):
-    numba.config.CACHE_DIR = os.path.join(tempfile.gettempdir(), "i24-twin-numba-cache")
+PACKAGE = Path(__file__).resolve().parents[1]  # twin/
+_DEFINES = re.compile(rb"@kernel|@overload|njit")
+_IMPORTS = re.compile(
+    rb"^\s*(?:from\s+(twin(?:\.\w+)*)\s+import\s+(\([^)]*\)|[\w, ]+)|import\s+(twin(?:\.\w+)*))",
+    re.MULTILINE,
+)
+
+
+def kernel_sources(package: Path = PACKAGE) -> list[Path]:
+    """The modules of ``package`` that define kernels, and every module of it that
+    they import, directly or not, in path order."""
+
+    def module(name: str) -> Path | None:
+        parts = name.split(".")[1:]
+        for path in (package.joinpath(*parts).with_suffix(".py"),
+                     package.joinpath(*parts, "__init__.py")):  # fmt: skip
+            if parts and path.is_file():
+                return path
+        return None
+
+    todo = [p for p in package.rglob("*.py") if _DEFINES.search(p.read_bytes())]
+    found = set(todo)
+    while todo:
+        text = todo.pop().read_bytes()
+        for match in _IMPORTS.finditer(text):
+            names = [(match.group(1) or match.group(3)).decode()]
+            if match.group(1):  # from twin.a import b: b may be a module
+                names += [f"{names[0]}.{n.strip()}" for n in re.split(r"[,()\s]+",
+                          match.group(2).decode()) if n.strip()]  # fmt: skip
+            for path in filter(None, map(module, names)):
+                if path not in found:
+                    found.add(path)
+                    todo.append(path)
+    return sorted(found)
+
+
+def sources_digest(files: list[Path], package: Path = PACKAGE) -> str:
+    """16 hex digits of the files' paths (relative to ``package``) and contents."""
+    digest = hashlib.sha256()
+    for path in files:
+        digest.update(path.relative_to(package).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
+def _cache_folder() -> str:
+    """Where this version of the kernels keeps its compiled code (module doc)."""
+    from twin.core.paths import cache_dir
+
+    key = sources_digest(kernel_sources())
+    for base in (os.environ.get("NUMBA_CACHE_DIR"), str(cache_dir() / "kernels")):
+        if not base:
+            continue
+        folder = os.path.join(base, key)
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(folder, os.W_OK):
+            return folder
+    return os.path.join(tempfile.gettempdir(), "i24-twin-kernels", key)
+
+
+numba.config.CACHE_DIR = _cache_folder()
 
 
 INLINE_IR = os.environ.get("TWIN_INLINE_IR") == "1"
