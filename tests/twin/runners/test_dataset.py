@@ -1,6 +1,7 @@
 """``twin dataset`` read back by independent readers (pycocotools for COCO, a KITTI
 reader written from the devkit's readme), resumed after kill -9, and made by Ray."""
 
+import contextlib
 import json
 import math
 import os
@@ -213,9 +214,11 @@ def test_a_killed_run_resumes_to_the_same_dataset(dataset, wave_store, tmp_path)
         "--out", str(out), "--data", str(wave_store.path), "--workers", "2", "--quiet",
         *CLI_SETTINGS,
     ]  # fmt: skip
-    run = subprocess.Popen(
-        command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
-    )
+    log = tmp_path / "killed.stderr"  # a file, not a pipe nobody reads while it runs
+    with open(log, "w") as stderr:
+        run = subprocess.Popen(
+            command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr
+        )
 
     def finished() -> list[Path]:
         folder = out / EPISODES
@@ -227,19 +230,22 @@ def test_a_killed_run_resumes_to_the_same_dataset(dataset, wave_store, tmp_path)
     deadline = time.monotonic() + 300
     # killed as soon as any episode is complete (the workers' episodes end in any order;
     # waiting for episode 0 could let the others finish first and the run end)
-    while not finished():
-        assert run.poll() is None, run.stderr.read().decode()
-        assert time.monotonic() < deadline, "no episode was finished in 5 minutes"
-        time.sleep(0.02)
-    os.killpg(run.pid, signal.SIGKILL)
-    run.wait()
+    try:
+        while not finished():
+            assert run.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, "no episode was finished in 5 minutes"
+            time.sleep(0.02)
+    finally:  # also when the run failed: no process of it is left behind
+        with contextlib.suppress(ProcessLookupError):  # a run that ended by itself
+            os.killpg(run.pid, signal.SIGKILL)
+        run.wait()
     assert not (out / "manifest.json").exists()  # killed before the end
     done = finished()
     assert 1 <= len(done) < EPISODE_COUNT
     first = done[0]
     stamp = (first / "episode.json").stat().st_mtime_ns
 
-    rerun = subprocess.run(command, capture_output=True, text=True)
+    rerun = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
     assert (first / "episode.json").stat().st_mtime_ns == stamp  # skipped, not redone
     assert not list(out.rglob(".*partial*"))  # the killed run's leftovers are gone
