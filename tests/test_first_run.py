@@ -142,7 +142,8 @@ def test_the_first_twin_run_prints_only_the_twins_summary(fresh):
     # it ends by listing what it wrote
     listed = lines[lines.index("wrote runs/B:") + 1 :]
     assert [line.split()[0] for line in listed] == [
-        "config.toml", "trajectories.parquet", "metrics.json", "timespace.png", "bev.png"
+        "config.toml", "trajectories.parquet", "metrics.json", "timespace.png", "boundary.png",
+        "bev.png",
     ]  # fmt: skip
     assert (fresh.cwd / "runs" / "B" / "metrics.json").is_file()
 

@@ -1,5 +1,6 @@
 """``twin run`` (one cosimulation episode) and ``twin render`` (one camera frame)."""
 
+import argparse
 from pathlib import Path
 
 from twin.cli.options import (
@@ -81,6 +82,13 @@ def _register_run(commands) -> None:
         help="lag on ghost speeds [s] (default 0: off)",
     )
     p.add_argument(
+        "--relax",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="a vehicle leaving the visible window closes in on its recording in the ghost "
+        "cell before it becomes a ghost (default); --no-relax: the paper's hand-over, a jump",
+    )
+    p.add_argument(
         "--ego-controller",
         default=None,
         help="module:function driving the ego, or a baseline: twin.controllers:human, "
@@ -126,6 +134,7 @@ def _run_config(args):
         "w_visible": args.w_visible,
         "w_ghost": args.w_ghost,
         "ghost_smoothing": args.ghost_smoothing,
+        "relax": args.relax,
         "ego_controller": args.ego_controller,
         "bev_time": args.bev_time,
         "bev_video": args.bev_video,

@@ -58,6 +58,10 @@ class CosimConfig:
         w_ghost: [m] ghost window beyond each end of the visible window.
         ghost_smoothing: [s] time constant of a first-order lag on the speed a lane's
             lead vehicle takes from its ghost (0: off, the paper's behaviour).
+        relax: a visible vehicle leaving the visible window stays simulated in the
+            ghost cell and closes in on its recording within physical limits before it
+            becomes a ghost (no jump; :mod:`twin.cosim.core.relax`); false: the paper's
+            hand-over, onto the recording at once.
         spawn_clearance: [m] bumper-to-bumper room a spawned vehicle needs to any body
             it shares its lane's width with, plus the difference of their braking
             distances at ``spawn_decel`` when the one behind is faster.
@@ -100,6 +104,7 @@ class CosimConfig:
     w_visible: float = 150.0
     w_ghost: float = 50.0
     ghost_smoothing: float = 0.0
+    relax: bool = True
     spawn_clearance: float = 2.0
     spawn_clearance_at_rest: float = 0.3
     spawn_decel: float = 4.0
@@ -148,6 +153,8 @@ class CosimConfig:
         for name in positive:
             if not numbers[name] > 0:
                 raise ConfigError(f"{name} must be > 0, got {numbers[name]!r}")
+        if not isinstance(self.relax, bool):
+            raise ConfigError(f"relax must be true or false, got {self.relax!r}")
         if self.ghost_smoothing < 0 or self.spawn_clearance < 0:
             raise ConfigError("ghost_smoothing and spawn_clearance must be >= 0")
         if not 0 <= self.spawn_clearance_at_rest <= self.spawn_clearance:

@@ -402,7 +402,9 @@ class Cosimulator:
             return
         st = self.state
         slots = self._slots_of(list(self._controllers))
-        by_slot = dict(zip(slots.tolist(), self._controllers.values(), strict=True))
+        relaxing = self.state.slots.relaxing[0]  # a relaxing vehicle tracks its recording
+        by_slot = {s: c for s, c in zip(slots.tolist(), self._controllers.values(), strict=True)
+                   if not relaxing[s]}  # fmt: skip
         traffic = kinds.Traffic(st.vehicles, st.obstacles, st.drivers, st.scratch, None,
                                 st.counters, st.actions)  # fmt: skip
         overrides, refused = apply_controllers(
@@ -793,6 +795,7 @@ class Finished:
         st = batch.state
         self.config, self.traffic, self.behaviour = config, shared.traffic, shared.behaviour
         self.road, self.direction = config.road, config.road.direction
+        self.limits = shared.limits
         self.world = _RoadOnly(shared.bundle.road)
         self.times = times
         placed = batch.placements[b]

@@ -116,7 +116,78 @@ def timespace_plot(recorded, sim, windows, recorded_ego, t0: float, title: str, 
     return save_figure(timespace_figure(recorded, sim, windows, recorded_ego, t0, title), out)
 
 
-def _trajectory_lines(ax, rows: pd.DataFrame, label: str) -> None:
+BOUNDARY_MARGIN_M = 30.0  # [m] shown inside the visible window and past the ghost cells
+
+
+def boundary_figure(sim: pd.DataFrame, ghosts: pd.DataFrame, windows: pd.DataFrame,
+                    t0: float, title: str):  # fmt: skip
+    """The seams of the ghost-cell boundary, zoomed (a matplotlib figure): one panel per
+    edge of the visible window (front, then rear), each in the moving frame of that edge
+    (distance past it [m] against time). Each vehicle that was simulated and then became
+    a ghost is drawn in a colour of its own: its simulated track as a line (thick where
+    it was outside the visible window, relaxing), its ghost as dots of the same colour;
+    a jump at the hand-over is the gap between the end of the line and the first dot.
+    The other ghosts are faint grey dots, the ghost cells hatched.
+
+    Args:
+        sim: the log's simulated rows (time [s since t0], id, tid, x, role).
+        ghosts: the log's ghost rows (time, tid, x).
+        windows: the log's windows per step (time, g0, x0, x1, g1).
+    """
+    edges = windows.set_index("time")
+    t = edges.index.to_numpy()
+    fig, axes = plt.subplots(2, 1, figsize=(11, 8), sharex=True, constrained_layout=True)
+    others = sim[sim["role"] != 0]
+    last = others.groupby("tid")["time"].max()
+    later = ghosts[ghosts["time"] > last.reindex(ghosts["tid"]).to_numpy()]
+    handed = np.intersect1d(last.index.to_numpy(), later["tid"].unique())
+    palette = plt.get_cmap("tab10").colors
+    sides = (("front", "x1", "g1", 1.0), ("rear", "x0", "g0", -1.0))
+    for ax, (name, edge, outer, sign) in zip(axes, sides, strict=True):
+        cell = sign * (edges[outer] - edges[edge]).to_numpy()
+        ax.fill_between(t, 0.0, cell, facecolor="none", edgecolor=COLOURS["ghost_cells"],
+                        hatch="//", lw=0, label="ghost cell")  # fmt: skip
+        ax.axhline(0.0, color=COLOURS["visible_window"], lw=1.5,
+                   label="edge of the visible window")  # fmt: skip
+
+        def moved(rows, edge=edge, sign=sign):
+            return sign * (rows["x"].to_numpy() - edges[edge].reindex(rows["time"]).to_numpy())
+
+        plain = ~ghosts["tid"].isin(handed)
+        ax.scatter(ghosts["time"][plain], moved(ghosts[plain]), s=2, color="0.75",
+                   linewidths=0, label="ghosts", rasterized=True)  # fmt: skip
+        side = 0
+        for tid in handed:
+            track = others[others["tid"] == tid]
+            d = moved(track)
+            if not (d[-1] > 0.0 or moved(later[later["tid"] == tid])[:1].clip(min=0).any()):
+                continue  # handed over at the other edge
+            colour = palette[side % len(palette)]
+            side += 1
+            ax.plot(track["time"], d, color=colour, lw=0.8)
+            out = np.where(d > 0.0, d, np.nan)
+            ax.plot(track["time"], out, color=colour, lw=2.2)
+            ghost = later[later["tid"] == tid]
+            ax.scatter(ghost["time"], moved(ghost), s=6, color=colour, linewidths=0)
+        ax.plot([], [], color="0.3", lw=0.8, label="a vehicle simulated (thick: relaxing)")
+        ax.scatter([], [], s=6, color="0.3", label="... then its ghost")
+        ax.set_ylim(-BOUNDARY_MARGIN_M, float(np.nanmax(cell, initial=0.0)) + BOUNDARY_MARGIN_M)
+        ax.set_ylabel(f"{name}: metres past the{chr(10)}visible window's {name} edge")
+        ax.grid(alpha=0.2)
+        ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
+    axes[-1].set_xlabel(f"time [s] after {clock(t0)}")
+    axes[-1].set_xlim(0.0, float(t[-1]))
+    fig.suptitle(title)
+    return fig
+
+
+def boundary_plot(sim, ghosts, windows, t0: float, title: str, out: Path):
+    """Write :func:`boundary_figure` as a PNG (a temporary name, then renamed)."""
+    return save_figure(boundary_figure(sim, ghosts, windows, t0, title), out)
+
+
+def _trajectory_lines(ax, rows: pd.DataFrame, label: str, color: str = "black",
+                      width: float = 0.45) -> None:  # fmt: skip
     """One thin black line per vehicle, over the recorded speeds' colours."""
     segments = []
     for _, track in rows.groupby("id", sort=True):
@@ -124,7 +195,7 @@ def _trajectory_lines(ax, rows: pd.DataFrame, label: str) -> None:
         breaks = np.flatnonzero(np.diff(t) > 0.5) + 1  # left the lane and came back
         pieces = zip(np.split(t, breaks), np.split(x, breaks), strict=True)
         segments += [np.column_stack(piece) for piece in pieces]
-    lines = LineCollection(segments, colors="black", linewidths=0.45, alpha=0.85, label=label)
+    lines = LineCollection(segments, colors=color, linewidths=width, alpha=0.85, label=label)
     lines.set_rasterized(True)
     ax.add_collection(lines)
 

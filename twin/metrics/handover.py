@@ -3,14 +3,26 @@ in the step it is handed from the visible window to its recording (a ghost), or 
 its recording to the visible window (a spawn), the ``handover`` section of
 ``metrics.json``.
 
-A visible vehicle (not the ego) whose last row is at step k, in an episode that goes
-on, was removed at step k + 1. Its recording at step k + 1 is where the boundary puts
-it next: a ghost where the recording lies in the windows then (``count``; of them
-``into_visible_window`` lie inside the visible window, where the recording is spawned
-again when there is room), and it left the windows (``left_windows``) where the
-recording is absent or outside them: it vanishes from the scene. The jump is the
-recording's position at step k + 1 against the simulated vehicle's at step k carried
-on at its speed for one step, and the difference of the speeds.
+A simulated vehicle (not the ego) whose last row is at step k, in an episode that goes
+on, was removed at step k + 1. Where it went (``visible_to_ghost``):
+
+* ``left_road``: it drove off the road (its position carried on one step lies beyond
+  the road's limits, where the windows end at the end of the map): nothing is handed
+  over;
+* ``count``: its recording at step k + 1 lies in a ghost cell: it became that ghost.
+  The jump is the recording's position at step k + 1 against the simulated vehicle's
+  at step k carried on at its speed for one step, and the difference of the speeds;
+* ``into_visible_window``: it was inside the windows and its recording lies in the
+  visible window, where a recording is neither drawn nor simulated while its vehicle
+  was: it vanished;
+* ``left_windows``: it drove out of the windows, or its recording is absent or outside
+  them: it left the scene.
+
+Vehicles relax in the ghost cells (:mod:`twin.cosim.core.relax`, on by default): a
+simulated vehicle outside the visible window is relaxing. ``relaxing`` gives how many
+vehicles relaxed, their measured accelerations' range [m/s^2], their lowest speed
+[m/s], and their distance along the road from their recordings at the same time [m]
+(median, p90, max).
 
 A vehicle spawned after the start (its first row at step k > 0) whose recording lay
 in the ghost cells at step k - 1 was a ghost before: its jump is its spawn position
@@ -31,15 +43,16 @@ BACKWARDS_M = 0.5  # [m] a jump against travel larger than this is counted as ba
 
 
 def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, road: Road,
-                     t0: float, dt: float) -> dict:  # fmt: skip
+                     t0: float, dt: float, limits=(-np.inf, np.inf)) -> dict:  # fmt: skip
     """The ``handover`` section of an episode's metrics (module doc).
 
     Args:
         vehicles: the log's vehicle rows (``time`` [s from t0], ``id``, ``tid``,
-            ``role``, ``x`` [m], ``speed`` [m/s]).
+            ``role``, ``x`` [m], ``speed`` [m/s], and ``accel`` [m/s^2] where measured).
         windows: the log's windows per step (``time``, ``g0``, ``x0``, ``x1``, ``g1``).
         traffic: the recorded traffic (``EmpiricalTraffic``).
         road: the episode's carriageway. t0: [s unix] its start. dt: [s] its step.
+        limits: [m] the road's x range the windows are clipped to.
     """
     if windows.empty:  # nothing was stepped: nobody was handed over
         return _empty()
@@ -51,29 +64,52 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
     frame = pd.DataFrame({
         "id": others["id"].to_numpy(), "tid": others["tid"].to_numpy(), "step": step,
         "x": others["x"].to_numpy(), "speed": others["speed"].to_numpy(),
+        "accel": others["accel"].to_numpy() if "accel" in others else np.nan,
     }).sort_values(["id", "step"], kind="stable")  # fmt: skip
     first = frame.groupby("id", sort=True).head(1)
     last = frame.groupby("id", sort=True).tail(1)
     removed = last[last["step"] < edges.shape[0] - 1]  # the episode went on after them
     spawned = first[first["step"].between(1, edges.shape[0] - 1)]  # after the start
+    relaxing = _place(frame["x"].to_numpy(), edges[frame["step"].to_numpy()]) != 0
     return {
-        "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt),
+        "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt, limits),
         "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),
+        "relaxing": _relaxing(frame[relaxing], traffic, road, t0, dt),
     }
 
 
-def _to_recording(rows, edges, traffic, road, t0, dt) -> dict:
-    """The visible vehicles removed: where their recordings put them one step later."""
+def _to_recording(rows, edges, traffic, road, t0, dt, limits) -> dict:
+    """The simulated vehicles removed: where their recordings put them one step later."""
     after = rows["step"].to_numpy() + 1
     present, x, speed = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + after * dt)
     place = _place(x, edges[after])
     carried = rows["x"].to_numpy() + rows["speed"].to_numpy() * dt
-    kept = present & (place >= 0)
+    off_road = (carried < limits[0]) | (carried > limits[1])
+    ghost = present & (place == 1) & ~off_road
+    vanished = present & (place == 0) & ~off_road & (_place(carried, edges[after]) >= 0)
     return {
-        "count": int(kept.sum()),
-        **_jumps(x[kept] - carried[kept], speed[kept] - rows["speed"].to_numpy()[kept]),
-        "into_visible_window": int((present & (place == 0)).sum()),
-        "left_windows": int((~kept).sum()),
+        "count": int(ghost.sum()),
+        **_jumps(x[ghost] - carried[ghost], speed[ghost] - rows["speed"].to_numpy()[ghost]),
+        "into_visible_window": int(vanished.sum()),
+        "left_windows": int((~(ghost | vanished) & ~off_road).sum()),
+        "left_road": int(off_road.sum()),
+    }
+
+
+def _relaxing(rows, traffic, road, t0, dt) -> dict:
+    """The rows of the vehicles outside the visible window (relaxing): how many
+    vehicles, their measured accelerations' range, their lowest speed, their distance
+    from their recordings."""
+    present, x, _ = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + rows["step"] * dt)
+    distance = np.abs(rows["x"].to_numpy() - x)[present]
+    accel = rows["accel"].to_numpy(float)
+    measured = accel[np.isfinite(accel)]
+    return {
+        "vehicles": int(rows["id"].nunique()),
+        "accel_min_mps2": round(float(measured.min()), 4) if measured.size else None,
+        "accel_max_mps2": round(float(measured.max()), 4) if measured.size else None,
+        "speed_min_mps": round(float(rows["speed"].min()), 4) if len(rows) else None,
+        "distance_m": _summary(distance),
     }
 
 
@@ -95,8 +131,21 @@ def _from_recording(rows, edges, traffic, road, t0, dt) -> dict:
 def _empty() -> dict:
     none = _jumps(np.zeros(0), np.zeros(0))
     return {
-        "visible_to_ghost": {"count": 0, **none, "into_visible_window": 0, "left_windows": 0},
+        "visible_to_ghost": {
+            "count": 0,
+            **none,
+            "into_visible_window": 0,
+            "left_windows": 0,
+            "left_road": 0,
+        },
         "ghost_to_visible": {"count": 0, **none},
+        "relaxing": {
+            "vehicles": 0,
+            "accel_min_mps2": None,
+            "accel_max_mps2": None,
+            "speed_min_mps": None,
+            "distance_m": _summary(np.zeros(0)),
+        },
     }
 
 

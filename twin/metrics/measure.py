@@ -68,7 +68,9 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             lane_flow_fidelity.recorded_changes_in_window(recorded_changes, windows, sim.t0),
             windows,
         ),
-        "handover": handover_section(vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt),
+        "handover": handover_section(
+            vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt, sim.limits
+        ),
         "physics": _physics(sim, vehicles),
         "timing": {
             "reset_s": round(reset_s, 3),

@@ -23,6 +23,7 @@ WITH_RECORDING = "runs whose ego's recording has a slow spell"
 WITH_LANE_TRAFFIC = "runs with recorded traffic in the lane"
 WITH_HANDOVER = "runs with a hand-over to the recording"
 WITH_GHOST_SPAWN = "runs with a spawn from the ghost cells"
+WITH_RELAXING = "runs with a vehicle relaxing in the ghost cells"
 
 
 @dataclass(frozen=True)
@@ -109,8 +110,8 @@ METRICS: tuple[Metric, ...] = (
            ("counts", "lane_changes"), summary="sum"),
     Metric("lane_changes_recorded", "count", "lane changes the recording makes in the same "
            "moving window", ("counts", "lane_changes_recorded_in_window"), summary="sum"),
-    Metric("handovers_to_ghost", "count", "visible vehicles handed back to their recordings "
-           "inside the windows", ("handover", "visible_to_ghost", "count"), summary="sum"),
+    Metric("handovers_to_ghost", "count", "simulated vehicles handed back to their recordings "
+           "in the ghost cells", ("handover", "visible_to_ghost", "count"), summary="sum"),
     Metric("handover_to_ghost_jump_p90_m", "m", "p90 over the episode's hand-overs to the "
            "recording of the one-step position jump (the recording one step later against "
            "the simulated vehicle carried on at its speed)",
@@ -123,9 +124,28 @@ METRICS: tuple[Metric, ...] = (
     Metric("handovers_backwards", "count", "hand-overs to the recording that moved the vehicle "
            "more than 0.5 m against travel", ("handover", "visible_to_ghost", "backwards"),
            summary="sum"),
-    Metric("handovers_left_windows", "count", "visible vehicles removed whose recordings are "
-           "outside the windows or absent then (they vanish)",
+    Metric("handovers_left_windows", "count", "simulated vehicles removed that drove out of the "
+           "windows, or whose recordings are outside them or absent then",
            ("handover", "visible_to_ghost", "left_windows"), summary="sum"),
+    Metric("handovers_into_visible_window", "count", "simulated vehicles removed inside the "
+           "windows whose recordings lie in the visible window, where nothing is drawn (they "
+           "vanish)", ("handover", "visible_to_ghost", "into_visible_window"), summary="sum"),
+    Metric("relaxing_vehicles", "count", "vehicles that relaxed toward their recordings in the "
+           "ghost cells (twin/cosim/core/relax.py)", ("handover", "relaxing", "vehicles"),
+           summary="sum"),
+    Metric("relaxing_accel_min_mps2", "m/s^2", "the lowest measured acceleration of a relaxing "
+           "vehicle", ("handover", "relaxing", "accel_min_mps2"), produced_by=WITH_RELAXING),
+    Metric("relaxing_accel_max_mps2", "m/s^2", "the highest measured acceleration of a relaxing "
+           "vehicle", ("handover", "relaxing", "accel_max_mps2"), produced_by=WITH_RELAXING),
+    Metric("relaxing_speed_min_mps", "m/s", "the lowest speed of a relaxing vehicle (below 0: "
+           "it moved backwards)", ("handover", "relaxing", "speed_min_mps"),
+           produced_by=WITH_RELAXING),
+    Metric("relaxing_distance_p90_m", "m", "p90 over a relaxing vehicle's steps of its distance "
+           "along the road from its recording", ("handover", "relaxing", "distance_m", "p90"),
+           produced_by=WITH_RELAXING),
+    Metric("relaxing_distance_max_m", "m", "the largest distance of a relaxing vehicle from its "
+           "recording", ("handover", "relaxing", "distance_m", "max"),
+           produced_by=WITH_RELAXING),
     Metric("handover_from_ghost_jump_max_m", "m", "the largest one-step position jump of a "
            "spawn from the ghost cells (the spawn against its ghost carried on at its speed)",
            ("handover", "ghost_to_visible", "position_jump_m", "max"),

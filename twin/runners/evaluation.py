@@ -559,6 +559,8 @@ def summarise(frame, config: EvalConfig) -> dict:
                     "median": _r(np.median(values)) if values.size else None,
                     "p90": _r(np.quantile(values, 0.9)) if values.size else None,
                     "mean": _r(values.mean()) if values.size else None,
+                    "min": _r(values.min()) if values.size else None,
+                    "max": _r(values.max()) if values.size else None,
                     "count": int(values.size),
                 }
         recorded = entry["metrics"]["lane_changes_recorded"]["sum"]
@@ -668,8 +670,30 @@ def summary_lines(result: EvalResult) -> str:
             f"recorded ({'-' if ratio is None else f'{ratio:.2f}'}); collisions "
             f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
             + _flow_words(entry.get("lane_flows"))
+            + _seam_words(m)
         )
     return "\n".join(lines)
+
+
+def _seam_words(m: dict) -> str:
+    """The ghost-cell boundary's figures over the episodes: hand-overs to ghosts and their
+    largest jump, vehicles that vanished, the relaxing vehicles' range of acceleration
+    and largest distance from their recordings."""
+    words = (f"; hand-overs to ghosts {m['handovers_to_ghost']['sum']:g} (largest jump "
+             f"{_extreme(m, 'handover_to_ghost_jump_max_m', 'max')} m), vanished "
+             f"{m['handovers_into_visible_window']['sum']:g}")  # fmt: skip
+    if m["relaxing_vehicles"]["sum"]:
+        words += (f"; relaxing {m['relaxing_vehicles']['sum']:g} (acceleration "
+                  f"{_extreme(m, 'relaxing_accel_min_mps2', 'min')} to "
+                  f"{_extreme(m, 'relaxing_accel_max_mps2', 'max')} m/s^2, up to "
+                  f"{_extreme(m, 'relaxing_distance_max_m', 'max')} m from its "
+                  "recording)")  # fmt: skip
+    return words
+
+
+def _extreme(metrics: dict, name: str, which: str) -> str:
+    value = metrics[name][which]
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _flow_words(flows: dict | None) -> str:

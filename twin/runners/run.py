@@ -7,6 +7,7 @@ The folder (written under a temporary name and renamed when complete)::
       trajectories.parquet   every simulated vehicle every step, ghosts at a lower rate
       metrics.json           fidelity, counts, physical checks, timing
       timespace.png          recorded traffic with the simulated ego over it
+      boundary.png           the visible window's edges zoomed (relaxing vehicles, ghosts)
       bev.png                bird's-eye view of the windows at ``bev_time``
       bev.mp4                the same for the whole episode (``bev_video``)
       cameras/               the ego's camera frames (``camera.enabled``; see
@@ -122,6 +123,7 @@ FOLDER_CONTENTS = {
     "trajectories.parquet": "the ego and simulated vehicles every step, ghosts at the log rate",
     "metrics.json": "fidelity to the recording, counts, energy, control figures, timing",
     "timespace.png": "time-space diagram: recorded traffic, simulated vehicles, the ego",
+    "boundary.png": "the visible window's edges zoomed: vehicles relaxing, ghosts, any jump",
     "bev.png": "bird's-eye view of the visible window and ghost cells",
     "bev.mp4": "the bird's-eye view over the whole episode",
     CAMERAS: "the ego's camera frames and labels",
@@ -313,6 +315,7 @@ def _write_folder(
     plots.timespace_plot(
         recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
     )
+    plots.boundary_plot(vehicles, ghosts, windows, sim.t0, title, tmp / "boundary.png")
     bev_time = cfg.bev_time if cfg.bev_time is not None else 0.5 * sim_s
     if len(ghosts):
         ghost_times = np.unique(ghosts["time"].to_numpy())
@@ -346,6 +349,26 @@ def _bev_scene(vehicles, ghosts, windows, arrays, at: float) -> plots.BevScene:
     return plots.BevScene(sim, ghost, window, at)
 
 
+def _seam_line(handover: dict) -> str:
+    """The ghost-cell boundary in one line: hand-overs each way with their largest jump,
+    the relaxing vehicles."""
+    out, back, relaxing = (handover["visible_to_ghost"], handover["ghost_to_visible"],
+                           handover["relaxing"])  # fmt: skip
+
+    def largest(section):
+        jump = section["position_jump_m"]["max"]
+        return "-" if jump is None else f"{jump:.2f}"
+
+    line = (f"boundary: {out['count']} handed to their recordings (largest jump "
+            f"{largest(out)} m), {out['into_visible_window']} vanished, {back['count']} "
+            f"spawned from ghosts (largest jump {largest(back)} m)")  # fmt: skip
+    if relaxing["vehicles"]:
+        line += (f"; {relaxing['vehicles']} relaxed (acceleration "
+                 f"{relaxing['accel_min_mps2']:.2f} to {relaxing['accel_max_mps2']:.2f} m/s^2, "
+                 f"up to {relaxing['distance_m']['max']:.1f} m from the recording)")  # fmt: skip
+    return line
+
+
 def summary(result: RunResult) -> str:
     """A few lines for the terminal: ego speed profile, counts, fidelity, speed."""
     m = result.metrics
@@ -365,6 +388,7 @@ def summary(result: RunResult) -> str:
         f"{counts['despawned']} despawned, {counts['spawns_skipped_overlap']} refused for lack "
         "of room; "
         f"{physics['collisions']} collisions, {physics['vehicles_off_road']} off the road",
+        _seam_line(m["handover"]),
         f"simulated {m['simulated_s']:.1f} s in {m['timing']['loop_s']:.1f} s: "
         f"{m['timing']['real_time_factor']:.1f} x real time",
     ]

@@ -60,7 +60,7 @@ def test_twin_run_names_the_egos_controller_and_lists_what_it_wrote(scene_store,
     listed = lines[lines.index(f"wrote {out}:") + 1 :]
     names = [line.split()[0] for line in listed]
     assert names == ["config.toml", "trajectories.parquet", "metrics.json", "timespace.png",
-                     "bev.png"]  # fmt: skip
+                     "boundary.png", "bev.png"]  # fmt: skip
     assert all(len(line.split(maxsplit=1)) == 2 for line in listed)  # each says what it holds
 
 
@@ -79,7 +79,8 @@ def test_a_run_without_ghosts_still_has_its_birds_eye_video(tmp_path):
 
 def test_the_run_folder_holds_every_output(run_folder):
     names = {p.name for p in run_folder.iterdir()}
-    expected = {"config.toml", "trajectories.parquet", "metrics.json", "timespace.png"}
+    expected = {"config.toml", "trajectories.parquet", "metrics.json", "timespace.png",
+                "boundary.png"}  # fmt: skip
     assert names == expected | {"bev.png", "bev.mp4"}
 
 
@@ -142,6 +143,7 @@ def test_pictures_open_in_opencv(run_folder):
     video.release()
     assert frames == 21
     assert cv2.imread(str(run_folder / "timespace.png")) is not None
+    assert cv2.imread(str(run_folder / "boundary.png")) is not None
 
 
 def test_a_rerun_replaces_a_run_folder_but_never_other_data(scene_store, run_folder, tmp_path):

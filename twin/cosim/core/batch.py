@@ -132,7 +132,7 @@ class Shared:
             targets=name == "recorded" or beh.strategic_flows is not None,
             kinematic=config.world == "kinematic",
             profile=physics.profile(bundle.road, road.direction),
-            fuel=physics.fuel_coefficients(),
+            fuel=physics.fuel_coefficients(), relax=bool(config.relax),
         )  # fmt: skip
         zones = [(z["lane"], z["x0"], z["x1"]) for z in beh.keep_out]
         ts = traffic_settings(config.traffic, mean, keep_out=zones, controller=config.controller,

@@ -15,6 +15,7 @@ import numpy as np
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.cosim.core import drivers as behaviour
+from twin.cosim.core import relax
 from twin.cosim.core.layout import (
     GHOST,
     GHOSTS_FULL,
@@ -84,16 +85,59 @@ def set_windows(b, core, ego_x):
 @kernel
 def despawn_outside(b, core):
     """Step 5: the visible vehicles now outside the visible window (not the ego) are
-    removed; returns how many."""
-    valid, x, ep = core.bodies.valid, core.bodies.x, core.episodes
-    v0, v1, ego = ep.windows[b, 1], ep.windows[b, 2], ep.ego[b]
+    removed, or, where the settings relax them, relax (:mod:`twin.cosim.core.relax`)
+    from the ghost cells on until they are back on their recordings; a relaxing vehicle
+    outside the windows is removed unless its recording is in a ghost cell (where it
+    would appear as a ghost, away from the vehicle), and so is one off the road; back
+    inside the visible window it is visible again. Returns how many were removed."""
+    valid, x, ep, sl, cs = (
+        core.bodies.valid,
+        core.bodies.x,
+        core.episodes,
+        core.slots,
+        core.settings,
+    )
+    g0, v0, v1, g1 = ep.windows[b, 0], ep.windows[b, 1], ep.windows[b, 2], ep.windows[b, 3]
+    ego = ep.ego[b]
     gone = 0
     for i in range(core.bodies.top[b]):
-        if valid[b, i] and i != ego and not v0 <= x[b, i] <= v1:
-            remove(b, core, i)
-            gone += 1
+        if not valid[b, i] or i == ego:
+            continue
+        if v0 <= x[b, i] <= v1:
+            if sl.relaxing[b, i]:
+                relax.end(b, core, i, ep.step[b] * cs.dt)
+            continue
+        t = ep.t0[b] + ep.step[b] * cs.dt
+        if sl.relaxing[b, i]:
+            relax.target(b, core, i, t)  # its recording now
+        xr = sl.rec_x[b, i]
+        recorded_in_cell = sl.rec_on[b, i] and g0 <= xr <= g1 and not v0 <= xr <= v1
+        stays = (g0 <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
+        if cs.relax and stays and cs.limit_lo <= x[b, i] <= cs.limit_hi:
+            if not sl.relaxing[b, i]:
+                relax.begin(b, core, i, t)
+            continue
+        remove(b, core, i)
+        gone += 1
     ep.despawned[b] += gone
     return gone
+
+
+@kernel
+def hand_back(b, core):
+    """Step 6 for the relaxing vehicles, after the recording was read: those back on
+    their recordings are handed to them (:func:`twin.cosim.core.relax.settled`); they
+    are ghosts at the reload. Returns how many."""
+    bo, sl, ep = core.bodies, core.slots, core.episodes
+    t = ep.t0[b] + ep.step[b] * core.settings.dt
+    back = 0
+    for i in range(bo.top[b]):
+        if bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i, t):
+            remove(b, core, i)
+            back += 1
+    ep.handed_back[b] += back
+    ep.despawned[b] += back
+    return back
 
 
 @kernel
@@ -106,6 +150,7 @@ def remove(b, core, i):
         table.slot[b, h] = -1
     bo = core.bodies
     bo.valid[b, i] = False
+    core.slots.relaxing[b, i] = False
     while bo.top[b] > 0 and not bo.valid[b, bo.top[b] - 1]:
         bo.top[b] -= 1
     core.slots.tgt_on[b, i] = False
@@ -197,6 +242,8 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     sl.off_road[b, i] = False
     sl.av[b, i] = False
     sl.tgt_on[b, i] = False
+    sl.relaxing[b, i] = False
+    sl.rec_on[b, i] = False
     lane = lane_of(y)
     behaviour.init_driver(b, i, core, seed, tid, r, rec.vehicle_class[r], lane, ep.step[b] * cs.dt)
     if controller >= 0:
@@ -384,9 +431,10 @@ def enter_and_reload(b, core):
 @kernel
 def lead_speeds(b, core):
     """Step 3: every vehicle wants its own desired speed, but the lead visible vehicle
-    of each lane ahead of the ego, which takes the speed of the ghost ahead of it (its
-    own if none; the larger of the two where the lead chases its ghost), through the
-    optional first-order lag (the paper's rule; ``docs/cosim.md``)."""
+    of each lane ahead of the ego (relaxing vehicles are not visible), which takes the
+    speed of the ghost ahead of it (its own if none; the larger of the two where the
+    lead chases its ghost), through the optional first-order lag (the paper's rule;
+    ``docs/cosim.md``)."""
     bo, sl, ep, gh, cs = core.bodies, core.slots, core.episodes, core.ghosts, core.settings
     dr = core.traffic.drivers
     valid, x, ids, lanes = bo.valid, bo.x, bo.id, dr.lane
@@ -401,7 +449,7 @@ def lead_speeds(b, core):
         if not valid[b, i]:
             continue
         params[b, i, 0] = base[b, i]
-        if i == ego or x[b, i] <= ego_x:
+        if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i]:
             continue
         k = -lanes[b, i] - 1
         lead = leads[b, k]

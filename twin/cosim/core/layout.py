@@ -7,7 +7,8 @@ validity mask), made once and reused.
 * ``slots`` (:data:`Slots`, B x N): what the cosimulation keeps of each vehicle: the
   recorded trajectory it stands for (``r``, an index of the recording, and the
   store's ``tid``), its own desired speed, whether it is an AV, its strategic target's
-  bookkeeping, and the checks of its spawn;
+  bookkeeping, the checks of its spawn, and whether it relaxes toward its recording
+  in a ghost cell with the recording's state now (:mod:`twin.cosim.core.relax`);
 * ``episodes`` (:data:`Episodes`, B): each episode's seed, clock, ego, windows,
   counters, and the contacts it had (``collisions`` counts new contacts and
   ``collision_log`` keeps the first; a collision is a pair, :mod:`twin.metrics.collisions`);
@@ -39,12 +40,12 @@ from twin.traffic.kernels import state as traffic
 Slots = namedtuple(
     "Slots",
     "r tid base_speed av just_spawned spawn_speed off_road tgt_lane tgt_draws plan_next "
-    "plan_end tgt_on order listed",
+    "plan_end tgt_on order listed relaxing rec_on rec_x rec_y rec_speed",
 )
 Episodes = namedtuple(
     "Episodes",
     "seed t0 step steps done ended ended_x ego ego_id ego_r next_id windows lead_speed leads "
-    "spawned spawned_initially despawned skipped_overlap skipped_invalid skipped_full "
+    "spawned spawned_initially despawned handed_back skipped_overlap skipped_invalid skipped_full "
     "collisions collision_log off_road spawn_errors spawn_error_count touching "
     "touching_count pair_count fuel fuel_sum group_distance speed_prev speed_prev_control "
     "collisions_before followers follower_count overflow",
@@ -96,7 +97,8 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         av=per_slot(bool), just_spawned=per_slot(bool), spawn_speed=per_slot(),
         off_road=per_slot(bool), tgt_lane=per_slot(np.int64), tgt_draws=per_slot(np.int64),
         plan_next=per_slot(np.int64), plan_end=per_slot(np.int64), tgt_on=per_slot(bool),
-        order=per_slot(np.int64, -1), listed=per_slot(bool),
+        order=per_slot(np.int64, -1), listed=per_slot(bool), relaxing=per_slot(bool),
+        rec_on=per_slot(bool), rec_x=per_slot(), rec_y=per_slot(), rec_speed=per_slot(),
     )  # fmt: skip
     zeros = np.zeros(b, np.int64)
     episodes = Episodes(
@@ -105,7 +107,8 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         ego_id=zeros.copy(), ego_r=zeros.copy(), next_id=zeros.copy(),
         windows=np.zeros((b, 4)), lead_speed=np.full((b, 4), np.nan),
         leads=np.full((b, 4), -1, np.int64), spawned=zeros.copy(),
-        spawned_initially=zeros.copy(), despawned=zeros.copy(), skipped_overlap=zeros.copy(),
+        spawned_initially=zeros.copy(), despawned=zeros.copy(), handed_back=zeros.copy(),
+        skipped_overlap=zeros.copy(),
         skipped_invalid=zeros.copy(), skipped_full=zeros.copy(), collisions=zeros.copy(),
         collision_log=np.zeros((b, COLLISIONS_KEPT, 3)), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),

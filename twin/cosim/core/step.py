@@ -29,10 +29,12 @@ import math
 from collections import namedtuple
 
 from twin.core.jit import kernel
+from twin.cosim.core import relax
 from twin.cosim.core.drivers import update_targets
 from twin.cosim.core.handover import (
     despawn_outside,
     enter_and_reload,
+    hand_back,
     lead_speeds,
     set_windows,
     snapshot,
@@ -47,7 +49,7 @@ CoreSettings = namedtuple(
     "CoreSettings",
     "dt limit_lo limit_hi w_visible w_ghost vel_default ghost_smoothing clearance "
     "clearance_at_rest spawn_decel av_share av_controller ego_controller lead_chases_ghost "
-    "targets kinematic profile fuel",
+    "targets kinematic profile fuel relax",
 )
 
 
@@ -78,6 +80,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.seed[b], ep.t0[b], ep.step[b], ep.steps[b] = seed, t0, 0, steps
     ep.ended[b], ep.ended_x[b], ep.next_id[b], ep.ego_r[b] = 0, 0.0, 0, ego_r
     ep.spawned[b], ep.spawned_initially[b], ep.despawned[b] = 0, 0, 0
+    ep.handed_back[b] = 0
     ep.skipped_overlap[b], ep.skipped_invalid[b], ep.skipped_full[b] = 0, 0, 0
     ep.collisions[b], ep.off_road[b], ep.spawn_error_count[b] = 0, 0, 0
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
@@ -155,6 +158,7 @@ def desired_speeds(b, core):
     """Step 3: the lane leads ahead of the ego take their ghost's speed; strategic
     targets on the decision grid."""
     lead_speeds(b, core)
+    relax.desired_speeds(b, core)
     if core.settings.targets and core.episodes.step[b] % core.traffic.settings.decision_steps == 0:
         update_targets(b, core)
 
@@ -165,6 +169,7 @@ def decisions(b, core):
     ep, cs = core.episodes, core.settings
     step = ep.step[b]
     decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
+    relax.track(b, core)
     speed, before = core.bodies.speed, ep.speed_prev
     for i in range(core.bodies.top[b]):
         before[b, i] = speed[b, i]
@@ -218,9 +223,11 @@ def leave(b, core):
 
 @kernel
 def read_windows(b, core):
-    """Step 6: the recording in the windows now."""
+    """Step 6: the recording in the windows now; relaxing vehicles back on their
+    recordings handed to them."""
     ep = core.episodes
     snapshot(b, core, ep.t0[b] + ep.step[b] * core.settings.dt)
+    hand_back(b, core)
 
 
 @kernel

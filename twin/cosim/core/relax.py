@@ -1,0 +1,134 @@
+"""Relaxing vehicles: the ghost-cell boundary without a seam, compiled, for one episode
+of a batch (``docs/cosim.md``, "Relaxing vehicles").
+
+In the paper a visible vehicle that leaves the visible window becomes its recording
+again at once, wherever the recording is: simulated vehicles drift from their
+recordings while they are in the window (a few metres to tens of metres), so the
+vehicle jumped. Here it stays a simulated body in the ghost cell, **relaxing**, and
+closes the distance to its recorded trajectory within physical limits:
+
+* its acceleration is a critically damped tracking law toward its recording, with
+  natural frequency :data:`OMEGA`, never more than its car following allows behind
+  the vehicle or ghost ahead, within [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`] (its
+  emergency braking, when it needs more, is left as it is and shows in the metrics);
+  its speed never goes below zero (the world's brakes hold it);
+* it changes lanes only toward its recording's lane, asked of the traffic manager,
+  which starts the change when the gap is safe (no discretionary change, no
+  strategic target);
+* it is handed to its recording (a ghost again) once it is within
+  :data:`HAND_BACK_X` and :data:`HAND_BACK_SPEED` of it, in its lane and within
+  :data:`HAND_BACK_Y` across, with the recording in a ghost cell: the step it becomes
+  a ghost it moves by at most that much;
+* it is removed when it leaves the windows (the outer edge of the ghost cells), as
+  every simulated vehicle was;
+* back inside the visible window it is a visible vehicle again, its driver deciding.
+
+A relaxing vehicle whose recording has ended (or is not recorded at the time) drives
+as its driver until it leaves the windows. How far a relaxing vehicle strays from
+its recorded track, its largest acceleration and its slowest speed are measured in
+every run (``twin.metrics.handover``).
+"""
+
+import math
+
+from twin.core.jit import kernel
+from twin.data.recording import lane_of, replay
+from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target
+
+OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
+ACCEL_LOW, ACCEL_HIGH = -4.0, 2.0  # [m/s^2] a relaxing vehicle's command, emergencies aside
+HAND_BACK_X = 0.3  # [m] along its recording
+HAND_BACK_SPEED = 0.3  # [m/s]
+HAND_BACK_Y = 0.5  # [m] across
+FREE_SPEED = 5.0  # [m/s] a relaxing driver's desired speed lies this far above its target's
+
+
+@kernel
+def begin(b, core, i, t):
+    """Slot ``i`` leaves the visible window into a ghost cell at unix ``t`` [s]: it
+    relaxes toward its recording from now on."""
+    sl, dr = core.slots, core.traffic.drivers
+    sl.relaxing[b, i] = True
+    dr.next_decision[b, i] = math.inf  # no discretionary change while it relaxes
+    dr.requested[b, i] = 0
+    clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
+    sl.tgt_on[b, i] = False
+    target(b, core, i, t)
+
+
+@kernel
+def end(b, core, i, time):
+    """Slot ``i`` is back inside the visible window at clock ``time`` [s]: its driver
+    decides again (its next lane-change decision at once)."""
+    core.slots.relaxing[b, i] = False
+    core.traffic.drivers.next_decision[b, i] = time
+    core.traffic.drivers.requested[b, i] = 0
+
+
+@kernel
+def target(b, core, i, t):
+    """Slot ``i``'s recording at unix ``t`` [s] (``rec_on`` where it is recorded then),
+    and the lane change toward its lane asked where the lanes differ."""
+    sl, dr = core.slots, core.traffic.drivers
+    present, x, y, speed = replay(core.rec, sl.r[b, i], t)
+    lane = lane_of(y) if present else 0
+    sl.rec_on[b, i] = present and lane != 0
+    sl.rec_x[b, i], sl.rec_y[b, i], sl.rec_speed[b, i] = x, y, speed
+    ask = 0
+    if sl.rec_on[b, i] and dr.lane_from[b, i] == dr.lane[b, i] and lane != dr.lane[b, i]:
+        ask = LEFT if lane > dr.lane[b, i] else RIGHT
+    dr.requested[b, i] = ask
+
+
+@kernel
+def settled(b, core, i, t):
+    """Relaxing slot ``i``'s target at unix ``t`` [s] (after the recording was read),
+    and whether it is back on its recording (module doc): to be handed to it."""
+    bo, sl, dr, ep = core.bodies, core.slots, core.traffic.drivers, core.episodes
+    target(b, core, i, t)
+    if not sl.rec_on[b, i]:
+        return False
+    xr = sl.rec_x[b, i]
+    in_ghost_cell = ep.windows[b, 0] <= xr <= ep.windows[b, 3] and not (
+        ep.windows[b, 1] <= xr <= ep.windows[b, 2]
+    )
+    return (
+        in_ghost_cell
+        and abs(bo.x[b, i] - xr) <= HAND_BACK_X
+        and abs(bo.speed[b, i] - sl.rec_speed[b, i]) <= HAND_BACK_SPEED
+        and abs(bo.y[b, i] - sl.rec_y[b, i]) <= HAND_BACK_Y
+        and dr.lane_from[b, i] == dr.lane[b, i]
+        and lane_of(sl.rec_y[b, i]) == dr.lane[b, i]
+    )
+
+
+@kernel
+def desired_speeds(b, core):
+    """A relaxing driver's desired speed well above its target's (the tracking law,
+    not the free road, sets how fast it goes; its car following still keeps it clear
+    of what is ahead)."""
+    bo, sl, params = core.bodies, core.slots, core.traffic.drivers.cf
+    for i in range(bo.top[b]):
+        if bo.valid[b, i] and sl.relaxing[b, i] and sl.rec_on[b, i]:
+            fastest = max(bo.speed[b, i], sl.rec_speed[b, i])
+            params[b, i, 0] = max(params[b, i, 0], 2.0 * fastest + FREE_SPEED)
+
+
+@kernel
+def track(b, core):
+    """Each relaxing vehicle's command (after the traffic manager's): the tracking law
+    toward its recording, never above its car following's command, within
+    [ACCEL_LOW, ACCEL_HIGH] unless it brakes in an emergency."""
+    bo, sl = core.bodies, core.slots
+    accel, emergency = core.traffic.drivers.accel, core.traffic.scratch.emergency
+    for i in range(bo.top[b]):
+        if not (bo.valid[b, i] and sl.relaxing[b, i] and sl.rec_on[b, i]):
+            continue
+        law = OMEGA * OMEGA * (sl.rec_x[b, i] - bo.x[b, i]) + 2.0 * OMEGA * (
+            sl.rec_speed[b, i] - bo.speed[b, i]
+        )
+        command = min(law, accel[b, i])
+        if emergency[b, i]:
+            accel[b, i] = min(command, ACCEL_HIGH)
+        else:
+            accel[b, i] = min(max(command, ACCEL_LOW), ACCEL_HIGH)
