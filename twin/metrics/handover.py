@@ -20,9 +20,10 @@ on, was removed at step k + 1. Where it went (``visible_to_ghost``):
 
 Vehicles relax in the ghost cells (:mod:`twin.cosim.core.relax`, on by default): a
 simulated vehicle outside the visible window is relaxing. ``relaxing`` gives how many
-vehicles relaxed, their measured accelerations' range [m/s^2], their lowest speed
-[m/s], and their distance along the road from their recordings at the same time [m]
-(median, p90, max).
+vehicles relaxed, their measured accelerations' range [m/s^2] (over the steps that
+began with the vehicle relaxing: the step it leaves the visible window was commanded
+inside it), their lowest speed [m/s], and their distance along the road from their
+recordings at the same time [m] (median, p90, max).
 
 A vehicle spawned after the start (its first row at step k > 0) whose recording lay
 in the ghost cells at step k - 1 was a ghost before: its jump is its spawn position
@@ -71,6 +72,11 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
     removed = last[last["step"] < edges.shape[0] - 1]  # the episode went on after them
     spawned = first[first["step"].between(1, edges.shape[0] - 1)]  # after the start
     relaxing = _place(frame["x"].to_numpy(), edges[frame["step"].to_numpy()]) != 0
+    # a step's measured acceleration was commanded at the row before: a relaxing one's
+    # where the vehicle relaxed then too
+    ids = frame["id"].to_numpy()
+    before = np.r_[False, relaxing[:-1] & (ids[1:] == ids[:-1])]
+    frame["accel"] = np.where(before, frame["accel"].to_numpy(float), np.nan)
     return {
         "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt, limits),
         "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),

@@ -45,6 +45,7 @@ def section():
     rows += [(k, 6, 12, 1, 250.0, 0.0) for k in range(5)]  # stays to the end
     rows += [(k, 13, 13, 1, 310.0 + 3 * k, 30.0 - 0.5 * k) for k in range(5)]  # relaxing
     rows += [(k, 14, 14, 1, 995.0 + 3 * k, 30.0) for k in range(3)]  # drives off the road
+    rows += [(k, 15, 15, 1, 290.0 + 7 * k, 20.0) for k in range(5)]  # out of the window at 2
     recording = Recording({
         (7, 3): (310.0, 29.0),  # in the front ghost cell: 11 m ahead of 296 + 3
         (9, 2): (200.0, 10.0),  # inside the visible window: 89 m ahead of 110 + 1
@@ -54,7 +55,8 @@ def section():
         (14, 3): (500.0, 30.0),  # still in the windows, but 14 left the road
     })  # fmt: skip
     accel = [np.nan] * len(rows)
-    accel[-8:-3] = [np.nan, -5.0, -3.5, 1.5, -0.5]  # vehicle 13's measured acceleration
+    accel[-13:-8] = [np.nan, -5.0, -3.5, 1.5, -0.5]  # vehicle 13's measured acceleration
+    accel[-5:] = [np.nan, 0.5, 3.0, 1.0, 1.0]  # 15's: the 3.0 commanded inside the window
     vehicles, windows = _log(rows, accel)
     return handover_section(vehicles, windows, recording, Road.WESTBOUND, T0, DT, (0.0, 1000.0))
 
@@ -73,7 +75,7 @@ def test_a_vehicle_handed_back_jumps_to_its_recording_and_the_jump_is_measured(s
 
 def test_the_vehicles_outside_the_visible_window_are_relaxing_and_measured(section):
     out = section["relaxing"]
-    assert out["vehicles"] == 3  # 13 and 14 ahead of the visible window, 5 behind it
+    assert out["vehicles"] == 4  # 13, 14 and 15 ahead of the visible window, 5 behind it
     assert out["accel_min_mps2"] == -5.0 and out["accel_max_mps2"] == 1.5
     assert out["speed_min_mps"] == pytest.approx(20.0)  # 5
     distance = out["distance_m"]  # 13 against its recording (5 has none then)

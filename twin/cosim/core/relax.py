@@ -10,7 +10,8 @@ closes the distance to its recorded trajectory within physical limits:
 * its acceleration is a critically damped tracking law toward its recording, with
   natural frequency :data:`OMEGA`, never more than its car following allows behind
   the vehicle or ghost ahead, within [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`] (its
-  emergency braking, when it needs more, is left as it is and shows in the metrics);
+  emergency braking behind a body, when it needs more, is left as it is and shows in
+  the metrics; a ghost that appears close ahead has no body to hit);
   its speed never goes below zero (the world's brakes hold it);
 * it changes lanes only toward its recording's lane, asked of the traffic manager,
   which starts the change when the gap is safe (no discretionary change, no
@@ -34,6 +35,7 @@ import math
 from twin.core.jit import kernel
 from twin.data.recording import lane_of, replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target
+from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
 ACCEL_LOW, ACCEL_HIGH = -4.0, 2.0  # [m/s^2] a relaxing vehicle's command, emergencies aside
@@ -118,9 +120,12 @@ def desired_speeds(b, core):
 def track(b, core):
     """Each relaxing vehicle's command (after the traffic manager's): the tracking law
     toward its recording, never above its car following's command, within
-    [ACCEL_LOW, ACCEL_HIGH] unless it brakes in an emergency."""
-    bo, sl = core.bodies, core.slots
-    accel, emergency = core.traffic.drivers.accel, core.traffic.scratch.emergency
+    [ACCEL_LOW, ACCEL_HIGH] unless it brakes in an emergency behind a body (a ghost
+    that appears close ahead, a recording leaving the visible window, has no body to
+    hit: a relaxing vehicle brakes for it within its limits)."""
+    bo, sl, sc = core.bodies, core.slots, core.traffic.scratch
+    accel, emergency, lanes = core.traffic.drivers.accel, sc.emergency, core.traffic.drivers.lane
+    n = bo.valid.shape[1]  # owners from n on are ghosts
     for i in range(bo.top[b]):
         if not (bo.valid[b, i] and sl.relaxing[b, i] and sl.rec_on[b, i]):
             continue
@@ -128,7 +133,12 @@ def track(b, core):
             sl.rec_speed[b, i] - bo.speed[b, i]
         )
         command = min(law, accel[b, i])
+        behind_body = False
         if emergency[b, i]:
+            ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b],
+                              b, lanes[b, i], bo.x[b, i])  # fmt: skip
+            behind_body = 0 <= ahead < n
+        if behind_body:
             accel[b, i] = min(command, ACCEL_HIGH)
         else:
             accel[b, i] = min(max(command, ACCEL_LOW), ACCEL_HIGH)
