@@ -41,6 +41,7 @@ import pandas as pd
 from twin.core.i24 import Road
 
 BACKWARDS_M = 0.5  # [m] a jump against travel larger than this is counted as backwards
+EDGE_M = 0.05  # [m] a vehicle carried on this close to the windows' end may have left them
 
 
 def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, road: Road,
@@ -92,7 +93,9 @@ def _to_recording(rows, edges, traffic, road, t0, dt, limits) -> dict:
     carried = rows["x"].to_numpy() + rows["speed"].to_numpy() * dt
     off_road = (carried < limits[0]) | (carried > limits[1])
     ghost = present & (place == 1) & ~off_road
-    vanished = present & (place == 0) & ~off_road & (_place(carried, edges[after]) >= 0)
+    g0, g1 = edges[after, 0], edges[after, 3]  # it was still inside them (one step's
+    inside = (carried >= g0 + EDGE_M) & (carried <= g1 - EDGE_M)  # braking aside)
+    vanished = present & (place == 0) & ~off_road & inside
     return {
         "count": int(ghost.sum()),
         **_jumps(x[ghost] - carried[ghost], speed[ghost] - rows["speed"].to_numpy()[ghost]),
