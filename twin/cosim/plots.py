@@ -138,9 +138,18 @@ def boundary_figure(sim: pd.DataFrame, ghosts: pd.DataFrame, windows: pd.DataFra
     t = edges.index.to_numpy()
     fig, axes = plt.subplots(2, 1, figsize=(11, 8), sharex=True, constrained_layout=True)
     others = sim[sim["role"] != 0]
-    last = others.groupby("tid")["time"].max()
-    later = ghosts[ghosts["time"] > last.reindex(ghosts["tid"]).to_numpy()]
-    handed = np.intersect1d(last.index.to_numpy(), later["tid"].unique())
+    lives = others.groupby("id").agg(tid=("tid", "first"), first=("time", "min"),
+                                     last=("time", "max"))  # fmt: skip
+    lives = lives.sort_values("first", kind="stable")
+    # each life's ghost: its recording's dots after it, until the recording is simulated again
+    lives["until"] = lives.groupby("tid")["first"].shift(-1).fillna(np.inf)
+    ghost_of = {}
+    for vid, life in lives.iterrows():
+        dots = ghosts[(ghosts["tid"] == life["tid"]) & (ghosts["time"] > life["last"])
+                      & (ghosts["time"] < life["until"])]  # fmt: skip
+        if len(dots):
+            ghost_of[vid] = dots
+    handed_tids = lives.loc[list(ghost_of), "tid"].unique() if ghost_of else []
     palette = plt.get_cmap("tab10").colors
     sides = (("front", "x1", "g1", 1.0), ("rear", "x0", "g0", -1.0))
     for ax, (name, edge, outer, sign) in zip(axes, sides, strict=True):
@@ -153,22 +162,20 @@ def boundary_figure(sim: pd.DataFrame, ghosts: pd.DataFrame, windows: pd.DataFra
         def moved(rows, edge=edge, sign=sign):
             return sign * (rows["x"].to_numpy() - edges[edge].reindex(rows["time"]).to_numpy())
 
-        plain = ~ghosts["tid"].isin(handed)
+        plain = ~ghosts["tid"].isin(handed_tids)
         ax.scatter(ghosts["time"][plain], moved(ghosts[plain]), s=2, color="0.75",
                    linewidths=0, label="ghosts", rasterized=True)  # fmt: skip
         side = 0
-        for tid in handed:
-            track = others[others["tid"] == tid]
-            d = moved(track)
-            if not (d[-1] > 0.0 or moved(later[later["tid"] == tid])[:1].clip(min=0).any()):
+        for vid, ghost in ghost_of.items():
+            track = others[others["id"] == vid]
+            d, g = moved(track), moved(ghost)
+            if not (d[-1] > 0.0 or g[0] > 0.0):
                 continue  # handed over at the other edge
             colour = palette[side % len(palette)]
             side += 1
             ax.plot(track["time"], d, color=colour, lw=0.8)
-            out = np.where(d > 0.0, d, np.nan)
-            ax.plot(track["time"], out, color=colour, lw=2.2)
-            ghost = later[later["tid"] == tid]
-            ax.scatter(ghost["time"], moved(ghost), s=6, color=colour, linewidths=0)
+            ax.plot(track["time"], np.where(d > 0.0, d, np.nan), color=colour, lw=2.2)
+            ax.scatter(ghost["time"], g, s=6, color=colour, linewidths=0)
         ax.plot([], [], color="0.3", lw=0.8, label="a vehicle simulated (thick: relaxing)")
         ax.scatter([], [], s=6, color="0.3", label="... then its ghost")
         ax.set_ylim(-BOUNDARY_MARGIN_M, float(np.nanmax(cell, initial=0.0)) + BOUNDARY_MARGIN_M)

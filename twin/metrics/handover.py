@@ -73,15 +73,16 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
     removed = last[last["step"] < edges.shape[0] - 1]  # the episode went on after them
     spawned = first[first["step"].between(1, edges.shape[0] - 1)]  # after the start
     relaxing = _place(frame["x"].to_numpy(), edges[frame["step"].to_numpy()]) != 0
-    # a step's measured acceleration was commanded at the row before: a relaxing one's
-    # where the vehicle relaxed then too
+    # a step's measured acceleration (on its last row) was commanded at the row before:
+    # a relaxing vehicle's steps are those that began with it relaxing
     ids = frame["id"].to_numpy()
-    before = np.r_[False, relaxing[:-1] & (ids[1:] == ids[:-1])]
-    frame["accel"] = np.where(before, frame["accel"].to_numpy(float), np.nan)
+    began = np.zeros(len(frame), bool)
+    began[1:] = relaxing[:-1] & (ids[1:] == ids[:-1])
+    accel = frame["accel"].to_numpy(float)[began]
     return {
         "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt, limits),
         "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),
-        "relaxing": _relaxing(frame[relaxing], traffic, road, t0, dt),
+        "relaxing": _relaxing(frame[relaxing], accel, traffic, road, t0, dt),
     }
 
 
@@ -105,13 +106,12 @@ def _to_recording(rows, edges, traffic, road, t0, dt, limits) -> dict:
     }
 
 
-def _relaxing(rows, traffic, road, t0, dt) -> dict:
+def _relaxing(rows, accel, traffic, road, t0, dt) -> dict:
     """The rows of the vehicles outside the visible window (relaxing): how many
     vehicles, their measured accelerations' range, their lowest speed, their distance
     from their recordings."""
     present, x, _ = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + rows["step"] * dt)
     distance = np.abs(rows["x"].to_numpy() - x)[present]
-    accel = rows["accel"].to_numpy(float)
     measured = accel[np.isfinite(accel)]
     return {
         "vehicles": int(rows["id"].nunique()),

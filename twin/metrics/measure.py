@@ -34,11 +34,15 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
     """
     cfg, log = sim.config, sim.log
     vehicles, windows, ghosts = log.vehicles(), log.windows(), log.ghosts()
+    # the fidelity and control figures judge the visible window, as the recording is
+    # judged there: vehicles relaxing outside it (twin.cosim.core.relax) are left out
+    inside = fidelity.in_moving_window(vehicles["time"], vehicles["x"], windows)
+    visible = vehicles[inside | (vehicles["role"] == 0).to_numpy()]
     recorded_ego = sim.traffic.track(cfg.road, sim.ego.tid)
     ego_rows = vehicles[vehicles["role"] == 0]
     every = max(1, round(fidelity.SAMPLE_PERIOD / cfg.dt))
-    step_of = np.round(vehicles["time"].to_numpy() / cfg.dt).astype(np.int64)
-    sampled = vehicles[step_of % every == 0]
+    step_of = np.round(visible["time"].to_numpy() / cfg.dt).astype(np.int64)
+    sampled = visible[step_of % every == 0]
     sampled_windows = windows[np.round(windows["time"] / cfg.dt).astype(np.int64) % every == 0]
     sim_s = sim.sim_time
     lengths = store.trajectory_arrays["length"]
@@ -61,10 +65,10 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
                 sampled, sampled_windows, sim.traffic, cfg.road, sim.t0, sim_s
             ),
         },
-        **control_sections(sim, vehicles, ghosts, lengths),
-        "counts": _counts(sim, recorded_changes, vehicles, windows, sampled),
+        **control_sections(sim, visible, ghosts, lengths),
+        "counts": _counts(sim, recorded_changes, visible, windows, sampled),
         "lane_flows": lane_flow_fidelity.episode_section(
-            lane_flow_fidelity.simulated_changes(vehicles, cfg.dt),
+            lane_flow_fidelity.simulated_changes(visible, cfg.dt),
             lane_flow_fidelity.recorded_changes_in_window(recorded_changes, windows, sim.t0),
             windows,
         ),

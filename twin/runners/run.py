@@ -363,10 +363,16 @@ def _seam_line(handover: dict) -> str:
             f"{largest(out)} m), {out['into_visible_window']} vanished, {back['count']} "
             f"spawned from ghosts (largest jump {largest(back)} m)")  # fmt: skip
     if relaxing["vehicles"]:
+        low, high = relaxing["accel_min_mps2"], relaxing["accel_max_mps2"]
+        far = relaxing["distance_m"]["max"]
         line += (f"; {relaxing['vehicles']} relaxed (acceleration "
-                 f"{relaxing['accel_min_mps2']:.2f} to {relaxing['accel_max_mps2']:.2f} m/s^2, "
-                 f"up to {relaxing['distance_m']['max']:.1f} m from the recording)")  # fmt: skip
+                 f"{_figure(low)} to {_figure(high)} m/s^2, up to {_figure(far)} m from the "
+                 "recording)")  # fmt: skip
     return line
+
+
+def _figure(value) -> str:
+    return "-" if value is None else f"{value:.2f}"
 
 
 def summary(result: RunResult) -> str:

@@ -88,8 +88,9 @@ def despawn_outside(b, core):
     removed, or, where the settings relax them, relax (:mod:`twin.cosim.core.relax`)
     from the ghost cells on until they are back on their recordings; a relaxing vehicle
     outside the windows is removed unless its recording is in a ghost cell (where it
-    would appear as a ghost, away from the vehicle), and so is one off the road; back
-    inside the visible window it is visible again. Returns how many were removed."""
+    would appear as a ghost, away from the vehicle), and so is one whose recording is
+    absent or off the lanes, or one off the road; back inside the visible window it is
+    visible again. Returns how many were removed."""
     valid, x, ep, sl, cs = (
         core.bodies.valid,
         core.bodies.x,
@@ -108,11 +109,13 @@ def despawn_outside(b, core):
                 relax.end(b, core, i, ep.step[b] * cs.dt)
             continue
         t = ep.t0[b] + ep.step[b] * cs.dt
-        if sl.relaxing[b, i]:
+        if cs.relax:
             relax.target(b, core, i, t)  # its recording now
         xr = sl.rec_x[b, i]
         recorded_in_cell = sl.rec_on[b, i] and g0 <= xr <= g1 and not v0 <= xr <= v1
-        stays = (g0 <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
+        stays = sl.rec_on[b, i] and (
+            (g0 <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
+        )
         if cs.relax and stays and cs.limit_lo <= x[b, i] <= cs.limit_hi:
             if not sl.relaxing[b, i]:
                 relax.begin(b, core, i, t)

@@ -40,7 +40,7 @@ from twin.traffic.kernels import state as traffic
 Slots = namedtuple(
     "Slots",
     "r tid base_speed av just_spawned spawn_speed off_road tgt_lane tgt_draws plan_next "
-    "plan_end tgt_on order listed relaxing rec_on rec_x rec_y rec_speed",
+    "plan_end tgt_on order listed relaxing rec_on rec_x rec_y rec_speed rec_accel changing",
 )
 Episodes = namedtuple(
     "Episodes",
@@ -99,6 +99,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         plan_next=per_slot(np.int64), plan_end=per_slot(np.int64), tgt_on=per_slot(bool),
         order=per_slot(np.int64, -1), listed=per_slot(bool), relaxing=per_slot(bool),
         rec_on=per_slot(bool), rec_x=per_slot(), rec_y=per_slot(), rec_speed=per_slot(),
+        rec_accel=per_slot(), changing=per_slot(bool),
     )  # fmt: skip
     zeros = np.zeros(b, np.int64)
     episodes = Episodes(

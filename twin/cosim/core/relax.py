@@ -7,34 +7,37 @@ recordings while they are in the window (a few metres to tens of metres), so the
 vehicle jumped. Here it stays a simulated body in the ghost cell, **relaxing**, and
 closes the distance to its recorded trajectory within physical limits:
 
-* its acceleration is a critically damped tracking law toward its recording, with
-  natural frequency :data:`OMEGA`, never more than its car following allows behind
-  the vehicle or ghost ahead, within [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`] (its
-  emergency braking behind a body, when it needs more, is left as it is and shows in
-  the metrics; a ghost that appears close ahead has no body to hit);
-  its speed never goes below zero (the world's brakes hold it);
-* it changes lanes only toward its recording's lane, asked of the traffic manager,
-  which starts the change when the gap is safe (no discretionary change, no
-  strategic target);
+* its acceleration is a critically damped tracking law toward its recording (the
+  recording's own acceleration plus a correction of natural frequency :data:`OMEGA`),
+  never more than its car following allows behind the vehicle or ghost ahead, within
+  [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`]; braking harder is left to it only behind a
+  body in a lane it occupies (a ghost that appears close ahead, a recording leaving
+  the visible window, has no body to hit); its speed never goes below zero (the
+  world's brakes hold it);
+* it changes lanes only toward its recording's lane where the HOV rule allows it,
+  asked of the traffic manager, which starts the change when the gap is safe (no
+  discretionary change, no strategic target; such a change is not counted among the
+  visible traffic's lane changes);
 * it is handed to its recording (a ghost again) once it is within
   :data:`HAND_BACK_X` and :data:`HAND_BACK_SPEED` of it, in its lane and within
   :data:`HAND_BACK_Y` across, with the recording in a ghost cell: the step it becomes
   a ghost it moves by at most that much;
-* it is removed when it leaves the windows (the outer edge of the ghost cells), as
-  every simulated vehicle was;
-* back inside the visible window it is a visible vehicle again, its driver deciding.
+* it is removed once it is outside the windows, unless its recording is in a ghost
+  cell (it would appear there, away from the vehicle), once its recording ends or
+  leaves the lanes, and when it leaves the road; a vehicle whose recording is absent
+  when it leaves the visible window is removed then, as in the paper;
+* back inside the visible window it is a visible vehicle again: its driver decides
+  (its next lane-change decision at once; a strategic target it had is not restored).
 
-A relaxing vehicle whose recording has ended (or is not recorded at the time) drives
-as its driver until it leaves the windows. How far a relaxing vehicle strays from
-its recorded track, its largest acceleration and its slowest speed are measured in
-every run (``twin.metrics.handover``).
+How far a relaxing vehicle strays from its recorded track, its acceleration and its
+slowest speed are measured in every run (``twin.metrics.handover``).
 """
 
 import math
 
 from twin.core.jit import kernel
 from twin.data.recording import lane_of, replay
-from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target
+from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
@@ -69,16 +72,23 @@ def end(b, core, i, time):
 
 @kernel
 def target(b, core, i, t):
-    """Slot ``i``'s recording at unix ``t`` [s] (``rec_on`` where it is recorded then),
-    and the lane change toward its lane asked where the lanes differ."""
-    sl, dr = core.slots, core.traffic.drivers
+    """Slot ``i``'s recording at unix ``t`` [s] (``rec_on`` where it is recorded then and
+    on the lanes; its acceleration over the next step), and the lane change toward its
+    lane asked where the lanes differ and the HOV rule allows it."""
+    sl, dr, ts = core.slots, core.traffic.drivers, core.traffic.settings
     present, x, y, speed = replay(core.rec, sl.r[b, i], t)
     lane = lane_of(y) if present else 0
     sl.rec_on[b, i] = present and lane != 0
     sl.rec_x[b, i], sl.rec_y[b, i], sl.rec_speed[b, i] = x, y, speed
+    dt = core.settings.dt
+    later, _, _, speed_later = replay(core.rec, sl.r[b, i], t + dt)
+    sl.rec_accel[b, i] = (speed_later - speed) / dt if later else 0.0
     ask = 0
-    if sl.rec_on[b, i] and dr.lane_from[b, i] == dr.lane[b, i] and lane != dr.lane[b, i]:
-        ask = LEFT if lane > dr.lane[b, i] else RIGHT
+    own = dr.lane[b, i]
+    if sl.rec_on[b, i] and dr.lane_from[b, i] == own and lane != own:
+        step = LEFT if lane > own else RIGHT
+        if hov_allows(dr.hov_eligible[b, i], own, own + step, core.bodies.x[b, i], ts.hov_openings):
+            ask = step
     dr.requested[b, i] = ask
 
 
@@ -117,6 +127,16 @@ def desired_speeds(b, core):
 
 
 @kernel
+def note_changes(b, core):
+    """Before the traffic manager's step: which relaxing vehicles are changing lanes
+    (:func:`track` then takes the changes they start out of the manager's count, which
+    counts the visible traffic's)."""
+    bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
+    for i in range(bo.top[b]):
+        sl.changing[b, i] = dr.lane_from[b, i] != dr.lane[b, i]
+
+
+@kernel
 def track(b, core):
     """Each relaxing vehicle's command (after the traffic manager's): the tracking law
     toward its recording, never above its car following's command, within
@@ -124,20 +144,28 @@ def track(b, core):
     that appears close ahead, a recording leaving the visible window, has no body to
     hit: a relaxing vehicle brakes for it within its limits)."""
     bo, sl, sc = core.bodies, core.slots, core.traffic.scratch
-    accel, emergency, lanes = core.traffic.drivers.accel, sc.emergency, core.traffic.drivers.lane
+    dr = core.traffic.drivers
+    accel, lanes, lanes_from = dr.accel, dr.lane, dr.lane_from
     n = bo.valid.shape[1]  # owners from n on are ghosts
     for i in range(bo.top[b]):
-        if not (bo.valid[b, i] and sl.relaxing[b, i] and sl.rec_on[b, i]):
+        if not (bo.valid[b, i] and sl.relaxing[b, i]):
             continue
-        law = OMEGA * OMEGA * (sl.rec_x[b, i] - bo.x[b, i]) + 2.0 * OMEGA * (
-            sl.rec_speed[b, i] - bo.speed[b, i]
+        if lanes_from[b, i] != lanes[b, i] and not sl.changing[b, i]:
+            core.traffic.counters.lane_changes[b] -= 1  # toward its recording's lane
+        if not sl.rec_on[b, i]:
+            continue
+        law = (
+            sl.rec_accel[b, i]
+            + OMEGA * OMEGA * (sl.rec_x[b, i] - bo.x[b, i])
+            + 2.0 * OMEGA * (sl.rec_speed[b, i] - bo.speed[b, i])
         )
         command = min(law, accel[b, i])
         behind_body = False
-        if emergency[b, i]:
-            ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b],
-                              b, lanes[b, i], bo.x[b, i])  # fmt: skip
-            behind_body = 0 <= ahead < n
+        if command < ACCEL_LOW:  # behind a body in any lane it occupies: brake as it needs
+            for lane in (lanes[b, i], lanes_from[b, i], bo.lane[b, i]):
+                ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner,
+                                  sc.entry_count[b], b, lane, bo.x[b, i])  # fmt: skip
+                behind_body |= 0 <= ahead < n
         if behind_body:
             accel[b, i] = min(command, ACCEL_HIGH)
         else:

@@ -6,8 +6,9 @@ paper's loop, ``docs/cosim.md``), one pure pass per episode::
     decide              the traffic manager: car following, lane changes, controllers
     integrate        4. the kinematic world moves the bodies (or pybullet, outside)
     after_world         contacts, the spawns' speed check, the ego's range
-    despawn_outside  5. visible vehicles leaving the visible window are removed
-    snapshot         6. the recording in the windows now; entering vehicles spawned
+    despawn_outside  5. visible vehicles leaving the visible window relax (or are removed)
+    snapshot         6. the recording in the windows now; relaxing vehicles back on
+    hand_back           their recordings handed to them; entering vehicles spawned
     enter_and_reload 7. and the ghost set reloaded
     record              the log row, the AV's fuel
 
@@ -168,6 +169,7 @@ def decisions(b, core):
     """The traffic manager: every body's commanded acceleration and steering."""
     ep, cs = core.episodes, core.settings
     step = ep.step[b]
+    relax.note_changes(b, core)
     decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
     relax.track(b, core)
     speed, before = core.bodies.speed, ep.speed_prev
