@@ -140,9 +140,9 @@ def note_changes(b, core):
 def track(b, core):
     """Each relaxing vehicle's command (after the traffic manager's): the tracking law
     toward its recording, never above its car following's command, within
-    [ACCEL_LOW, ACCEL_HIGH] unless it brakes in an emergency behind a body (a ghost
-    that appears close ahead, a recording leaving the visible window, has no body to
-    hit: a relaxing vehicle brakes for it within its limits)."""
+    [ACCEL_LOW, ACCEL_HIGH]; only where its car following asks for harder braking
+    behind a body in a lane it occupies does it brake that hard (a ghost that appears
+    close ahead, a recording leaving the visible window, has no body to hit)."""
     bo, sl, sc = core.bodies, core.slots, core.traffic.scratch
     dr = core.traffic.drivers
     accel, lanes, lanes_from = dr.accel, dr.lane, dr.lane_from
@@ -159,14 +159,12 @@ def track(b, core):
             + OMEGA * OMEGA * (sl.rec_x[b, i] - bo.x[b, i])
             + 2.0 * OMEGA * (sl.rec_speed[b, i] - bo.speed[b, i])
         )
-        command = min(law, accel[b, i])
-        behind_body = False
-        if command < ACCEL_LOW:  # behind a body in any lane it occupies: brake as it needs
+        following = accel[b, i]
+        floor = ACCEL_LOW
+        if following < ACCEL_LOW:  # behind a body in a lane it occupies: as hard as needed
             for lane in (lanes[b, i], lanes_from[b, i], bo.lane[b, i]):
                 ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner,
                                   sc.entry_count[b], b, lane, bo.x[b, i])  # fmt: skip
-                behind_body |= 0 <= ahead < n
-        if behind_body:
-            accel[b, i] = min(command, ACCEL_HIGH)
-        else:
-            accel[b, i] = min(max(command, ACCEL_LOW), ACCEL_HIGH)
+                if 0 <= ahead < n:
+                    floor = following
+        accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
