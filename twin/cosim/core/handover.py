@@ -118,7 +118,7 @@ def despawn_outside(b, core):
         )
         if cs.relax and stays and cs.limit_lo <= x[b, i] <= cs.limit_hi:
             if not sl.relaxing[b, i]:
-                relax.begin(b, core, i, t)
+                relax.begin(b, core, i)
             continue
         remove(b, core, i)
         gone += 1
@@ -129,13 +129,13 @@ def despawn_outside(b, core):
 @kernel
 def hand_back(b, core):
     """Step 6 for the relaxing vehicles, after the recording was read: those back on
-    their recordings are handed to them (:func:`twin.cosim.core.relax.settled`); they
-    are ghosts at the reload. Returns how many."""
+    their recordings (:func:`twin.cosim.core.relax.settled`, on the targets step 5 read
+    at this same time) are handed to them; they are ghosts at the reload. Returns how
+    many."""
     bo, sl, ep = core.bodies, core.slots, core.episodes
-    t = ep.t0[b] + ep.step[b] * core.settings.dt
     back = 0
     for i in range(bo.top[b]):
-        if bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i, t):
+        if bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i):
             remove(b, core, i)
             back += 1
     ep.handed_back[b] += back

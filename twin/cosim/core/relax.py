@@ -49,16 +49,14 @@ FREE_SPEED = 5.0  # [m/s] a relaxing driver's desired speed lies this far above 
 
 
 @kernel
-def begin(b, core, i, t):
-    """Slot ``i`` leaves the visible window into a ghost cell at unix ``t`` [s]: it
-    relaxes toward its recording from now on."""
+def begin(b, core, i):
+    """Slot ``i`` leaves the visible window into a ghost cell (its :func:`target` read
+    this step): it relaxes toward its recording from now on."""
     sl, dr = core.slots, core.traffic.drivers
     sl.relaxing[b, i] = True
     dr.next_decision[b, i] = math.inf  # no discretionary change while it relaxes
-    dr.requested[b, i] = 0
     clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
     sl.tgt_on[b, i] = False
-    target(b, core, i, t)
 
 
 @kernel
@@ -93,11 +91,10 @@ def target(b, core, i, t):
 
 
 @kernel
-def settled(b, core, i, t):
-    """Relaxing slot ``i``'s target at unix ``t`` [s] (after the recording was read),
-    and whether it is back on its recording (module doc): to be handed to it."""
+def settled(b, core, i):
+    """Whether relaxing slot ``i`` is back on its recording (module doc; its
+    :func:`target` read this step): to be handed to it."""
     bo, sl, dr, ep = core.bodies, core.slots, core.traffic.drivers, core.episodes
-    target(b, core, i, t)
     if not sl.rec_on[b, i]:
         return False
     xr = sl.rec_x[b, i]
