@@ -62,8 +62,9 @@ class Counters:
     # tried again every step while inside the visible window)
     skipped_invalid: int = 0  # spawns refused: recorded state outside the lanes or too fast
     skipped_full: int = 0  # spawns refused: every vehicle slot of the episode was taken
+    yielded: int = 0  # recorded vehicles made relaxing bodies behind one they crowded
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
-    collisions: list = field(default_factory=list)  # (time [s], id, id) of the new contacts
+    collisions: list = field(default_factory=list)  # the new contacts (layout.CONTACT_COLUMNS)
     # kept (a collision is a pair: twin.metrics.collisions counts them)
     contacts: int = 0  # new contacts, also past the first COLLISIONS_KEPT listed above
     off_road: int = 0  # vehicles ever outside the four lanes
@@ -591,11 +592,16 @@ def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
     c.despawned = int(ep.despawned[b])
     c.skipped_overlap, c.skipped_invalid = int(ep.skipped_overlap[b]), int(ep.skipped_invalid[b])
     c.skipped_full, c.off_road = int(ep.skipped_full[b]), int(ep.off_road[b])
+    c.yielded = int(ep.yielded[b])
     n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
     c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
     c.contacts = int(ep.collisions[b])
     m = min(c.contacts, layout.COLLISIONS_KEPT)
-    c.collisions = [(float(t), int(x), int(y)) for t, x, y in ep.collision_log[b, :m]]
+    c.collisions = [
+        (float(row[0]), int(row[1]), int(row[2]), int(row[3]), int(row[4]), int(row[5]),
+         float(row[6]))
+        for row in ep.collision_log[b, :m]
+    ]  # fmt: skip
     if ep.ended[b] == layout.EGO_LEFT and not c.ended:
         c.ended = (
             f"the ego left the range of map and data (x = {ep.ended_x[b]:.1f} m) at "

@@ -2,43 +2,61 @@
 an episode's contacts and its trajectory log (the ``physics`` section of
 ``metrics.json``).
 
-A contact is a pair of bodies that begins to touch (the core records each with its
-time and the two ids); a **collision** is a pair that touched at least once, however
-often it touched again (two bodies pushed together in a queue touch and part many
-times). Each collision is listed with both vehicles at its first contact:
+A contact is a pair of vehicles that begins to touch: two bodies (the world's contact,
+or the kinematic world's footprints), or a body and a ghost (footprints: a ghost has no
+body, but it is drawn and labelled, so a body on it is a crash the cameras see). The
+core records each with its time, the two ids and what each was doing then
+(:data:`~twin.cosim.core.layout.CONTACT_COLUMNS`). A **collision** is a pair that
+touched at least once, however often it touched again (two bodies pushed together in a
+queue touch and part many times). Each collision is listed with both vehicles at its
+first contact:
 
-* ``role``: ``ego`` or ``visible`` (ghosts have no body and cannot touch);
+* ``role``: ``ego``, ``visible``, ``relaxing`` (a simulated vehicle in a ghost cell on
+  its way back to its recording, :mod:`twin.cosim.core.relax`) or ``ghost`` (``id``
+  null, ``tid`` its store trajectory);
 * ``lane``, ``speed_mps``;
 * ``doing``: ``just_spawned`` (its first row less than :data:`JUST_SPAWNED_S` before),
-  ``changing_lanes`` (its lane in the log changes within :data:`CHANGE_BEFORE_S`
-  before or :data:`CHANGE_AFTER_S` after), ``stalled`` (slower than
-  :data:`STALLED_SPEED` for the :data:`STALLED_S` before), else ``following``.
+  ``merging`` (in a lane change it must make, or seeking one inside its strategic
+  target's zone: a lane ending, a merge), ``changing_lanes`` (its lane in the log
+  changes within :data:`CHANGE_BEFORE_S` before or :data:`CHANGE_AFTER_S` after, or
+  the core saw it changing), ``stalled`` (slower than :data:`STALLED_SPEED` for the
+  :data:`STALLED_S` before), else ``following``; a ghost is ``recorded``.
 
-and a ``cause``, the first that holds: ``spawn`` (either just spawned), ``lane_change``
-(either changing lanes), ``rear_end`` (the same lane), else ``other``; a contact past
-those the core keeps (:data:`~twin.cosim.core.layout.COLLISIONS_KEPT` an episode) counts as a
-collision of cause ``unknown``.
+and a ``cause``, the first that holds: ``ghost`` (one of them is a ghost), ``spawn``
+(either just spawned), ``lane_change`` (either changing lanes or merging),
+``rear_end`` (the same lane), else ``other``; a contact past those the core keeps
+(:data:`~twin.cosim.core.layout.COLLISIONS_KEPT` an episode) counts as a collision of
+cause ``unknown``.
 """
 
 import numpy as np
+
+from twin.cosim.core.layout import (
+    CONTACT_CHANGING,
+    CONTACT_EGO,
+    CONTACT_GHOST,
+    CONTACT_MANDATORY,
+    CONTACT_RELAXING,
+    GHOST_ID_BASE,
+)
 
 JUST_SPAWNED_S = 1.0  # [s]
 CHANGE_BEFORE_S = 3.0  # [s]
 CHANGE_AFTER_S = 1.0  # [s]
 STALLED_SPEED = 0.5  # [m/s]
 STALLED_S = 10.0  # [s]
-CAUSES = ("spawn", "lane_change", "rear_end", "other")
+CAUSES = ("ghost", "spawn", "lane_change", "rear_end", "other")
 UNKNOWN = "unknown"  # the cause of a contact past those the core keeps
 #: every cause, in the order of twin eval's columns
-COLUMNS = ("rear_end", "lane_change", "spawn", "other", UNKNOWN)
+COLUMNS = ("rear_end", "lane_change", "spawn", "ghost", "other", UNKNOWN)
 LISTED = 20  # the first collisions are listed
 
 
 def count_collisions(contacts, total: int) -> int:
-    """How many collisions ``total`` new contacts make, of which ``contacts`` (time, id,
-    id) are the first kept: the pairs among those kept, and each contact past them as
+    """How many collisions ``total`` new contacts make, of which ``contacts`` (rows of
+    time, id, id, ...) are the first kept: the pairs among those kept, and each contact past them as
     one of its own (its pair is not known)."""
-    pairs = {(min(int(a), int(b)), max(int(a), int(b))) for _, a, b in contacts}
+    pairs = {(min(int(row[1]), int(row[2])), max(int(row[1]), int(row[2]))) for row in contacts}
     return len(pairs) + max(int(total) - len(contacts), 0)
 
 
@@ -46,8 +64,9 @@ def collision_section(contacts, vehicles, total: int | None = None) -> dict:
     """The collisions of an episode (module doc).
 
     Args:
-        contacts: (time [s], id, id) of the new contacts, in time order (the core keeps
-            first COLLISIONS_KEPT of an episode).
+        contacts: the new contacts, in time order (the core keeps the first
+            COLLISIONS_KEPT of an episode): rows of CONTACT_COLUMNS (time [s], id, id,
+            then optionally both vehicles' flags and a ghost's lane and speed).
         vehicles: the log's vehicle rows, a DataFrame (``time`` [s], ``id``, ``role``, ``lane``,
             ``speed``).
         total: how many new contacts there were (default: as many as listed); each
@@ -59,16 +78,24 @@ def collision_section(contacts, vehicles, total: int | None = None) -> dict:
         ``collision_list`` (the first :data:`LISTED`).
     """
     first: dict[tuple[int, int], list] = {}
-    for time, a, b in contacts:
-        pair = (min(int(a), int(b)), max(int(a), int(b)))
+    for row in contacts:
+        time, a, b = float(row[0]), int(row[1]), int(row[2])
+        flags = (int(row[3]), int(row[4])) if len(row) > 4 else (0, 0)
+        ghost = (int(row[5]), float(row[6])) if len(row) > 6 else (0, float("nan"))
+        if a > b:
+            a, b, flags = b, a, flags[::-1]
+        pair = (a, b)
         if pair in first:
             first[pair][1] += 1
         else:
-            first[pair] = [float(time), 1]
+            first[pair] = [time, 1, flags, ghost]
     tracks = {int(i): rows for i, rows in vehicles.groupby("id", sort=False)} if first else {}
     listed, by_cause = [], dict.fromkeys(CAUSES, 0)
-    for pair, (time, touches) in sorted(first.items(), key=lambda item: item[1][0]):
-        states = [_state(tracks.get(i), i, time) for i in pair]
+    for pair, (time, touches, flags, ghost) in sorted(first.items(), key=lambda item: item[1][0]):
+        states = [
+            _ghost(i, ghost) if f & CONTACT_GHOST else _state(tracks.get(i), i, time, f)
+            for i, f in zip(pair, flags, strict=True)
+        ]
         cause = _cause(states)
         by_cause[cause] += 1
         if len(listed) < LISTED:
@@ -84,8 +111,22 @@ def collision_section(contacts, vehicles, total: int | None = None) -> dict:
     }
 
 
-def _state(rows, vehicle_id: int, time: float) -> dict:
-    """What vehicle ``vehicle_id`` was at ``time`` (its last log row at or before it)."""
+def _ghost(key: int, ghost: tuple) -> dict:
+    """A ghost in a contact (its id there ``GHOST_ID_BASE - tid``; its lane and speed)."""
+    lane, speed = ghost
+    return {
+        "id": None,
+        "tid": GHOST_ID_BASE - key,
+        "role": "ghost",
+        "lane": lane,
+        "speed_mps": round(speed, 3),
+        "doing": "recorded",
+    }
+
+
+def _state(rows, vehicle_id: int, time: float, flags: int = 0) -> dict:
+    """What vehicle ``vehicle_id`` was at ``time`` (its last log row at or before it;
+    ``flags``, the core's CONTACT_* flags of it then)."""
     if rows is None or rows.empty:
         return {"id": vehicle_id, "role": None, "lane": None, "speed_mps": None, "doing": None}
     times = rows["time"].to_numpy()
@@ -96,7 +137,9 @@ def _state(rows, vehicle_id: int, time: float) -> dict:
     before = (times >= time - STALLED_S) & (times <= time)
     if time - times[0] < JUST_SPAWNED_S:
         doing = "just_spawned"
-    elif np.any(lanes[around] != lane):
+    elif flags & CONTACT_MANDATORY:
+        doing = "merging"
+    elif flags & CONTACT_CHANGING or np.any(lanes[around] != lane):
         doing = "changing_lanes"
     elif times[0] <= time - STALLED_S and np.all(speeds[before] < STALLED_SPEED):
         doing = "stalled"
@@ -104,18 +147,27 @@ def _state(rows, vehicle_id: int, time: float) -> dict:
         doing = "following"
     return {
         "id": vehicle_id,
-        "role": "ego" if int(rows["role"].to_numpy()[k]) == 0 else "visible",
+        "role": _role(int(rows["role"].to_numpy()[k]), flags),
         "lane": lane,
         "speed_mps": round(float(speeds[k]), 3),
         "doing": doing,
     }
 
 
+def _role(logged: int, flags: int) -> str:
+    """The role of a body (its log role, ``flags`` the core's at the contact)."""
+    if logged == 0 or flags & CONTACT_EGO:
+        return "ego"
+    return "relaxing" if flags & CONTACT_RELAXING else "visible"
+
+
 def _cause(states: list[dict]) -> str:
+    if any(s["role"] == "ghost" for s in states):
+        return "ghost"
     doings = {s["doing"] for s in states}
     if "just_spawned" in doings:
         return "spawn"
-    if "changing_lanes" in doings:
+    if doings & {"changing_lanes", "merging"}:
         return "lane_change"
     lanes = {s["lane"] for s in states}
     if len(lanes) == 1 and None not in lanes:

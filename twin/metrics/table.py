@@ -23,6 +23,7 @@ WITH_RECORDING = "runs whose ego's recording has a slow spell"
 WITH_LANE_TRAFFIC = "runs with recorded traffic in the lane"
 WITH_HANDOVER = "runs with a hand-over to the recording"
 WITH_GHOST_SPAWN = "runs with a spawn from the ghost cells"
+WITH_SPAWN = "runs with a spawn"
 WITH_RELAXING = "runs with a vehicle relaxing in the ghost cells"
 
 
@@ -150,16 +151,29 @@ METRICS: tuple[Metric, ...] = (
            "spawn from the ghost cells (the spawn against its ghost carried on at its speed)",
            ("handover", "ghost_to_visible", "position_jump_m", "max"),
            produced_by=WITH_GHOST_SPAWN),
-    Metric("collisions", "count", "pairs of vehicle bodies that touched (however often)",
+    Metric("collisions", "count", "pairs of vehicles that touched (however often): two "
+           "bodies, or a body on a ghost's recorded box",
            ("physics", "collisions"), summary="sum"),
-    Metric("contacts", "count", "new contacts between vehicle bodies (a pair that touches "
-           "again counts again)", ("physics", "contacts"), summary="sum"),
+    Metric("contacts", "count", "new contacts between vehicles, bodies or a body and a "
+           "ghost (a pair that touches again counts again)", ("physics", "contacts"),
+           summary="sum"),
     *(
         Metric(f"collisions_{cause}", "count", f"collisions of cause {cause.replace('_', ' ')} "
                "(twin/metrics/collisions.py)", ("physics", "collisions_by_cause", cause),
                summary="sum")
         for cause in COLUMNS
     ),
+    Metric("spawns_inexact", "count", "impulse spawns whose speed one step later missed "
+           "the recorded speed (carried on at the driver's command) by more than 0.5 %",
+           ("physics", "spawns_above_0.5_percent"), summary="sum"),
+    Metric("spawn_speed_error_max", "-", "the largest relative spawn speed error of the run",
+           ("physics", "spawn_speed_error_max"), produced_by=WITH_SPAWN),
+    Metric("spawns_waiting", "count", "vehicles refused a spawn for want of room (each once), "
+           "tried again while in the visible window", ("counts", "spawns_skipped_overlap"),
+           summary="sum"),
+    Metric("ghosts_yielded", "count", "recorded vehicles made relaxing bodies behind a body "
+           "they crowded (twin/cosim/core/handover.py)", ("counts", "ghosts_yielded"),
+           summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
     Metric("vehicles_off_road", "count", "vehicles that left the road",

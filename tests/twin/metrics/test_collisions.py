@@ -3,6 +3,13 @@
 import numpy as np
 import pandas as pd
 
+from twin.cosim.core.layout import (
+    CONTACT_CHANGING,
+    CONTACT_GHOST,
+    CONTACT_MANDATORY,
+    CONTACT_RELAXING,
+    GHOST_ID_BASE,
+)
 from twin.metrics.collisions import CAUSES, COLUMNS, UNKNOWN, collision_section, count_collisions
 
 DT = 0.5
@@ -34,8 +41,8 @@ def test_each_pair_is_one_collision_with_both_vehicles_and_a_cause():
     ]
     out = collision_section(contacts, _log())
     assert out["contacts"] == 4 and out["collisions"] == 3
-    assert out["collisions_by_cause"] == {"spawn": 1, "lane_change": 1, "rear_end": 1,
-                                          "other": 0, "unknown": 0}  # fmt: skip
+    assert out["collisions_by_cause"] == {"ghost": 0, "spawn": 1, "lane_change": 1,
+                                          "rear_end": 1, "other": 0, "unknown": 0}  # fmt: skip
     first, change, spawn = out["collision_list"]
     assert first["ids"] == [0, 1] and first["contacts"] == 2 and first["cause"] == "rear_end"
     ego, stalled = first["vehicles"]
@@ -66,3 +73,28 @@ def test_collisions_count_pairs_and_each_contact_past_those_kept():
     kept = [(1.0, 3, 5), (2.0, 5, 3), (3.0, 3, 6)]
     assert count_collisions(kept, 3) == 2 and count_collisions(kept, 7) == 6
     assert count_collisions([], 0) == 0
+
+
+def test_the_cores_flags_name_relaxing_vehicles_merging_and_ghosts():
+    nan = float("nan")
+    ghost = GHOST_ID_BASE - 77  # store trajectory 77
+    contacts = [
+        # vehicle 4 relaxing in a ghost cell, a ghost (lane -4, 21 m/s) runs onto it
+        (5.0, 4, ghost, CONTACT_RELAXING, CONTACT_GHOST, -4, 21.0),
+        # vehicle 2 in a change it must make (a lane ending) into the stalled vehicle 1
+        (6.0, 1, 2, 0, CONTACT_CHANGING | CONTACT_MANDATORY, 0, nan),
+        # the ego and vehicle 4 (the core saw 4 changing lanes; the log's rows do not)
+        (8.0, 4, 0, CONTACT_CHANGING, 0, 0, nan),
+    ]
+    out = collision_section(contacts, _log())
+    assert out["collisions"] == 3
+    assert out["collisions_by_cause"]["ghost"] == 1
+    assert out["collisions_by_cause"]["lane_change"] == 2
+    on_ghost, merge, change = out["collision_list"]
+    assert on_ghost["ids"] == [ghost, 4] and on_ghost["cause"] == "ghost"
+    ghost_state, relaxing = on_ghost["vehicles"]
+    assert ghost_state == {"id": None, "tid": 77, "role": "ghost", "lane": -4,
+                           "speed_mps": 21.0, "doing": "recorded"}  # fmt: skip
+    assert relaxing["role"] == "relaxing" and relaxing["id"] == 4
+    assert merge["vehicles"][1]["doing"] == "merging"
+    assert change["ids"] == [0, 4] and change["vehicles"][1]["doing"] == "changing_lanes"

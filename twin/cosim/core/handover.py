@@ -34,6 +34,13 @@ from twin.traffic.kernels.steering import centre_y
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
+#: [m] behind the rear ghost window, the recording is read too: a recorded vehicle there
+#: that crowds a relaxing body near the window's end becomes a relaxing body before it
+#: would enter the window on top of it, and a relaxing body stays that far out
+REAR_MARGIN = 50.0
+#: [m/s^2] a recorded vehicle becomes a body behind one it crowds only where it can stop
+#: behind it braking this hard (else it stays a ghost: a contact with a ghost, counted)
+YIELD_DECEL = 6.0
 
 
 # -- the tid table ---------------------------------------------------------------------------
@@ -99,6 +106,7 @@ def despawn_outside(b, core):
         core.settings,
     )
     g0, v0, v1, g1 = ep.windows[b, 0], ep.windows[b, 1], ep.windows[b, 2], ep.windows[b, 3]
+    rear = g0 - REAR_MARGIN
     ego = ep.ego[b]
     gone = 0
     for i in range(core.bodies.top[b]):
@@ -112,9 +120,9 @@ def despawn_outside(b, core):
         if cs.relax:
             relax.target(b, core, i, t)  # its recording now
         xr = sl.rec_x[b, i]
-        recorded_in_cell = sl.rec_on[b, i] and g0 <= xr <= g1 and not v0 <= xr <= v1
+        recorded_in_cell = sl.rec_on[b, i] and rear <= xr <= g1 and not v0 <= xr <= v1
         stays = sl.rec_on[b, i] and (
-            (g0 <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
+            (rear <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
         )
         if cs.relax and stays and cs.limit_lo <= x[b, i] <= cs.limit_hi:
             if not sl.relaxing[b, i]:
@@ -135,7 +143,11 @@ def hand_back(b, core):
     bo, sl, ep = core.bodies, core.slots, core.episodes
     back = 0
     for i in range(bo.top[b]):
-        if bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i):
+        if not (bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i)):
+            continue
+        # as a ghost it would crowd the body ahead and be taken back at once
+        if not crowds(b, core, bo.x[b, i], bo.y[b, i], bo.speed[b, i], bo.length[b, i],
+                      bo.width[b, i], i):  # fmt: skip
             remove(b, core, i)
             back += 1
     ep.handed_back[b] += back
@@ -193,23 +205,45 @@ def fits(b, core, x, y, speed, length, width):
     """Whether a recorded vehicle at back x, y [m] can be spawned among the bodies: no
     body within :func:`spawn_room` ahead or behind among those it overlaps laterally;
     a body changing lanes holds its new lane too."""
-    bo, dr, cs = core.bodies, core.traffic.drivers, core.settings
+    cs = core.settings
+    return not _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
+                     cs.spawn_decel, np.int64(-1), np.bool_(False))  # fmt: skip
+
+
+@kernel
+def crowds(b, core, x, y, speed, length, width, skip):
+    """Whether a vehicle at back x, y [m] moving at ``speed`` [m/s] is closer than
+    :func:`spawn_room` to a body ahead of it (not slot ``skip``) among those it overlaps
+    laterally, as :func:`fits` asks: a recording so close behind a simulated body would
+    soon run into it."""
+    cs = core.settings
+    return _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
+                 cs.spawn_decel, skip, np.bool_(True))  # fmt: skip
+
+
+@kernel
+def _near(b, core, x, y, speed, length, width, c, rest, decel, skip, ahead_only):
+    """Whether a body (not slot ``skip``; only those ahead of back ``x`` where
+    ``ahead_only``) is closer than :func:`spawn_room` at clearances ``c``, ``rest`` [m]
+    and deceleration ``decel`` [m/s^2] to a vehicle at back x, y [m] and ``speed``
+    [m/s], among those it overlaps laterally; a body changing lanes holds its new lane
+    too."""
+    bo, dr = core.bodies, core.traffic.drivers
     valid, bx, by, bspeed, blength, bwidth = bo.valid, bo.x, bo.y, bo.speed, bo.length, bo.width
     lane, lane_from = dr.lane, dr.lane_from
-    c, rest, decel = cs.clearance, cs.clearance_at_rest, cs.spawn_decel
     for j in range(bo.top[b]):
-        if not valid[b, j]:
+        if not valid[b, j] or j == skip or (ahead_only and bx[b, j] < x):
             continue
         bv = max(bspeed[b, j], 0.0)
         if not _clear_of(c, rest, decel, x, y, speed, length, width, bx[b, j], by[b, j], bv,
                          blength[b, j], bwidth[b, j]):  # fmt: skip
-            return False
+            return True
         if lane_from[b, j] != lane[b, j] and not _clear_of(
             c, rest, decel, x, y, speed, length, width, bx[b, j], centre_y(lane[b, j]), bv,
             blength[b, j], bwidth[b, j],
         ):  # fmt: skip
-            return False
-    return True
+            return True
+    return False
 
 
 @kernel
@@ -339,7 +373,8 @@ def spawn_recorded(b, core, k, retry):
 def snapshot(b, core, t):
     """The recorded vehicles in the windows' span at unix ``t`` [s], sorted by x."""
     sn, ep = core.snap, core.episodes
-    count = window(core.rec, t, ep.windows[b, 0], ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
+    rear = ep.windows[b, 0] - (REAR_MARGIN if core.settings.relax else 0.0)
+    count = window(core.rec, t, rear, ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
                    sn.speed[b])  # fmt: skip
     if count < 0:
         ep.overflow[b] |= SNAPSHOT_FULL
@@ -369,10 +404,11 @@ def enter_and_reload(b, core):
     set is reloaded. Returns how many were spawned."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
     initial = ep.step[b] == 0  # a value, not a literal argument: one compilation
+    t = ep.t0[b] + ep.step[b] * core.settings.dt
     keys, flags, tslot = core.table.key, core.table.flags, core.table.slot
     sr, sx, sy, sspeed = sn.r, sn.x, sn.y, sn.speed
     n = sn.count[b]
-    a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))
+    a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))  # before a: the rear margin
     v0 = _bound(sx[b], n, ep.windows[b, 1], np.bool_(False))
     v1 = _bound(sx[b], n, ep.windows[b, 2], np.bool_(True))
     d = _bound(sx[b], n, ep.windows[b, 3], np.bool_(True))
@@ -394,7 +430,7 @@ def enter_and_reload(b, core):
         if enter and spawn_recorded(b, core, k, retry):
             spawned += 1
     overflow = False
-    for k in range(n):
+    for k in range(a, n):
         h = entry(keys, flags, tslot, b, np.int64(sr[b, k]), np.bool_(True))
         if h >= 0:
             flags[b, h] |= SEEN
@@ -408,13 +444,17 @@ def enter_and_reload(b, core):
             flags[b, h] &= ~GHOST
     count = 0
     capacity = gr.shape[1]
-    for k in range(a, d):
+    for k in range(d):
         if v0 <= k < v1:
             continue
         r = sr[b, k]
         lane = lane_of(sy[b, k])
         if lane == 0 or flags_of(keys, flags, tslot, b, r) & SIMULATED:
             continue
+        if core.settings.relax and _yields(b, core, k, t):
+            continue  # simulated now, relaxing behind the body it would run into
+        if k < a:
+            continue  # in the rear margin, not a ghost
         if count == capacity:
             ep.overflow[b] |= GHOSTS_FULL
             break
@@ -429,6 +469,35 @@ def enter_and_reload(b, core):
     if overflow:
         ep.overflow[b] |= TABLE_FULL
     return spawned
+
+
+@kernel
+def _yields(b, core, k, t):
+    """Whether snapshot row ``k``, a recorded vehicle in a ghost cell at unix ``t`` [s],
+    crowds a body ahead of it (:func:`crowds`: a simulated vehicle that lags its own
+    recording, which the recording behind it does not know of) and so becomes a
+    simulated vehicle there, relaxing (:mod:`twin.cosim.core.relax`): spawned at its
+    recorded state where its footprint touches no body, it follows the body ahead and
+    is handed back to its recording once on it with room ahead. Counted in
+    ``Episodes.yielded``."""
+    sn, rec = core.snap, core.rec
+    r = sn.r[b, k]
+    x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
+    length, width = rec.length[r], rec.width[r]
+    if speed > MAX_SPEED or not crowds(b, core, x, y, speed, length, width, np.int64(-1)):
+        return False
+    cs = core.settings
+    if _near(b, core, x, y, speed, length, width, cs.clearance_at_rest, cs.clearance_at_rest,
+             YIELD_DECEL, np.int64(-1), np.bool_(False)):  # fmt: skip
+        return False  # too close to stop behind it: it stays a ghost (a contact with a ghost)
+    slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
+    if slot < 0:
+        core.episodes.skipped_full[b] += 1
+        return False
+    relax.begin(b, core, slot)
+    relax.target(b, core, slot, t)
+    core.episodes.yielded[b] += 1
+    return True
 
 
 @kernel

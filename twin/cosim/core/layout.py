@@ -10,8 +10,10 @@ validity mask), made once and reused.
   bookkeeping, the checks of its spawn, and whether it relaxes toward its recording
   in a ghost cell with the recording's state now (:mod:`twin.cosim.core.relax`);
 * ``episodes`` (:data:`Episodes`, B): each episode's seed, clock, ego, windows,
-  counters, and the contacts it had (``collisions`` counts new contacts and
-  ``collision_log`` keeps the first; a collision is a pair, :mod:`twin.metrics.collisions`);
+  counters, and the contacts it had (``collisions`` counts new contacts, of two bodies
+  or of a body and a ghost, and ``collision_log`` keeps the first with what each vehicle
+  was doing, :data:`CONTACT_COLUMNS`; a collision is a pair,
+  :mod:`twin.metrics.collisions`);
 * ``table`` (:data:`TidTable`, B x H): per episode, every recorded vehicle it has met,
   in an open-addressing hash by recording index: simulated now, a ghost after the
   last reload, seen in the windows before, waiting for room to spawn;
@@ -45,10 +47,10 @@ Slots = namedtuple(
 Episodes = namedtuple(
     "Episodes",
     "seed t0 step steps done ended ended_x ego ego_id ego_r next_id windows lead_speed leads "
-    "spawned spawned_initially despawned handed_back skipped_overlap skipped_invalid skipped_full "
-    "collisions collision_log off_road spawn_errors spawn_error_count touching "
-    "touching_count pair_count fuel fuel_sum group_distance speed_prev speed_prev_control "
-    "collisions_before followers follower_count overflow",
+    "spawned spawned_initially despawned handed_back yielded skipped_overlap skipped_invalid "
+    "skipped_full collisions collision_log off_road spawn_errors spawn_error_count touching "
+    "touching_count ghost_touching ghost_touching_count pair_count fuel fuel_sum group_distance "
+    "speed_prev speed_prev_control collisions_before followers follower_count overflow",
 )
 TidTable = namedtuple("TidTable", "key flags slot")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
@@ -76,7 +78,14 @@ SIMULATED, GHOST, SEEN, WAITING = 1, 2, 4, 8
 RUNNING, EGO_LEFT = 0, 1
 #: ``Episodes.overflow``: what ran out (the batch's facade names it)
 SNAPSHOT_FULL, TABLE_FULL, PAIRS_FULL, GHOSTS_FULL = 1, 2, 4, 8
-COLLISIONS_KEPT = 64  # the first new contacts of an episode are kept (time, id, id)
+COLLISIONS_KEPT = 64  # the first new contacts of an episode are kept (CONTACT_COLUMNS)
+#: a kept contact's columns: its time [s], the two vehicles (ids, the smaller first; a
+#: ghost's is GHOST_ID_BASE - its store tid, second), what each was doing (the CONTACT_*
+#: flags), and the second's lane and speed [m/s] where it is a ghost (else 0 and NaN)
+CONTACT_COLUMNS = ("time", "a", "b", "flags_a", "flags_b", "ghost_lane", "ghost_speed")
+#: contact flags: what a vehicle was at its contact
+CONTACT_EGO, CONTACT_RELAXING, CONTACT_CHANGING, CONTACT_MANDATORY, CONTACT_GHOST = 1, 2, 4, 8, 16
+GHOST_ID_BASE = -1  # a ghost's id in a contact: GHOST_ID_BASE - tid (below every body's)
 SPAWN_ERRORS_KEPT = 4096  # spawn speed errors kept per episode
 TOUCHING_KEPT = 256  # vehicle pairs in contact at once, per episode
 FOLLOWERS = 5  # the AV's followers whose fuel counts with its own
@@ -109,11 +118,13 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         windows=np.zeros((b, 4)), lead_speed=np.full((b, 4), np.nan),
         leads=np.full((b, 4), -1, np.int64), spawned=zeros.copy(),
         spawned_initially=zeros.copy(), despawned=zeros.copy(), handed_back=zeros.copy(),
-        skipped_overlap=zeros.copy(),
+        yielded=zeros.copy(),        skipped_overlap=zeros.copy(),
         skipped_invalid=zeros.copy(), skipped_full=zeros.copy(), collisions=zeros.copy(),
-        collision_log=np.zeros((b, COLLISIONS_KEPT, 3)), off_road=zeros.copy(),
+        collision_log=np.zeros((b, COLLISIONS_KEPT, len(CONTACT_COLUMNS))), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),
         touching=np.zeros((b, TOUCHING_KEPT, 2), np.int64), touching_count=zeros.copy(),
+        ghost_touching=np.zeros((b, TOUCHING_KEPT, 2), np.int64),
+        ghost_touching_count=zeros.copy(),
         pair_count=zeros.copy(), fuel=np.zeros(b), fuel_sum=np.zeros(b),
         group_distance=np.zeros(b), speed_prev=np.zeros((b, n)), speed_prev_control=np.zeros(b),
         collisions_before=zeros.copy(),

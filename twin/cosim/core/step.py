@@ -41,8 +41,19 @@ from twin.cosim.core.handover import (
     snapshot,
     spawn,
 )
-from twin.cosim.core.layout import COLLISIONS_KEPT, EGO_LEFT, FOLLOWERS, PAIRS_FULL
-from twin.physics.kernels import fuel_rate, integrate, overlaps
+from twin.cosim.core.layout import (
+    COLLISIONS_KEPT,
+    CONTACT_CHANGING,
+    CONTACT_EGO,
+    CONTACT_GHOST,
+    CONTACT_MANDATORY,
+    CONTACT_RELAXING,
+    EGO_LEFT,
+    FOLLOWERS,
+    GHOST_ID_BASE,
+    PAIRS_FULL,
+)
+from twin.physics.kernels import footprints_overlap, fuel_rate, integrate, overlaps
 from twin.physics.vehicle import HOLD_SPEED
 from twin.traffic.kernels.decide import decide
 
@@ -235,7 +246,9 @@ def read_windows(b, core):
 @kernel
 def enter(b, core):
     """Step 7: entering vehicles spawned where there is room, the ghost set reloaded."""
-    core.episodes.spawned[b] += enter_and_reload(b, core)
+    ep = core.episodes
+    ep.spawned[b] += enter_and_reload(b, core)
+    ghost_contacts(b, core, ep.step[b] * core.settings.dt)
 
 
 @kernel
@@ -287,7 +300,7 @@ def _contacts(b, core, time):
     last step are new contacts, counted in ``collisions`` and kept in ``collision_log``
     as (time [s], id, id) with the smaller id first, in id order."""
     ep, ids, pairs = core.episodes, core.bodies.id, core.pairs
-    touching, log = ep.touching, ep.collision_log
+    touching = ep.touching
     count = ep.pair_count[b]
     for k in range(count):  # as ids, smaller first
         a, c = ids[b, pairs[b, k, 0]], ids[b, pairs[b, k, 1]]
@@ -302,20 +315,136 @@ def _contacts(b, core, time):
         pairs[b, j + 1, 0], pairs[b, j + 1, 1] = a, c
     for k in range(count):
         a, c = pairs[b, k, 0], pairs[b, k, 1]
-        old = False
-        for j in range(ep.touching_count[b]):
-            if touching[b, j, 0] == a and touching[b, j, 1] == c:
-                old = True
-                break
-        if not old:
-            m = ep.collisions[b]
-            if m < COLLISIONS_KEPT:
-                log[b, m, 0], log[b, m, 1], log[b, m, 2] = time, a, c
-            ep.collisions[b] = m + 1
+        if not _touched(touching, b, ep.touching_count[b], a, c):
+            _new_contact(ep, b, time, a, c, _doing(b, core, _slot_of(b, core.bodies, a)),
+                         _doing(b, core, _slot_of(b, core.bodies, c)), 0, math.nan)  # fmt: skip
     keep = min(count, touching.shape[1])
     for k in range(keep):
         touching[b, k, 0], touching[b, k, 1] = pairs[b, k, 0], pairs[b, k, 1]
     ep.touching_count[b] = keep
+
+
+@kernel
+def ghost_contacts(b, core, time):
+    """The bodies whose footprints overlap a ghost's (its recorded box, along the road,
+    the ghost set just reloaded: both at the step's time) that did not at the last step
+    are new contacts, counted and kept as :func:`_contacts` does, the ghost second
+    (GHOST_ID_BASE - its tid). Ghosts have no body: only this test sees them touch."""
+    ep, bo, gh, rec = core.episodes, core.bodies, core.ghosts, core.rec
+    valid, x, y, yaw, length, width, ids = (
+        bo.valid, bo.x, bo.y, bo.yaw, bo.length, bo.width, bo.id
+    )  # fmt: skip
+    gr, gx, gy = gh.r, gh.x, gh.y
+    touching = ep.ghost_touching
+    n_ghosts = gh.count[b]
+    if n_ghosts == 0:
+        ep.ghost_touching_count[b] = 0
+        return
+    reach = 0.0  # the longest footprint's half diagonal, of bodies and ghosts
+    for g in range(n_ghosts):
+        reach = max(reach, 0.5 * (rec.length[gr[b, g]] + rec.width[gr[b, g]]))
+    for i in range(bo.top[b]):
+        if valid[b, i]:
+            reach = max(reach, 0.5 * (length[b, i] + width[b, i]))
+    before = ep.ghost_touching_count[b]
+    count = 0
+    for i in range(bo.top[b]):
+        if not valid[b, i]:
+            continue
+        xi = x[b, i] + 0.5 * length[b, i]
+        # ghosts sorted by back x: a ghost that may touch has its centre within two
+        # reaches of xi, so its back within three
+        g = _first_at(gx[b], n_ghosts, xi - 3.0 * reach)
+        while g < n_ghosts and gx[b, g] <= xi + 2.0 * reach:
+            r = gr[b, g]
+            xg = gx[b, g] + 0.5 * rec.length[r]
+            reach_ig = 0.5 * (length[b, i] + width[b, i] + rec.length[r] + rec.width[r])
+            near = abs(xg - xi) <= reach_ig and abs(gy[b, g] - y[b, i]) <= reach_ig
+            if near and footprints_overlap(
+                xi, y[b, i], yaw[b, i], 0.5 * length[b, i], 0.5 * width[b, i],
+                xg, gy[b, g], 0.0, 0.5 * rec.length[r], 0.5 * rec.width[r],
+            ):  # fmt: skip
+                a, c = ids[b, i], GHOST_ID_BASE - rec.tid[r]
+                if not _touched(touching, b, before, a, c):
+                    _new_contact(ep, b, time, a, c, _doing(b, core, i), CONTACT_GHOST,
+                                 gh.lane[b, g], gh.speed[b, g])  # fmt: skip
+                # this step's pairs after last step's, which are still being read
+                if before + count < touching.shape[1]:
+                    touching[b, before + count, 0], touching[b, before + count, 1] = a, c
+                    count += 1
+            g += 1
+    for k in range(count):  # this step's pairs replace last step's
+        touching[b, k, 0] = touching[b, before + k, 0]
+        touching[b, k, 1] = touching[b, before + k, 1]
+    ep.ghost_touching_count[b] = count
+
+
+@kernel(inline=True)
+def _touched(touching, b, count, a, c):
+    """Whether pair (a, c) is among the first ``count`` of ``touching[b]``."""
+    for j in range(count):  # noqa: SIM110 (a generator does not compile)
+        if touching[b, j, 0] == a and touching[b, j, 1] == c:
+            return True
+    return False
+
+
+@kernel(inline=True)
+def _new_contact(ep, b, time, a, c, flags_a, flags_c, ghost_lane, ghost_speed):
+    """Count a new contact of (a, c) at ``time`` [s] and keep it while the log has room
+    (:data:`~twin.cosim.core.layout.CONTACT_COLUMNS`)."""
+    m = ep.collisions[b]
+    if m < COLLISIONS_KEPT:
+        log = ep.collision_log
+        log[b, m, 0], log[b, m, 1], log[b, m, 2] = time, a, c
+        log[b, m, 3], log[b, m, 4] = flags_a, flags_c
+        log[b, m, 5], log[b, m, 6] = ghost_lane, ghost_speed
+    ep.collisions[b] = m + 1
+
+
+@kernel(inline=True)
+def _first_at(values, count, x):
+    """The first index of sorted ``values[:count]`` at or above ``x``."""
+    lo, hi = 0, count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@kernel(inline=True)
+def _slot_of(b, bo, vehicle_id):
+    """The slot of body ``vehicle_id`` (-1 where none holds it)."""
+    for i in range(bo.top[b]):
+        if bo.valid[b, i] and bo.id[b, i] == vehicle_id:
+            return i
+    return -1
+
+
+@kernel
+def _doing(b, core, i):
+    """What slot ``i`` was doing (the CONTACT_* flags; 0 for no slot): the ego, relaxing,
+    changing lanes, and a change it must make (started, or sought inside its strategic
+    target's zone: merging)."""
+    if i < 0:
+        return 0
+    dr = core.traffic.drivers
+    flags = 0
+    if i == core.episodes.ego[b]:
+        flags |= CONTACT_EGO
+    if core.slots.relaxing[b, i]:
+        flags |= CONTACT_RELAXING
+    if dr.lane_from[b, i] != dr.lane[b, i]:
+        flags |= CONTACT_CHANGING
+        if dr.mandatory[b, i]:
+            flags |= CONTACT_MANDATORY
+    elif dr.strategic[b, i] != 0:
+        centre = core.bodies.x[b, i] + 0.5 * core.bodies.length[b, i]
+        if centre >= dr.strategic_from[b, i]:
+            flags |= CONTACT_MANDATORY
+    return flags
 
 
 @kernel

@@ -221,6 +221,7 @@ def _start(b, seed, t, i, choice, centre, y, urgent):
     drivers.changes[b, i] += 1
     low, high = settings.lane_change_low, settings.lane_change_high
     duration = low + (high - low) * draw
+    drivers.mandatory[b, i] = urgent and choice == drivers.strategic[b, i]
     drivers.lane_from[b, i] = drivers.lane[b, i]
     drivers.lane[b, i] = drivers.lane[b, i] + choice
     drivers.start_x[b, i] = centre

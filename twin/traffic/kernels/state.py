@@ -13,7 +13,9 @@ while the vehicles' ``valid`` is true.
   is in (0 off the lanes); ``length``, ``wheelbase`` [m]; ``mu``, the tyres' grip.
 * ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``.
 * ``Drivers`` (B, N): the traffic manager's state of each vehicle (module
-  :mod:`twin.traffic.kernels.decide` says what each field is).
+  :mod:`twin.traffic.kernels.decide` says what each field is); ``mandatory``, whether
+  the driver's last lane change was one it had to make (toward its strategic target,
+  inside that target's zone: a lane ending, a merge; what a collision calls merging).
 * ``Scratch``: the sorted lane entries and the step's outputs.
 * ``Traffic``: all of them with the :class:`~twin.traffic.kernels.decide.TrafficSettings`,
   the per-episode ``Counters`` and the ACTION vehicles' ``actions`` (B,), packed into
@@ -35,7 +37,7 @@ Drivers = namedtuple(
     "Drivers",
     "key cf politeness threshold safe_decel keep_right hov_eligible auto lane lane_from "
     "start_x start_y path_length next_decision decisions changes requested strategic "
-    "strategic_from strategic_by accel ctrl",
+    "strategic_from strategic_by accel ctrl mandatory",
 )
 Scratch = namedtuple(
     "Scratch",
@@ -71,6 +73,7 @@ def drivers(b: int, n: int) -> Drivers:
         changes=np.zeros((b, n), np.int64), requested=np.zeros((b, n), np.int64),
         strategic=np.zeros((b, n), np.int64), strategic_from=f(np.nan),
         strategic_by=f(np.nan), accel=f(), ctrl=np.zeros((b, n), np.int64),
+        mandatory=np.zeros((b, n), bool),
     )  # fmt: skip
 
 
