@@ -34,12 +34,17 @@ from twin.traffic.kernels.steering import centre_y
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
-#: [m] behind the rear ghost window, the recording is read too: a recorded vehicle there
-#: that crowds a relaxing body near the window's end becomes a relaxing body before it
-#: would enter the window on top of it, and a relaxing body stays that far out
+#: [m] behind the rear ghost window, and behind the rearmost relaxing body, the recording
+#: is read too (``Episodes.lookback``): a recorded vehicle there that crowds a body
+#: becomes a relaxing body before it would run into it; a relaxing body stays while its
+#: recording is there, and any body this far behind the rear ghost window
 REAR_MARGIN = 50.0
-#: [m/s^2] a recorded vehicle becomes a body behind one it crowds only where it can stop
-#: behind it braking this hard (else it stays a ghost: a contact with a ghost, counted)
+#: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
+#: with the braking distances at this deceleration (it would have to brake harder)
+CROWD_DECEL = 2.0
+#: [m/s^2] it becomes a body behind the one it crowds only where it can stop behind it
+#: braking this hard, ``spawn_clearance`` apart (else it stays a ghost: a contact with a
+#: ghost if they touch, counted)
 YIELD_DECEL = 6.0
 
 
@@ -94,8 +99,9 @@ def despawn_outside(b, core):
     """Step 5: the visible vehicles now outside the visible window (not the ego) are
     removed, or, where the settings relax them, relax (:mod:`twin.cosim.core.relax`)
     from the ghost cells on until they are back on their recordings; a relaxing vehicle
-    outside the windows is removed unless its recording is in a ghost cell (where it
-    would appear as a ghost, away from the vehicle), and so is one whose recording is
+    more than :data:`REAR_MARGIN` behind the windows or ahead of them is removed unless
+    its recording is in a ghost cell or behind it as far as the recording is read (it
+    would appear there, away from the vehicle), and so is one whose recording is
     absent or off the lanes, or one off the road; back inside the visible window it is
     visible again. Returns how many were removed."""
     valid, x, ep, sl, cs = (
@@ -107,6 +113,7 @@ def despawn_outside(b, core):
     )
     g0, v0, v1, g1 = ep.windows[b, 0], ep.windows[b, 1], ep.windows[b, 2], ep.windows[b, 3]
     rear = g0 - REAR_MARGIN
+    lookback = min(ep.lookback[b], rear)
     ego = ep.ego[b]
     gone = 0
     for i in range(core.bodies.top[b]):
@@ -120,7 +127,7 @@ def despawn_outside(b, core):
         if cs.relax:
             relax.target(b, core, i, t)  # its recording now
         xr = sl.rec_x[b, i]
-        recorded_in_cell = sl.rec_on[b, i] and rear <= xr <= g1 and not v0 <= xr <= v1
+        recorded_in_cell = sl.rec_on[b, i] and lookback <= xr <= g1 and not v0 <= xr <= v1
         stays = sl.rec_on[b, i] and (
             (rear <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
         )
@@ -213,12 +220,12 @@ def fits(b, core, x, y, speed, length, width):
 @kernel
 def crowds(b, core, x, y, speed, length, width, skip):
     """Whether a vehicle at back x, y [m] moving at ``speed`` [m/s] is closer than
-    :func:`spawn_room` to a body ahead of it (not slot ``skip``) among those it overlaps
-    laterally, as :func:`fits` asks: a recording so close behind a simulated body would
-    soon run into it."""
+    :func:`spawn_room` at :data:`CROWD_DECEL` to a body ahead of it (not slot ``skip``)
+    among those it overlaps laterally, as :func:`fits` asks: a recording so close
+    behind a simulated body would soon run into it."""
     cs = core.settings
     return _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-                 cs.spawn_decel, skip, np.bool_(True))  # fmt: skip
+                 CROWD_DECEL, skip, np.bool_(True))  # fmt: skip
 
 
 @kernel
@@ -371,9 +378,17 @@ def spawn_recorded(b, core, k, retry):
 
 @kernel
 def snapshot(b, core, t):
-    """The recorded vehicles in the windows' span at unix ``t`` [s], sorted by x."""
-    sn, ep = core.snap, core.episodes
-    rear = ep.windows[b, 0] - (REAR_MARGIN if core.settings.relax else 0.0)
+    """The recorded vehicles in the windows' span at unix ``t`` [s], sorted by x, and
+    (where vehicles relax) :data:`REAR_MARGIN` behind it and behind the rearmost
+    relaxing body (``Episodes.lookback``, the span's rear end)."""
+    sn, ep, bo = core.snap, core.episodes, core.bodies
+    rear = ep.windows[b, 0]
+    if core.settings.relax:  # and behind the rearmost relaxing body
+        rear -= REAR_MARGIN
+        for i in range(bo.top[b]):
+            if bo.valid[b, i] and core.slots.relaxing[b, i]:
+                rear = min(rear, bo.x[b, i] - REAR_MARGIN)
+    ep.lookback[b] = rear
     count = window(core.rec, t, rear, ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
                    sn.speed[b])  # fmt: skip
     if count < 0:
@@ -401,7 +416,9 @@ def enter_and_reload(b, core):
     """Steps 6 and 7 on the episode's snapshot: the ghosts now inside the visible window,
     the tracks first seen inside it and the vehicles waiting for room are spawned (at
     the reset, step 0: the visible set, the ego's own track left out), then the ghost
-    set is reloaded. Returns how many were spawned."""
+    set is reloaded, the recorded vehicles there or behind it that crowd a body ahead
+    made relaxing bodies (:func:`_yields`). Returns how many were spawned into the
+    visible window."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
     initial = ep.step[b] == 0  # a value, not a literal argument: one compilation
     t = ep.t0[b] + ep.step[b] * core.settings.dt
@@ -477,9 +494,9 @@ def _yields(b, core, k, t):
     crowds a body ahead of it (:func:`crowds`: a simulated vehicle that lags its own
     recording, which the recording behind it does not know of) and so becomes a
     simulated vehicle there, relaxing (:mod:`twin.cosim.core.relax`): spawned at its
-    recorded state where its footprint touches no body, it follows the body ahead and
-    is handed back to its recording once on it with room ahead. Counted in
-    ``Episodes.yielded``."""
+    recorded state where it can stop behind every body braking at :data:`YIELD_DECEL`,
+    it follows the body ahead and is handed back to its recording once on it with room
+    ahead. Counted in ``Episodes.yielded``."""
     sn, rec = core.snap, core.rec
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
@@ -487,8 +504,8 @@ def _yields(b, core, k, t):
     if speed > MAX_SPEED or not crowds(b, core, x, y, speed, length, width, np.int64(-1)):
         return False
     cs = core.settings
-    if _near(b, core, x, y, speed, length, width, cs.clearance_at_rest, cs.clearance_at_rest,
-             YIELD_DECEL, np.int64(-1), np.bool_(False)):  # fmt: skip
+    if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance, YIELD_DECEL,
+             np.int64(-1), np.bool_(False)):  # fmt: skip
         return False  # too close to stop behind it: it stays a ghost (a contact with a ghost)
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:

@@ -47,10 +47,11 @@ Slots = namedtuple(
 Episodes = namedtuple(
     "Episodes",
     "seed t0 step steps done ended ended_x ego ego_id ego_r next_id windows lead_speed leads "
-    "spawned spawned_initially despawned handed_back yielded skipped_overlap skipped_invalid "
-    "skipped_full collisions collision_log off_road spawn_errors spawn_error_count touching "
-    "touching_count ghost_touching ghost_touching_count pair_count fuel fuel_sum group_distance "
-    "speed_prev speed_prev_control collisions_before followers follower_count overflow",
+    "spawned spawned_initially despawned handed_back yielded lookback skipped_overlap "
+    "skipped_invalid skipped_full collisions collision_log off_road spawn_errors "
+    "spawn_error_count touching touching_count ghost_touching ghost_touching_count pair_count "
+    "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
+    "follower_count overflow",
 )
 TidTable = namedtuple("TidTable", "key flags slot")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
@@ -118,7 +119,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         windows=np.zeros((b, 4)), lead_speed=np.full((b, 4), np.nan),
         leads=np.full((b, 4), -1, np.int64), spawned=zeros.copy(),
         spawned_initially=zeros.copy(), despawned=zeros.copy(), handed_back=zeros.copy(),
-        yielded=zeros.copy(),        skipped_overlap=zeros.copy(),
+        yielded=zeros.copy(), lookback=np.full(b, -np.inf),        skipped_overlap=zeros.copy(),
         skipped_invalid=zeros.copy(), skipped_full=zeros.copy(), collisions=zeros.copy(),
         collision_log=np.zeros((b, COLLISIONS_KEPT, len(CONTACT_COLUMNS))), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),
