@@ -183,6 +183,32 @@ def _place(b, i, x, y, length, cg_height, z, grade, lane, road, stations, height
     lane[b, i] = lane_of(y[b, i])
 
 
+@kernel(inline=True)
+def resistance(v, drag_area, rolling, m, cos_p, sin_p):
+    """[N] air drag, rolling resistance and the grade's pull on a body of mass ``m``
+    [kg] at speed ``v`` [m/s] (``cos_p``, ``sin_p``: of the grade's pitch)."""
+    return (
+        0.5 * AIR_DENSITY * drag_area * v * abs(v)
+        + rolling * m * GRAVITY * cos_p * math.tanh(v / ROLLING_SPEED)
+        + m * GRAVITY * sin_p
+    )  # fmt: skip
+
+
+@kernel(inline=True)
+def drive_limit(b, i, bodies, v):
+    """[m/s^2] the most acceleration body ``i``'s powertrain and driven wheels give at
+    speed ``v`` [m/s] on its grade now (:func:`integrate`'s point mass)."""
+    g = bodies.grade[b, i]
+    cos_p = 1.0 / math.sqrt(1.0 + g * g)
+    m = bodies.mass[b, i]
+    force = min(
+        bodies.max_power[b, i] / max(v, POWER_SPEED_MIN),
+        bodies.mu[b, i] * m * GRAVITY * cos_p * bodies.driven_share[b, i],
+    )
+    resist = resistance(v, bodies.drag_area[b, i], bodies.rolling[b, i], m, cos_p, g * cos_p)
+    return (force - resist) / bodies.eff_mass[b, i]
+
+
 @kernel
 def integrate(b, bodies, accel, steer, drive, brake, prof, dt):
     """Step episode ``b``'s bodies by ``dt`` [s] under the commanded accelerations
@@ -212,11 +238,7 @@ def integrate(b, bodies, accel, steer, drive, brake, prof, dt):
         cos_p = 1.0 / math.sqrt(1.0 + g * g)
         sin_p = g * cos_p
         m = mass[b, i]
-        resist = (
-            0.5 * AIR_DENSITY * drag_area[b, i] * v0 * abs(v0)
-            + rolling[b, i] * m * GRAVITY * cos_p * math.tanh(v0 / ROLLING_SPEED)
-            + m * GRAVITY * sin_p
-        )  # fmt: skip
+        resist = resistance(v0, drag_area[b, i], rolling[b, i], m, cos_p, sin_p)
         command = accel[b, i]
         power_limit = max_power[b, i] / max(v0, POWER_SPEED_MIN)
         grip = mu[b, i] * m * GRAVITY * cos_p  # all four wheels: the brakes' limit

@@ -53,7 +53,7 @@ from twin.cosim.core.layout import (
     GHOST_ID_BASE,
     PAIRS_FULL,
 )
-from twin.physics.kernels import footprints_overlap, fuel_rate, integrate, overlaps
+from twin.physics.kernels import drive_limit, footprints_overlap, fuel_rate, integrate, overlaps
 from twin.physics.vehicle import HOLD_SPEED
 from twin.traffic.kernels.decide import decide
 
@@ -211,9 +211,8 @@ def contacts(b, core):
     bo, sl, ep, cs = core.bodies, core.slots, core.episodes, core.settings
     ep.step[b] += 1
     step = ep.step[b]
-    _checks(b, bo.top[b], bo.valid, bo.speed, bo.lane, sl.just_spawned, sl.spawn_speed, sl.off_road,
-            core.traffic.drivers.accel, ep.spawn_errors, ep.spawn_error_count, ep.off_road,
-            cs.dt)  # fmt: skip
+    _checks(b, bo, sl.just_spawned, sl.spawn_speed, sl.off_road, core.traffic.drivers.accel,
+            ep.spawn_errors, ep.spawn_error_count, ep.off_road, cs.dt)  # fmt: skip
     if cs.kinematic:
         count = overlaps(b, bo, sl.order, sl.listed, core.pairs)
         if count < 0:
@@ -269,18 +268,23 @@ PHASES = ("desired_speeds", "decisions", "move", "contacts", "leave", "read_wind
 
 
 @kernel
-def _checks(b, top, valid, speed, lane, just_spawned, spawn_speed, off_road, accel, errors,
-            error_count, off_count, dt):  # fmt: skip
+def _checks(b, bo, just_spawned, spawn_speed, off_road, accel, errors, error_count, off_count,
+            dt):  # fmt: skip
     """The speed error of the vehicles spawned before the step, one step after their
-    impulse (|v - max(v_spawn + a_commanded dt, 0)| / max(v_spawn, 1 m/s); a braking
-    vehicle slower than HOLD_SPEED may also be held at rest, as the physics world's
-    static friction holds it); the vehicles off the four lanes, each counted once."""
-    for i in range(top):
+    impulse (|v - max(v_spawn + a dt, 0)| / max(v_spawn, 1 m/s), ``a`` the driver's
+    command up to what the powertrain gives at the spawn speed: a driver wanting more
+    on a free road than the engine has is no inexact spawn, while braking harder than
+    the tyres hold is; a braking vehicle slower than HOLD_SPEED may also be held at
+    rest, as the physics world's static friction holds it); the vehicles off the four
+    lanes, each counted once."""
+    valid, speed, lane = bo.valid, bo.speed, bo.lane
+    for i in range(bo.top[b]):
         if not valid[b, i]:
             continue
         if just_spawned[b, i]:
             v0 = spawn_speed[b, i]
-            expected = max(v0 + accel[b, i] * dt, 0.0)  # brakes hold at 0
+            wanted = min(accel[b, i], drive_limit(b, i, bo, v0))
+            expected = max(v0 + wanted * dt, 0.0)  # brakes hold at 0
             error = abs(speed[b, i] - expected)
             if accel[b, i] <= 0.0 and expected < HOLD_SPEED:  # or static friction holds it
                 error = min(error, abs(speed[b, i]))
