@@ -86,3 +86,24 @@ def test_contact_flags_say_who_was_relaxing(batch):
     run, _, _ = batch
     flags = [int(row[3]) for _, row in _ghost_contacts(run.state.episodes)]
     assert any(f & layout.CONTACT_RELAXING for f in flags)
+
+
+def test_no_body_is_spawned_beyond_the_maps_end():
+    # an ego near the upstream end: the rear windows are clipped there, and recorded
+    # vehicles behind the relaxing ones are read no further (the physics world has no
+    # road beyond it)
+    store = embedded_store("morning")
+    config = CosimConfig(world="kinematic", t_max=60.0)
+    shared = Shared.make(store, default_map(), config)
+    lo = shared.settings.limit_lo
+    t_first, _ = store.time_range(config.road)
+    run = Batch(shared, episodes=4)
+    for b in range(4):
+        run.reset(b, lane=-2, x=lo + 210.0, time=t_first + 300.0 + 60.0 * b, seed=b)
+    lookback = []
+    while not run.done.all():
+        run.step()
+        lookback.append(run.state.episodes.lookback.copy())
+    assert min(np.min(lookback), lo) == lo  # the recording is read no further back
+    log = run.state.log
+    assert (log.x[log.id >= 0] >= lo - 1e-9).all()

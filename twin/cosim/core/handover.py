@@ -388,6 +388,7 @@ def snapshot(b, core, t):
         for i in range(bo.top[b]):
             if bo.valid[b, i] and core.slots.relaxing[b, i]:
                 rear = min(rear, bo.x[b, i] - REAR_MARGIN)
+    rear = max(rear, core.settings.limit_lo)  # no body is spawned beyond the map's end
     ep.lookback[b] = rear
     count = window(core.rec, t, rear, ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
                    sn.speed[b])  # fmt: skip
