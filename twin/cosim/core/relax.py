@@ -29,10 +29,11 @@ closes the distance to its recorded trajectory within physical limits:
 * back inside the visible window it is a visible vehicle again: its driver decides
   (its next lane-change decision at once; a strategic target it had is not restored).
 
-A recorded vehicle in a ghost cell (or in the rear margin behind it) that crowds a
-body ahead of it becomes a relaxing vehicle too, spawned at its recorded state
-(:func:`twin.cosim.core.handover.enter_and_reload`): the lag of a relaxing vehicle
-travels upstream instead of the recording driving through it.
+A recorded vehicle in a ghost cell, or behind the rear one (as far as 50 m behind the
+rearmost relaxing vehicle), that crowds a body ahead of it becomes a relaxing vehicle
+too, spawned at its recorded state (:func:`twin.cosim.core.handover.enter_and_reload`):
+the lag of a relaxing vehicle travels upstream, as a queue does, instead of the
+recording driving through it.
 
 How far a relaxing vehicle strays from its recorded track, its acceleration and its
 slowest speed are measured in every run (``twin.metrics.handover``).
