@@ -274,18 +274,16 @@ def integrate(b, bodies, accel, steer, drive, brake, prof, dt):
 
 
 @kernel
-def overlaps(b, bodies, order, listed, pairs):
-    """The pairs of episode ``b``'s slots whose footprints overlap now (rectangles of
-    the bodies' length and width about their centres, turned by their yaw; the
-    separating-axis test on candidates close along the road). ``order`` (B, N) keeps
-    the slots sorted by centre x from step to step (-1 past the last), ``listed``
-    (B, N) bool which are in it; writes up to ``pairs.shape[1]`` (slot, slot) rows
-    into ``pairs[b]`` and returns how many (-1: more than that)."""
-    valid, x, y, yaw = bodies.valid, bodies.x, bodies.y, bodies.yaw
-    length, width = bodies.length, bodies.width
-    n = bodies.top[b]
+def keep_sorted(b, bodies, order, listed, centre):
+    """Keep ``order[b]`` (B, N) the valid slots of episode ``b`` sorted by x (their
+    centres where ``centre``, else their backs) from call to call (-1 past the last;
+    ``listed`` (B, N) bool: which are in it): last call's order of the slots still
+    valid, the new ones after, then an insertion sort (few moves between calls).
+    Returns how many."""
+    valid, x, length = bodies.valid, bodies.x, bodies.length
+    half = 0.5 if centre else 0.0
     m = 0
-    for k in range(valid.shape[1]):  # last step's order, of the slots still valid
+    for k in range(valid.shape[1]):  # last call's order, of the slots still valid
         o = order[b, k]
         if o < 0:
             break
@@ -294,21 +292,35 @@ def overlaps(b, bodies, order, listed, pairs):
             m += 1
         else:
             listed[b, o] = False
-    for i in range(n):  # and the new ones
+    for i in range(bodies.top[b]):  # and the new ones
         if valid[b, i] and not listed[b, i]:
             order[b, m] = i
             listed[b, i] = True
             m += 1
     if m < valid.shape[1]:
         order[b, m] = -1
-    for k in range(1, m):  # insertion sort by centre x
+    for k in range(1, m):  # insertion sort by x
         o = order[b, k]
-        key = x[b, o] + 0.5 * length[b, o]
+        key = x[b, o] + half * length[b, o]
         j = k - 1
-        while j >= 0 and x[b, order[b, j]] + 0.5 * length[b, order[b, j]] > key:
+        while j >= 0 and x[b, order[b, j]] + half * length[b, order[b, j]] > key:
             order[b, j + 1] = order[b, j]
             j -= 1
         order[b, j + 1] = o
+    return m
+
+
+@kernel
+def overlaps(b, bodies, order, listed, pairs):
+    """The pairs of episode ``b``'s slots whose footprints overlap now (rectangles of
+    the bodies' length and width about their centres, turned by their yaw; the
+    separating-axis test on candidates close along the road). ``order`` (B, N) keeps
+    the slots sorted by centre x from step to step, ``listed`` which are in it
+    (:func:`keep_sorted`); writes up to ``pairs.shape[1]`` (slot, slot) rows into
+    ``pairs[b]`` and returns how many (-1: more than that)."""
+    x, y, yaw = bodies.x, bodies.y, bodies.yaw
+    length, width = bodies.length, bodies.width
+    m = keep_sorted(b, bodies, order, listed, np.bool_(True))
     reach = 0.0
     for k in range(m):
         o = order[b, k]

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from mapgen.build import default_map
+from twin.core.jit import kernel
 from twin.cosim.config import CosimConfig
-from twin.cosim.core import layout
+from twin.cosim.core import handover, layout
 from twin.cosim.core.batch import Batch, Shared
 from twin.data.embedded import embedded_store
 from twin.data.recording import replay
@@ -107,3 +108,41 @@ def test_no_body_is_spawned_beyond_the_maps_end():
     assert min(np.min(lookback), lo) == lo  # the recording is read no further back
     log = run.state.log
     assert (log.x[log.id >= 0] >= lo - 1e-9).all()
+
+
+@kernel(nrt=True)  # called from Python with the struct
+def _sort_bodies(b, core):
+    return handover._sort_bodies(b, core)
+
+
+@kernel(nrt=True)
+def _both_crowding_tests(b, core, m, x, y, speed, length):
+    return (
+        handover._crowds_sorted(b, core, m, x, y, speed, length, 1.9),
+        handover.crowds(b, core, x, y, speed, length, 1.9, np.int64(-1)),
+    )
+
+
+def test_the_sorted_crowding_test_agrees_with_the_scan_over_every_body(batch):
+    """The yields' crowding test prunes the bodies by their back x and stopping points
+    (handover._crowds_sorted); it must answer as the plain scan does, here for vehicles
+    placed behind every body of every episode at speeds from rest to 40 m/s."""
+    run, _, _ = batch
+    bo = run.state.bodies
+    rng = np.random.default_rng(7)
+    asked = crowded = 0
+    for b in range(EPISODES):
+        m = _sort_bodies(b, run.core)
+        order = run.state.slots.by_back[b, :m]
+        assert m == int(bo.valid[b].sum())
+        assert np.all(np.diff(bo.x[b, order]) >= 0.0)
+        for j in order:
+            for _ in range(4):
+                x = bo.x[b, j] - rng.uniform(0.0, 120.0)
+                y = bo.y[b, j] + rng.choice([0.0, 1.0, 3.7])
+                speed, length = rng.uniform(0.0, 40.0), rng.uniform(3.5, 20.0)
+                sorted_, scanned = _both_crowding_tests(b, run.core, m, x, y, speed, length)
+                assert sorted_ == scanned, (b, j, x, y, speed, length)
+                asked += 1
+                crowded += bool(scanned)
+    assert 0 < crowded < asked  # both answers occur

@@ -26,7 +26,7 @@ from twin.cosim.core.layout import (
     WAITING,
 )
 from twin.data.recording import lane_of, window
-from twin.physics.kernels import place
+from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import clear_target
 from twin.traffic.kernels.steering import centre_y
@@ -235,22 +235,73 @@ def _near(b, core, x, y, speed, length, width, c, rest, decel, skip, ahead_only)
     and deceleration ``decel`` [m/s^2] to a vehicle at back x, y [m] and ``speed``
     [m/s], among those it overlaps laterally; a body changing lanes holds its new lane
     too."""
-    bo, dr = core.bodies, core.traffic.drivers
-    valid, bx, by, bspeed, blength, bwidth = bo.valid, bo.x, bo.y, bo.speed, bo.length, bo.width
-    lane, lane_from = dr.lane, dr.lane_from
+    bo = core.bodies
     for j in range(bo.top[b]):
-        if not valid[b, j] or j == skip or (ahead_only and bx[b, j] < x):
+        if not bo.valid[b, j] or j == skip or (ahead_only and bo.x[b, j] < x):
             continue
-        bv = max(bspeed[b, j], 0.0)
-        if not _clear_of(c, rest, decel, x, y, speed, length, width, bx[b, j], by[b, j], bv,
-                         blength[b, j], bwidth[b, j]):  # fmt: skip
-            return True
-        if lane_from[b, j] != lane[b, j] and not _clear_of(
-            c, rest, decel, x, y, speed, length, width, bx[b, j], centre_y(lane[b, j]), bv,
-            blength[b, j], bwidth[b, j],
-        ):  # fmt: skip
+        if _body_near(b, core, j, x, y, speed, length, width, c, rest, decel):
             return True
     return False
+
+
+@kernel
+def _sort_bodies(b, core):
+    """The bodies by back x for :func:`_crowds_sorted`: ``slots.by_back[b]`` kept sorted
+    (:func:`twin.physics.kernels.keep_sorted`) and ``slots.by_back_stop[b, k]`` the
+    nearest point where the bodies from the k-th on could stop braking at
+    :data:`CROWD_DECEL`. Returns how many bodies."""
+    bo, sl = core.bodies, core.slots
+    m = keep_sorted(b, bo, sl.by_back, sl.by_back_listed, np.bool_(False))
+    nearest = np.inf
+    for k in range(m - 1, -1, -1):
+        j = sl.by_back[b, k]
+        v = max(bo.speed[b, j], 0.0)
+        nearest = min(nearest, bo.x[b, j] + v * v / (2.0 * CROWD_DECEL))
+        sl.by_back_stop[b, k] = nearest
+    return m
+
+
+@kernel
+def _crowds_sorted(b, core, m, x, y, speed, length, width):
+    """:func:`crowds` (no slot skipped) over the ``m`` bodies sorted by
+    :func:`_sort_bodies`, from the first at or ahead of back ``x`` (a binary search) to
+    the last that could be too close: a body crowded by a vehicle there is closer than
+    the larger clearance if it is faster, else its stopping point is closer than the
+    vehicle's plus that clearance."""
+    cs, bx, order, stop = core.settings, core.bodies.x, core.slots.by_back, core.slots.by_back_stop
+    lo, hi = 0, m
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if bx[b, order[b, mid]] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    near = x + length + max(cs.clearance, cs.clearance_at_rest) + 1.0  # a metre for rounding
+    own_stop = near + speed * speed / (2.0 * CROWD_DECEL)
+    for k in range(lo, m):
+        j = order[b, k]
+        if bx[b, j] >= near and stop[b, k] >= own_stop:
+            break  # neither close nor stopping short, nor any body ahead of it
+        if _body_near(b, core, j, x, y, speed, length, width, cs.clearance,
+                      cs.clearance_at_rest, CROWD_DECEL):  # fmt: skip
+            return True
+    return False
+
+
+@kernel(inline=True)
+def _body_near(b, core, j, x, y, speed, length, width, c, rest, decel):
+    """Whether body ``j`` is closer than :func:`spawn_room` to a vehicle at back x, y
+    (:func:`_near`), in its lane or, changing lanes, in its new one."""
+    bo, dr = core.bodies, core.traffic.drivers
+    bv = max(bo.speed[b, j], 0.0)
+    bx, blength, bwidth = bo.x[b, j], bo.length[b, j], bo.width[b, j]
+    if not _clear_of(c, rest, decel, x, y, speed, length, width, bx, bo.y[b, j], bv, blength,
+                     bwidth):  # fmt: skip
+        return True
+    return dr.lane_from[b, j] != dr.lane[b, j] and not _clear_of(
+        c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane[b, j]), bv, blength,
+        bwidth,
+    )  # fmt: skip
 
 
 @kernel
@@ -462,6 +513,9 @@ def enter_and_reload(b, core):
             flags[b, h] &= ~GHOST
     count = 0
     capacity = gr.shape[1]
+    relaxing, m = core.settings.relax, 0
+    if relaxing:  # the bodies by back x, for the crowding test
+        m = _sort_bodies(b, core)
     for k in range(d):
         if v0 <= k < v1:
             continue
@@ -469,8 +523,10 @@ def enter_and_reload(b, core):
         lane = lane_of(sy[b, k])
         if lane == 0 or flags_of(keys, flags, tslot, b, r) & SIMULATED:
             continue
-        if core.settings.relax and _yields(b, core, k, t):
-            continue  # simulated now, relaxing behind the body it would run into
+        if relaxing and _yields(b, core, k, t, m):
+            # simulated now, relaxing behind the body it would run into
+            m = _sort_bodies(b, core)
+            continue
         if k < a:
             continue  # in the rear margin, not a ghost
         if count == capacity:
@@ -490,19 +546,19 @@ def enter_and_reload(b, core):
 
 
 @kernel
-def _yields(b, core, k, t):
+def _yields(b, core, k, t, m):
     """Whether snapshot row ``k``, a recorded vehicle in a ghost cell at unix ``t`` [s],
     crowds a body ahead of it (:func:`crowds`: a simulated vehicle that lags its own
     recording, which the recording behind it does not know of) and so becomes a
     simulated vehicle there, relaxing (:mod:`twin.cosim.core.relax`): spawned at its
     recorded state where it can stop behind every body braking at :data:`YIELD_DECEL`,
     it follows the body ahead and is handed back to its recording once on it with room
-    ahead. Counted in ``Episodes.yielded``."""
+    ahead. Counted in ``Episodes.yielded``. ``m``: the bodies in ``slots.by_back[b]``."""
     sn, rec = core.snap, core.rec
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
     length, width = rec.length[r], rec.width[r]
-    if speed > MAX_SPEED or not crowds(b, core, x, y, speed, length, width, np.int64(-1)):
+    if speed > MAX_SPEED or not _crowds_sorted(b, core, m, x, y, speed, length, width):
         return False
     cs = core.settings
     if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance, YIELD_DECEL,

@@ -42,7 +42,8 @@ from twin.traffic.kernels import state as traffic
 Slots = namedtuple(
     "Slots",
     "r tid base_speed av just_spawned spawn_speed off_road tgt_lane tgt_draws plan_next "
-    "plan_end tgt_on order listed relaxing rec_on rec_x rec_y rec_speed rec_accel changing",
+    "plan_end tgt_on order listed by_back by_back_listed by_back_stop relaxing rec_on rec_x rec_y rec_speed "
+    "rec_accel changing",
 )
 Episodes = namedtuple(
     "Episodes",
@@ -107,7 +108,8 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         av=per_slot(bool), just_spawned=per_slot(bool), spawn_speed=per_slot(),
         off_road=per_slot(bool), tgt_lane=per_slot(np.int64), tgt_draws=per_slot(np.int64),
         plan_next=per_slot(np.int64), plan_end=per_slot(np.int64), tgt_on=per_slot(bool),
-        order=per_slot(np.int64, -1), listed=per_slot(bool), relaxing=per_slot(bool),
+        order=per_slot(np.int64, -1), listed=per_slot(bool), by_back=per_slot(np.int64, -1),
+        by_back_listed=per_slot(bool), by_back_stop=per_slot(), relaxing=per_slot(bool),
         rec_on=per_slot(bool), rec_x=per_slot(), rec_y=per_slot(), rec_speed=per_slot(),
         rec_accel=per_slot(), changing=per_slot(bool),
     )  # fmt: skip

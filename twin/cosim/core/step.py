@@ -77,6 +77,8 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
         valid[b, i] = False
         order[b, i] = -1
         listed[b, i] = False
+        sl.by_back[b, i] = -1
+        sl.by_back_listed[b, i] = False
         ctrl[b, i] = 0
     bo.top[b] = 0
     if core.log.on:
