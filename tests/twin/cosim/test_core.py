@@ -169,3 +169,33 @@ def test_no_kernel_reads_or_writes_out_of_bounds(tmp_path):
     )  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     assert "spawned" in done.stdout
+
+
+def test_an_episode_reset_in_a_used_slot_is_the_same_bytes_as_in_a_new_batch():
+    """Everything an episode counts or carries starts afresh at its reset: on the
+    embedded morning (relaxing vehicles, yields, contacts with ghosts) an episode run
+    after another in the same slot is the one a new batch runs."""
+    from mapgen.build import default_map
+    from twin.data.embedded import embedded_store
+
+    store = embedded_store("morning")
+    shared = Shared.make(store, default_map(), CosimConfig(world="kinematic", t_max=60.0))
+    t_first, _ = store.time_range("westbound")
+
+    def run(batch, offset):
+        batch.reset(0, lane=-2, x=700.0, time=t_first + offset, seed=3)
+        while not batch.done.all():
+            batch.step()
+        ep, log = batch.state.episodes, batch.state.log
+        on = log.id[0] >= 0  # the rows of the slots in use
+        rows = [log.id[0].tobytes()] + [getattr(log, f)[0][on].tobytes() for f in ("x", "speed")]
+        counts = {f: getattr(ep, f)[0].item() for f in ep._fields if getattr(ep, f)[0].size == 1}
+        return rows, counts
+
+    used = Batch(shared, 1)
+    first = run(used, 380.0)
+    again = run(used, 300.0)
+    new = run(Batch(shared, 1), 300.0)
+    assert first[1]["yielded"] > 0 and first[1] != new[1]
+    assert again[0] == new[0]
+    assert again[1] == new[1]
