@@ -149,6 +149,7 @@ def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> d
         "spawns_skipped_overlap": counters.skipped_overlap,
         "spawns_skipped_invalid": counters.skipped_invalid,
         "ghosts_yielded": counters.yielded,
+        "ghosts_held": counters.held,
         "visible_max": int(vehicles.groupby("time").size().max()) - 1,
         "lane_changes": sim.manager.lane_changes,
         "lane_changes_recorded_in_window": fidelity.recorded_lane_changes_in_window(

@@ -174,6 +174,9 @@ METRICS: tuple[Metric, ...] = (
     Metric("ghosts_yielded", "count", "recorded vehicles made relaxing bodies behind a body "
            "they crowded (twin/cosim/core/handover.py)", ("counts", "ghosts_yielded"),
            summary="sum"),
+    Metric("ghosts_held", "count", "recorded vehicles held back from appearing as ghosts "
+           "where a spawn would not fit, each time (twin/cosim/core/handover.py)",
+           ("counts", "ghosts_held"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
     Metric("vehicles_off_road", "count", "vehicles that left the road",

@@ -19,7 +19,9 @@ from twin.cosim.core import relax
 from twin.cosim.core.layout import (
     GHOST,
     GHOSTS_FULL,
+    HELD,
     SEEN,
+    SHOWN,
     SIMULATED,
     SNAPSHOT_FULL,
     TABLE_FULL,
@@ -167,8 +169,8 @@ def remove(b, core, i):
     """Free slot ``i``: its vehicle is simulated no more."""
     table, dr = core.table, core.traffic.drivers
     h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], np.bool_(False))
-    if h >= 0:
-        table.flags[b, h] &= ~SIMULATED
+    if h >= 0:  # drawn until now: its recording may be a ghost at once
+        table.flags[b, h] = (table.flags[b, h] & ~SIMULATED) | SHOWN
         table.slot[b, h] = -1
     bo = core.bodies
     bo.valid[b, i] = False
@@ -355,7 +357,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     table = core.table
     h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h >= 0:
-        table.flags[b, h] = (table.flags[b, h] | SIMULATED) & ~WAITING
+        table.flags[b, h] = (table.flags[b, h] | SIMULATED) & ~(WAITING | HELD)
         table.slot[b, h] = i
     return i
 
@@ -469,8 +471,12 @@ def enter_and_reload(b, core):
     the tracks first seen inside it and the vehicles waiting for room are spawned (at
     the reset, step 0: the visible set, the ego's own track left out), then the ghost
     set is reloaded, the recorded vehicles there or behind it that crowd a body ahead
-    made relaxing bodies (:func:`_yields`). Returns how many were spawned into the
-    visible window."""
+    made relaxing bodies (:func:`_yields`). A recorded vehicle not drawn a step ago (a
+    ghost, or a body just removed) appears as a ghost only where a spawn would fit
+    (:func:`fits`): one that would appear on or too close to a body, most often one
+    that waited for room in the visible window while the simulated traffic took its
+    place, is held back and waits as a spawn does (``Episodes.held`` counts each time a
+    vehicle is held back). Returns how many were spawned into the visible window."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
     initial = ep.step[b] == 0  # a value, not a literal argument: one compilation
     t = ep.t0[b] + ep.step[b] * core.settings.dt
@@ -492,36 +498,42 @@ def enter_and_reload(b, core):
             f = flags_of(keys, flags, tslot, b, r)
             simulated = f & SIMULATED != 0
             first_seen = f & (SEEN | SIMULATED) == 0
-            enter = f & GHOST != 0 or first_seen or (f & WAITING != 0 and not simulated)
+            enter = f & GHOST != 0 or first_seen or (f & (WAITING | HELD) != 0 and not simulated)
             # a track beginning inside the window that finds a body in its way is not
             # tried again: in real data it is most often the next fragment of that vehicle
             retry = not first_seen
         if enter and spawn_recorded(b, core, k, retry):
             spawned += 1
-    overflow = False
-    for k in range(a, n):
-        h = entry(keys, flags, tslot, b, np.int64(sr[b, k]), np.bool_(True))
-        if h >= 0:
-            flags[b, h] |= SEEN
-        else:
-            overflow = True
     # 7. the ghost set: the recorded vehicles of the ghost windows not simulated
     gr, glane, gx, gy, gspeed, glength = gh.r, gh.lane, gh.x, gh.y, gh.speed, gh.length
     for g in range(gh.count[b]):
         h = entry(keys, flags, tslot, b, np.int64(gr[b, g]), np.bool_(False))
         if h >= 0:
-            flags[b, h] &= ~GHOST
+            flags[b, h] = (flags[b, h] & ~GHOST) | SHOWN
+    overflow = False
+    for k in range(a, n):
+        h = entry(keys, flags, tslot, b, np.int64(sr[b, k]), np.bool_(True))
+        if h >= 0:
+            flags[b, h] |= SEEN
+            if k >= d:  # beyond the ghost windows: not drawn
+                flags[b, h] &= ~SHOWN
+        else:
+            overflow = True
     count = 0
     capacity = gr.shape[1]
     relaxing, m = core.settings.relax, 0
     if relaxing:  # the bodies by back x, for the crowding test
         m = _sort_bodies(b, core)
     for k in range(d):
+        r = sr[b, k]
+        h = entry(keys, flags, tslot, b, r, np.bool_(False))
+        f = flags[b, h] if h >= 0 else 0
+        if h >= 0:
+            flags[b, h] &= ~SHOWN  # read: shown again only as a ghost or a body
         if v0 <= k < v1:
             continue
-        r = sr[b, k]
         lane = lane_of(sy[b, k])
-        if lane == 0 or flags_of(keys, flags, tslot, b, r) & SIMULATED:
+        if lane == 0 or f & SIMULATED:
             continue
         if relaxing and _yields(b, core, k, t, m):
             # simulated now, relaxing behind the body it would run into
@@ -529,15 +541,24 @@ def enter_and_reload(b, core):
             continue
         if k < a:
             continue  # in the rear margin, not a ghost
+        length, width = rec.length[r], rec.width[r]
+        if not f & SHOWN and not fits(b, core, sx[b, k], sy[b, k], sspeed[b, k], length, width):
+            # not drawn a step ago, and where a spawn would not fit: appearing now, it
+            # would appear on (or too close to) a body; it waits for room as a spawn does
+            # (tried as a spawn too, back in the visible window)
+            if h >= 0 and not f & HELD:
+                ep.held[b] += 1
+                flags[b, h] |= HELD
+            continue
         if count == capacity:
             ep.overflow[b] |= GHOSTS_FULL
             break
         gr[b, count], glane[b, count] = r, lane
         gx[b, count], gy[b, count] = sx[b, k], sy[b, k]
-        gspeed[b, count], glength[b, count] = sspeed[b, k], rec.length[r]
+        gspeed[b, count], glength[b, count] = sspeed[b, k], length
         h = entry(keys, flags, tslot, b, r, np.bool_(True))
         if h >= 0:
-            flags[b, h] |= GHOST
+            flags[b, h] = (flags[b, h] | GHOST) & ~HELD
         count += 1
     gh.count[b] = count
     if overflow:

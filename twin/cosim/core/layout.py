@@ -42,13 +42,13 @@ from twin.traffic.kernels import state as traffic
 Slots = namedtuple(
     "Slots",
     "r tid base_speed av just_spawned spawn_speed off_road tgt_lane tgt_draws plan_next "
-    "plan_end tgt_on order listed by_back by_back_listed by_back_stop relaxing rec_on rec_x rec_y rec_speed "
-    "rec_accel changing",
+    "plan_end tgt_on order listed by_back by_back_listed by_back_stop relaxing rec_on rec_x "
+    "rec_y rec_speed rec_accel changing",
 )
 Episodes = namedtuple(
     "Episodes",
     "seed t0 step steps done ended ended_x ego ego_id ego_r next_id windows lead_speed leads "
-    "spawned spawned_initially despawned handed_back yielded lookback skipped_overlap "
+    "spawned spawned_initially despawned handed_back yielded held lookback skipped_overlap "
     "skipped_invalid skipped_full collisions collision_log off_road spawn_errors "
     "spawn_error_count touching touching_count ghost_touching ghost_touching_count pair_count "
     "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
@@ -74,8 +74,11 @@ Core = namedtuple(
     "Core", "traffic bodies slots episodes table ghosts snap log pairs settings rec params beh"
 )
 
-#: flags of the tid table
-SIMULATED, GHOST, SEEN, WAITING = 1, 2, 4, 8
+#: flags of the tid table: simulated, a ghost, read before, waiting for room; SHOWN: a
+#: ghost at the last reload or a body removed since (drawn a step ago); HELD: held back
+#: from appearing as a ghost on a body until it appears
+#: (:func:`twin.cosim.core.handover.enter_and_reload`)
+SIMULATED, GHOST, SEEN, WAITING, SHOWN, HELD = 1, 2, 4, 8, 16, 32
 #: ``Episodes.ended``
 RUNNING, EGO_LEFT = 0, 1
 #: ``Episodes.overflow``: what ran out (the batch's facade names it)
@@ -121,7 +124,8 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         windows=np.zeros((b, 4)), lead_speed=np.full((b, 4), np.nan),
         leads=np.full((b, 4), -1, np.int64), spawned=zeros.copy(),
         spawned_initially=zeros.copy(), despawned=zeros.copy(), handed_back=zeros.copy(),
-        yielded=zeros.copy(), lookback=np.full(b, -np.inf),        skipped_overlap=zeros.copy(),
+        yielded=zeros.copy(), held=zeros.copy(), lookback=np.full(b, -np.inf),
+        skipped_overlap=zeros.copy(),
         skipped_invalid=zeros.copy(), skipped_full=zeros.copy(), collisions=zeros.copy(),
         collision_log=np.zeros((b, COLLISIONS_KEPT, len(CONTACT_COLUMNS))), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),

@@ -94,7 +94,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.seed[b], ep.t0[b], ep.step[b], ep.steps[b] = seed, t0, 0, steps
     ep.ended[b], ep.ended_x[b], ep.next_id[b], ep.ego_r[b] = 0, 0.0, 0, ego_r
     ep.spawned[b], ep.spawned_initially[b], ep.despawned[b] = 0, 0, 0
-    ep.handed_back[b], ep.yielded[b], ep.lookback[b] = 0, 0, -math.inf
+    ep.handed_back[b], ep.yielded[b], ep.held[b], ep.lookback[b] = 0, 0, 0, -math.inf
     ep.skipped_overlap[b], ep.skipped_invalid[b], ep.skipped_full[b] = 0, 0, 0
     ep.collisions[b], ep.off_road[b], ep.spawn_error_count[b] = 0, 0, 0
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
