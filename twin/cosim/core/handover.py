@@ -21,7 +21,6 @@ from twin.cosim.core.layout import (
     GHOSTS_FULL,
     HELD,
     SEEN,
-    SHOWN,
     SIMULATED,
     SNAPSHOT_FULL,
     TABLE_FULL,
@@ -43,7 +42,7 @@ MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 REAR_MARGIN = 50.0
 #: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
 #: with the braking distances at this deceleration (it would have to brake harder)
-CROWD_DECEL = 2.0
+CROWD_DECEL = relax.CROWD_DECEL
 #: [m/s^2] it becomes a body behind the one it crowds only where it can stop behind it
 #: braking this hard, ``spawn_clearance`` apart (else it stays a ghost: a contact with a
 #: ghost if they touch, counted)
@@ -137,10 +136,22 @@ def despawn_outside(b, core):
             if not sl.relaxing[b, i]:
                 relax.begin(b, core, i)
             continue
+        if not cs.relax:  # the paper's hand-over: its ghost appears at once, where it is
+            _drawn_now(b, core, core.slots.r[b, i])
         remove(b, core, i)
         gone += 1
     ep.despawned[b] += gone
     return gone
+
+
+@kernel(inline=True)
+def _drawn_now(b, core, r):
+    """Recorded vehicle ``r`` is drawn this step (``TidTable.drawn``): a ghost now, or a
+    body handed to its recording, whose ghost appears at once where it was."""
+    table = core.table
+    h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
+    if h >= 0:
+        table.drawn[b, h] = core.episodes.step[b]
 
 
 @kernel
@@ -157,6 +168,7 @@ def hand_back(b, core):
         # as a ghost it would crowd the body ahead and be taken back at once
         if not crowds(b, core, bo.x[b, i], bo.y[b, i], bo.speed[b, i], bo.length[b, i],
                       bo.width[b, i], i):  # fmt: skip
+            _drawn_now(b, core, core.slots.r[b, i])
             remove(b, core, i)
             back += 1
     ep.handed_back[b] += back
@@ -169,8 +181,8 @@ def remove(b, core, i):
     """Free slot ``i``: its vehicle is simulated no more."""
     table, dr = core.table, core.traffic.drivers
     h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], np.bool_(False))
-    if h >= 0:  # drawn until now: its recording may be a ghost at once
-        table.flags[b, h] = (table.flags[b, h] & ~SIMULATED) | SHOWN
+    if h >= 0:
+        table.flags[b, h] &= ~SIMULATED
         table.slot[b, h] = -1
     bo = core.bodies
     bo.valid[b, i] = False
@@ -472,14 +484,16 @@ def enter_and_reload(b, core):
     the reset, step 0: the visible set, the ego's own track left out), then the ghost
     set is reloaded, the recorded vehicles there or behind it that crowd a body ahead
     made relaxing bodies (:func:`_yields`). A recorded vehicle not drawn a step ago (a
-    ghost, or a body just removed) appears as a ghost only where a spawn would fit
-    (:func:`fits`): one that would appear on or too close to a body, most often one
-    that waited for room in the visible window while the simulated traffic took its
-    place, is held back and waits as a spawn does (``Episodes.held`` counts each time a
-    vehicle is held back). Returns how many were spawned into the visible window."""
+    ghost at the last reload, or a body handed to it since: ``table.drawn``) appears as a
+    ghost only where a spawn would fit (:func:`fits`): one that would appear on or too
+    close to a body, most often one that waited for room in the visible window while
+    the simulated traffic took its place, is held back and waits as a spawn does
+    (``Episodes.held`` counts each time a vehicle is held back). Returns how many were
+    spawned into the visible window."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
-    initial = ep.step[b] == 0  # a value, not a literal argument: one compilation
-    t = ep.t0[b] + ep.step[b] * core.settings.dt
+    step = ep.step[b]
+    initial = step == 0  # a value, not a literal argument: one compilation
+    t = ep.t0[b] + step * core.settings.dt
     keys, flags, tslot = core.table.key, core.table.flags, core.table.slot
     sr, sx, sy, sspeed = sn.r, sn.x, sn.y, sn.speed
     n = sn.count[b]
@@ -509,14 +523,12 @@ def enter_and_reload(b, core):
     for g in range(gh.count[b]):
         h = entry(keys, flags, tslot, b, np.int64(gr[b, g]), np.bool_(False))
         if h >= 0:
-            flags[b, h] = (flags[b, h] & ~GHOST) | SHOWN
+            flags[b, h] &= ~GHOST
     overflow = False
     for k in range(a, n):
         h = entry(keys, flags, tslot, b, np.int64(sr[b, k]), np.bool_(True))
         if h >= 0:
             flags[b, h] |= SEEN
-            if k >= d:  # beyond the ghost windows: not drawn
-                flags[b, h] &= ~SHOWN
         else:
             overflow = True
     count = 0
@@ -528,8 +540,6 @@ def enter_and_reload(b, core):
         r = sr[b, k]
         h = entry(keys, flags, tslot, b, r, np.bool_(False))
         f = flags[b, h] if h >= 0 else 0
-        if h >= 0:
-            flags[b, h] &= ~SHOWN  # read: shown again only as a ghost or a body
         if v0 <= k < v1:
             continue
         lane = lane_of(sy[b, k])
@@ -542,7 +552,8 @@ def enter_and_reload(b, core):
         if k < a:
             continue  # in the rear margin, not a ghost
         length, width = rec.length[r], rec.width[r]
-        if not f & SHOWN and not fits(b, core, sx[b, k], sy[b, k], sspeed[b, k], length, width):
+        drawn = h >= 0 and core.table.drawn[b, h] >= step - 1
+        if not drawn and not fits(b, core, sx[b, k], sy[b, k], sspeed[b, k], length, width):
             # not drawn a step ago, and where a spawn would not fit: appearing now, it
             # would appear on (or too close to) a body; it waits for room as a spawn does
             # (tried as a spawn too, back in the visible window)
@@ -559,6 +570,7 @@ def enter_and_reload(b, core):
         h = entry(keys, flags, tslot, b, r, np.bool_(True))
         if h >= 0:
             flags[b, h] = (flags[b, h] | GHOST) & ~HELD
+            core.table.drawn[b, h] = step
         count += 1
     gh.count[b] = count
     if overflow:

@@ -54,7 +54,7 @@ Episodes = namedtuple(
     "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
     "follower_count overflow",
 )
-TidTable = namedtuple("TidTable", "key flags slot")
+TidTable = namedtuple("TidTable", "key flags slot drawn")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
 Snapshot = namedtuple("Snapshot", "count r x y speed")
 Log = namedtuple(
@@ -74,11 +74,11 @@ Core = namedtuple(
     "Core", "traffic bodies slots episodes table ghosts snap log pairs settings rec params beh"
 )
 
-#: flags of the tid table: simulated, a ghost, read before, waiting for room; SHOWN: a
-#: ghost at the last reload or a body removed since (drawn a step ago); HELD: held back
+#: flags of the tid table: simulated, a ghost, read before, waiting for room, held back
 #: from appearing as a ghost on a body until it appears
-#: (:func:`twin.cosim.core.handover.enter_and_reload`)
-SIMULATED, GHOST, SEEN, WAITING, SHOWN, HELD = 1, 2, 4, 8, 16, 32
+#: (:func:`twin.cosim.core.handover.enter_and_reload`); the table's ``drawn`` keeps the
+#: last step a vehicle was drawn (a ghost, or a body until its removal)
+SIMULATED, GHOST, SEEN, WAITING, HELD = 1, 2, 4, 8, 16
 #: ``Episodes.ended``
 RUNNING, EGO_LEFT = 0, 1
 #: ``Episodes.overflow``: what ran out (the batch's facade names it)
@@ -90,6 +90,7 @@ COLLISIONS_KEPT = 64  # the first new contacts of an episode are kept (CONTACT_C
 CONTACT_COLUMNS = ("time", "a", "b", "flags_a", "flags_b", "ghost_lane", "ghost_speed")
 #: contact flags: what a vehicle was at its contact
 CONTACT_EGO, CONTACT_RELAXING, CONTACT_CHANGING, CONTACT_MANDATORY, CONTACT_GHOST = 1, 2, 4, 8, 16
+NEVER = -2  # ``TidTable.drawn`` of a vehicle not drawn this episode
 GHOST_ID_BASE = -1  # a ghost's id in a contact: GHOST_ID_BASE - tid (below every body's)
 SPAWN_ERRORS_KEPT = 4096  # spawn speed errors kept per episode
 TOUCHING_KEPT = 256  # vehicle pairs in contact at once, per episode
@@ -140,7 +141,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
     )  # fmt: skip
     table = TidTable(
         key=np.full((b, h), -1, np.int64), flags=np.zeros((b, h), np.int64),
-        slot=np.full((b, h), -1, np.int64),
+        slot=np.full((b, h), -1, np.int64), drawn=np.full((b, h), NEVER, np.int64),
     )  # fmt: skip
     ghosts = Ghosts(
         count=zeros.copy(), r=np.zeros((b, g), np.int64), lane=np.zeros((b, g), np.int64),

@@ -10,10 +10,9 @@ closes the distance to its recorded trajectory within physical limits:
 * its acceleration is a critically damped tracking law toward its recording (the
   recording's own acceleration plus a correction of natural frequency :data:`OMEGA`),
   never more than its car following allows behind the vehicle or ghost ahead, within
-  [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`]; braking harder is left to it only behind a
-  body in a lane it occupies (a ghost that appears close ahead, a recording leaving
-  the visible window, has no body to hit); its speed never goes below zero (the
-  world's brakes hold it);
+  [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`]; braking harder is left to it where its car
+  following needs it, behind a body or a ghost (a ghost is drawn: running into one is
+  a crash a user sees); its speed never goes below zero (the world's brakes hold it);
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
   discretionary change, no strategic target; such a change is not counted among the
@@ -48,6 +47,10 @@ from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
 ACCEL_LOW, ACCEL_HIGH = -4.0, 2.0  # [m/s^2] a relaxing vehicle's command, emergencies aside
+#: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
+#: with the braking distances at this deceleration (it would have to brake harder;
+#: :mod:`twin.cosim.core.handover`)
+CROWD_DECEL = 2.0
 HAND_BACK_X = 0.3  # [m] along its recording
 HAND_BACK_SPEED = 0.3  # [m/s]
 HAND_BACK_Y = 0.5  # [m] across
@@ -143,13 +146,12 @@ def note_changes(b, core):
 def track(b, core):
     """Each relaxing vehicle's command (after the traffic manager's): the tracking law
     toward its recording, never above its car following's command, within
-    [ACCEL_LOW, ACCEL_HIGH]; only where its car following asks for harder braking
-    behind a body in a lane it occupies does it brake that hard (a ghost that appears
-    close ahead, a recording leaving the visible window, has no body to hit)."""
-    bo, sl, sc = core.bodies, core.slots, core.traffic.scratch
-    dr = core.traffic.drivers
+    [ACCEL_LOW, ACCEL_HIGH]; where its car following asks for harder braking, behind a
+    body or a ghost (drawn, so a crash a user sees), it brakes that hard. It does not
+    brake toward its recording while a ghost behind it crowds it (a recording, which
+    cannot brake for it): it keeps its speed, its car following aside."""
+    bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
     accel, lanes, lanes_from = dr.accel, dr.lane, dr.lane_from
-    n = bo.valid.shape[1]  # owners from n on are ghosts
     for i in range(bo.top[b]):
         if not (bo.valid[b, i] and sl.relaxing[b, i]):
             continue
@@ -162,12 +164,28 @@ def track(b, core):
             + OMEGA * OMEGA * (sl.rec_x[b, i] - bo.x[b, i])
             + 2.0 * OMEGA * (sl.rec_speed[b, i] - bo.speed[b, i])
         )
+        if law < 0.0 and _crowded_by_ghost(b, core, i):
+            law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
         following = accel[b, i]
-        floor = ACCEL_LOW
-        if following < ACCEL_LOW:  # behind a body in a lane it occupies: as hard as needed
-            for lane in (lanes[b, i], lanes_from[b, i], bo.lane[b, i]):
-                ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner,
-                                  sc.entry_count[b], b, lane, bo.x[b, i])  # fmt: skip
-                if 0 <= ahead < n:
-                    floor = following
+        floor = min(following, ACCEL_LOW)  # behind a body or a ghost: as hard as needed
         accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
+
+
+@kernel
+def _crowded_by_ghost(b, core, i):
+    """Whether the ghost just behind slot ``i`` in a lane it occupies is closer than
+    the clearance plus the difference of their braking distances at
+    :data:`CROWD_DECEL` (the test a recorded vehicle crowding a body meets)."""
+    bo, dr, sc = core.bodies, core.traffic.drivers, core.traffic.scratch
+    n = bo.valid.shape[1]  # owners from n on are ghosts
+    v = max(bo.speed[b, i], 0.0)
+    for lane in (dr.lane[b, i], dr.lane_from[b, i]):
+        _, behind = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
+                           lane, bo.x[b, i])  # fmt: skip
+        if behind < n:
+            continue
+        gap = bo.x[b, i] - sc.sx[b, behind] - sc.slength[b, behind]
+        vg = max(sc.sspeed[b, behind], 0.0)
+        if gap < core.settings.clearance + max(vg * vg - v * v, 0.0) / (2.0 * CROWD_DECEL):
+            return True
+    return False

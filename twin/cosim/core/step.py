@@ -51,6 +51,7 @@ from twin.cosim.core.layout import (
     EGO_LEFT,
     FOLLOWERS,
     GHOST_ID_BASE,
+    NEVER,
     PAIRS_FULL,
 )
 from twin.physics.kernels import drive_limit, footprints_overlap, fuel_rate, integrate, overlaps
@@ -89,6 +90,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     keys = core.table.key
     for h in range(keys.shape[1]):
         keys[b, h] = -1
+        core.table.drawn[b, h] = NEVER
     t.scratch.order_count[b] = 0
     core.ghosts.count[b] = 0
     ep.seed[b], ep.t0[b], ep.step[b], ep.steps[b] = seed, t0, 0, steps
