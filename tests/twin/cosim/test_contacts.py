@@ -148,3 +148,19 @@ def test_the_sorted_crowding_test_agrees_with_the_scan_over_every_body(batch):
                 asked += 1
                 crowded += bool(scanned)
     assert 0 < crowded < asked  # both answers occur
+
+
+def test_a_recorded_queue_ahead_of_a_body_is_drawn_for_it_to_brake_for(cosim):
+    # a body at 20 m/s 35 m behind a recorded vehicle crawling in the front ghost cell:
+    # the recording appears (a spawn would not fit there, but the body can brake for
+    # it, a ghost held back would leave the queue undrawn) and the body does not hit it
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 20.0), vehicle(2, -2, EGO_X + 140.0, 20.0),
+         vehicle(3, -2, EGO_X + 180.0, 0.5, seconds=60.0)],
+        world="kinematic", t_max=8.0,
+    )  # fmt: skip
+    sim.run()
+    ghosts = sim.log.ghosts()
+    assert tid_of(sim, 3) in set(ghosts[ghosts["time"] == 0.0]["tid"])  # drawn at once
+    assert int(sim.state.episodes.held[0]) == 0
+    assert sim.counters.contacts == 0  # the body braked for it (or went round it)

@@ -232,6 +232,23 @@ def fits(b, core, x, y, speed, length, width):
 
 
 @kernel
+def may_appear(b, core, x, y, speed, length, width):
+    """Whether a recorded vehicle not drawn a step ago may appear as a ghost at back x,
+    y [m] moving at ``speed`` [m/s]: no body ahead of it within a spawn's room (a
+    recording cannot brake for it) and no body's footprint within the clearance at
+    rest of its own. A body close behind it may be: that body brakes for it (a ghost
+    held back there would leave the queue it stands in undrawn, and the body would
+    drive on into it)."""
+    cs = core.settings
+    return not (
+        _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
+              cs.spawn_decel, np.int64(-1), np.bool_(True))
+        or _near(b, core, x, y, speed, length, width, cs.clearance_at_rest,
+                 cs.clearance_at_rest, np.inf, np.int64(-1), np.bool_(False))
+    )  # fmt: skip
+
+
+@kernel
 def crowds(b, core, x, y, speed, length, width, skip):
     """Whether a vehicle at back x, y [m] moving at ``speed`` [m/s] is closer than
     :func:`spawn_room` at :data:`CROWD_DECEL` to a body ahead of it (not slot ``skip``)
@@ -485,9 +502,9 @@ def enter_and_reload(b, core):
     set is reloaded, the recorded vehicles there or behind it that crowd a body ahead
     made relaxing bodies (:func:`_yields`). A recorded vehicle not drawn a step ago (a
     ghost at the last reload, or a body handed to it since: ``table.drawn``) appears as a
-    ghost only where a spawn would fit (:func:`fits`): one that would appear on or too
-    close to a body, most often one that waited for room in the visible window while
-    the simulated traffic took its place, is held back and waits as a spawn does
+    ghost only where it would not be on a body nor run into one (:func:`may_appear`): one
+    that would, most often one that waited for room in the visible window while the
+    simulated traffic took its place, is held back and waits as a spawn does
     (``Episodes.held`` counts each time a vehicle is held back). Returns how many were
     spawned into the visible window."""
     sn, ep, gh, rec = core.snap, core.episodes, core.ghosts, core.rec
@@ -553,10 +570,11 @@ def enter_and_reload(b, core):
             continue  # in the rear margin, not a ghost
         length, width = rec.length[r], rec.width[r]
         drawn = h >= 0 and core.table.drawn[b, h] >= step - 1
-        if not drawn and not fits(b, core, sx[b, k], sy[b, k], sspeed[b, k], length, width):
-            # not drawn a step ago, and where a spawn would not fit: appearing now, it
-            # would appear on (or too close to) a body; it waits for room as a spawn does
-            # (tried as a spawn too, back in the visible window)
+        if not drawn and not may_appear(b, core, sx[b, k], sy[b, k], sspeed[b, k], length,
+                                        width):  # fmt: skip
+            # not drawn a step ago: appearing now, it would appear on a body or run into
+            # one; it waits for room as a spawn does (tried as a spawn too, back in the
+            # visible window)
             if h >= 0 and not f & HELD:
                 ep.held[b] += 1
                 flags[b, h] |= HELD
