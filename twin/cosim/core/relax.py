@@ -19,8 +19,10 @@ closes the distance to its recorded trajectory within physical limits:
   visible traffic's lane changes);
 * it is handed to its recording (a ghost again) once it is within
   :data:`HAND_BACK_X` and :data:`HAND_BACK_SPEED` of it, in its lane and within
-  :data:`HAND_BACK_Y` across, with the recording in a ghost cell: the step it becomes
-  a ghost it moves by at most that much;
+  :data:`HAND_BACK_Y` across, with the recording in a ghost cell, and its speed a step
+  ago (the last one drawn of it) within :data:`HAND_BACK_SPEED` of its recording's now
+  too: the step it becomes a ghost it moves by at most that much, and its speed
+  changes by at most that much (not that plus the step's own change of speed);
 * it is removed once it is outside the windows, unless its recording is in a ghost
   cell (it would appear there, away from the vehicle), once its recording ends or
   leaves the lanes, and when it leaves the road; a vehicle whose recording is absent
@@ -114,6 +116,7 @@ def settled(b, core, i):
         in_ghost_cell
         and abs(bo.x[b, i] - xr) <= HAND_BACK_X
         and abs(bo.speed[b, i] - sl.rec_speed[b, i]) <= HAND_BACK_SPEED
+        and abs(ep.speed_prev[b, i] - sl.rec_speed[b, i]) <= HAND_BACK_SPEED
         and abs(bo.y[b, i] - sl.rec_y[b, i]) <= HAND_BACK_Y
         and dr.lane_from[b, i] == dr.lane[b, i]
         and lane_of(sl.rec_y[b, i]) == dr.lane[b, i]
