@@ -21,6 +21,23 @@ def test_stanley_steers_toward_the_path():
     assert steer(0.0, curvature=0.01) == pytest.approx(np.arctan(0.027))
 
 
+def test_stanley_turns_a_yawed_body_back_beyond_the_lateral_limit():
+    """The lateral-acceleration limit bounds how hard a body is steered toward its
+    path, not how far a yawed body is turned back: a body braking hard at 48 m/s
+    (limit 0.005 rad) that yawed 0.05 rad off its path is steered back by that much;
+    clamped to the limit it went on yawing and left the road (physics world)."""
+    limit = np.arctan(2.8 * 4.0 / 48.0**2)
+
+    def steer(error, heading_error):
+        return stanley(error, heading_error, 48.0, 0.0, 2.8, 1.0, limit)
+
+    assert steer(0.0, 0.05) == pytest.approx(-0.05)
+    assert steer(0.0, -0.05) == pytest.approx(0.05)
+    assert steer(2.0, 0.0) == pytest.approx(limit)  # toward the path: within the limit
+    assert steer(-2.0, 0.0) == pytest.approx(-limit)
+    assert abs(steer(0.0, 2.0)) == pytest.approx(0.5)  # never beyond MAX_STEER
+
+
 def test_lane_change_path_is_a_smooth_blend_with_consistent_derivatives():
     x = np.linspace(-10.0, 110.0, 12001)
     y, slope, bend = np.array([path_shape(xi, 0.0, 1.0, 4.0, 100.0) for xi in x]).T

@@ -44,11 +44,15 @@ def stanley(error, heading_error, speed, curvature, wheelbase, gain, max_steer):
     curvature as feedforward: ``error`` [m] the vehicle's y minus the path's (positive
     right of travel), ``heading_error`` [rad] its yaw minus the path's (positive left),
     ``speed`` [m/s], ``curvature`` [1/m] (positive turning left), ``wheelbase`` [m],
-    ``gain`` [1/s] (the cross-track error decays at about this rate), within
-    +/- ``max_steer`` [rad]."""
+    ``gain`` [1/s] (the cross-track error decays at about this rate). The steer toward
+    the path (feedforward and cross-track terms) stays within +/- ``max_steer`` [rad]
+    (the lateral-acceleration limit); the heading term turns a yawed body back beyond
+    it, up to :data:`MAX_STEER` (clamped with the rest, a body that yawed under hard
+    braking at 48 m/s could not be turned back and spun off the road)."""
     feedforward = math.atan(wheelbase * curvature) if curvature != 0.0 else 0.0
-    angle = feedforward - heading_error + math.atan(gain * error / (max(speed, 0.0) + SOFT_SPEED))
-    return min(max(angle, -max_steer), max_steer)
+    toward = feedforward + math.atan(gain * error / (max(speed, 0.0) + SOFT_SPEED))
+    angle = min(max(toward, -max_steer), max_steer) - heading_error
+    return min(max(angle, -MAX_STEER), MAX_STEER)
 
 
 @kernel(inline=True)
