@@ -1,6 +1,8 @@
-"""Reading I-24 MOTION day files: one JSON array of trajectory documents, many GB large,
-gzip'd or not, parsed as a stream (ijson) one document at a time, with the
-non-standard ``NaN`` and ``Infinity`` tokens some writers emit read as ``null``."""
+"""I-24 MOTION day files: one JSON array of trajectory documents, many GB large.
+Reading: gzip'd or not, parsed as a stream (ijson) one document at a time, with the
+non-standard ``NaN`` and ``Infinity`` tokens some writers emit read as ``null``.
+Writing (:func:`write_day`): the twin's test data (the synthesiser's, SUMO's) in the
+real layout."""
 
 import contextlib
 import gzip
@@ -10,8 +12,13 @@ from pathlib import Path
 from typing import BinaryIO
 
 import ijson
+import numpy as np
+import orjson
 
+from twin.core import i24
+from twin.core.atomic import atomic_file
 from twin.core.errors import DataFormatError
+from twin.core.progress import progress_bar
 
 READ_CHUNK = 1 << 16  # [bytes]
 
@@ -117,3 +124,63 @@ def _nonfinite_to_null(data: bytes) -> bytes:
     return (
         data.replace(b"-Infinity", b"null").replace(b"Infinity", b"null").replace(b"NaN", b"null")
     )
+
+
+def write_day(path, road, anchor: float, vid: np.ndarray, tracks: list,
+              vehicle_class: np.ndarray, dimensions: np.ndarray, *, flag: str = "synthetic",
+              progress: bool = False) -> Path:  # fmt: skip
+    """Write recorded tracks as an I-24 MOTION day file (a JSON array of documents,
+    ordered by first time), each vehicle's ``_id`` made of ``anchor`` [s unix], the
+    road and its id in ``vid``.
+
+    Args:
+        road: the carriageway (``twin.core.i24.Road``). tracks: per vehicle (t [s unix],
+            x [m], y [m]) arrays in the road frame, back centre. vehicle_class: (m,)
+            I-24 classes. dimensions: (m, 3) length, width, height [m]. flag: the
+            documents' ``flags`` entry (who made the data).
+
+    Written to a temporary file beside ``path`` and renamed, so an interrupted write
+    never leaves a truncated file under the final name.
+    """
+    path = Path(path)
+    order = np.argsort([track[0][0] for track in tracks], kind="stable")
+    prefix = f"{int(anchor) & 0xFFFFFFFF:08x}{road.code:02x}"
+    with atomic_file(path) as tmp, open(tmp, "wb") as out:
+        out.write(b"[\n")
+        for n, i in enumerate(progress_bar(order, progress=progress, desc="write", leave=False)):
+            t, x, y = tracks[i]
+            x_ft = np.round(i24.x_feet(x, road), 2)
+            y_ft = np.round(i24.y_feet(y, road), 2)
+            t = np.round(t, 3)
+            length, width, height = (dimensions[i] / i24.FT).round(3).tolist()
+            doc = {
+                "_id": {"$oid": f"{prefix}{int(vid[i]):014x}"},
+                "timestamp": t.tolist(),
+                "first_timestamp": float(t[0]),
+                "last_timestamp": float(t[-1]),
+                "x_position": x_ft.tolist(),
+                "y_position": y_ft.tolist(),
+                "starting_x": float(x_ft[0]),
+                "ending_x": float(x_ft[-1]),
+                "length": length,
+                "width": width,
+                "height": height,
+                "coarse_vehicle_class": int(vehicle_class[i]),
+                "fine_vehicle_class": int(vehicle_class[i]),
+                "direction": road.direction,
+                "merged_ids": [],
+                "fragment_ids": [],
+                "compute_node_id": 0,
+                "local_fragment_id": int(vid[i]),
+                "road_segment_ids": [],
+                "configuration_id": 0,
+                "flags": [flag],
+                "x_score": 0.0,
+                "y_score": 0.0,
+                "feasibility": 1.0,
+            }
+            if n:
+                out.write(b",\n")
+            out.write(orjson.dumps(doc))
+        out.write(b"\n]\n")
+    return path

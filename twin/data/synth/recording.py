@@ -7,11 +7,9 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
-import orjson
 
-from twin.core import i24
-from twin.core.atomic import atomic_file
 from twin.core.progress import progress_bar
+from twin.data.day_files import write_day
 from twin.data.synth.config import SynthConfig
 from twin.data.synth.simulation import Simulation
 from twin.traffic.drivers import DriverTraits
@@ -102,52 +100,8 @@ def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
 
 
 def write_i24_json(result: SynthResult, path: str | os.PathLike, *, progress: bool = False) -> Path:
-    """Write the tracks as an I-24 MOTION day file (a JSON array of documents).
-
-    Written to a temporary file beside ``path`` and renamed, so an interrupted write
-    never leaves a truncated file under the final name.
-    """
+    """Write the tracks as an I-24 MOTION day file (a JSON array of documents;
+    :func:`twin.data.day_files.write_day`)."""
     cfg = result.config
-    road = cfg.road
-    path = Path(path)
-    order = np.argsort([track[0][0] for track in result.tracks], kind="stable")
-    prefix = f"{int(cfg.anchor) & 0xFFFFFFFF:08x}{road.code:02x}"
-    with atomic_file(path) as tmp, open(tmp, "wb") as out:
-        out.write(b"[\n")
-        for n, i in enumerate(progress_bar(order, progress=progress, desc="write", leave=False)):
-            t, x, y = result.tracks[i]
-            x_ft = np.round(i24.x_feet(x, road), 2)
-            y_ft = np.round(i24.y_feet(y, road), 2)
-            t = np.round(t, 3)
-            length, width, height = (result.dimensions[i] / i24.FT).round(3).tolist()
-            doc = {
-                "_id": {"$oid": f"{prefix}{int(result.vid[i]):014x}"},
-                "timestamp": t.tolist(),
-                "first_timestamp": float(t[0]),
-                "last_timestamp": float(t[-1]),
-                "x_position": x_ft.tolist(),
-                "y_position": y_ft.tolist(),
-                "starting_x": float(x_ft[0]),
-                "ending_x": float(x_ft[-1]),
-                "length": length,
-                "width": width,
-                "height": height,
-                "coarse_vehicle_class": int(result.vehicle_class[i]),
-                "fine_vehicle_class": int(result.vehicle_class[i]),
-                "direction": road.direction,
-                "merged_ids": [],
-                "fragment_ids": [],
-                "compute_node_id": 0,
-                "local_fragment_id": int(result.vid[i]),
-                "road_segment_ids": [],
-                "configuration_id": 0,
-                "flags": ["synthetic"],
-                "x_score": 0.0,
-                "y_score": 0.0,
-                "feasibility": 1.0,
-            }
-            if n:
-                out.write(b",\n")
-            out.write(orjson.dumps(doc))
-        out.write(b"\n]\n")
-    return path
+    return write_day(path, cfg.road, cfg.anchor, result.vid, result.tracks,
+                     result.vehicle_class, result.dimensions, progress=progress)  # fmt: skip
