@@ -25,6 +25,7 @@ def register(commands) -> None:
     _register_ingest(data_commands)
     _register_info(data_commands)
     _register_synth(data_commands)
+    _register_sumo(data_commands)
     _register_plot(data_commands)
     _register_waves(data_commands)
 
@@ -172,6 +173,17 @@ def _synth_config(args):
     for name in ("politeness", "change_threshold", "decision_interval"):
         if getattr(args, name) is not None:
             changes[name] = getattr(args, name)
+    return _preset(args, changes)
+
+
+def _preset(args, changes: dict):
+    """``--preset`` with ``changes``, ``--minutes`` and ``--start``.
+
+    Raises:
+        UsageError: a value the synthesiser cannot take (the message names it).
+    """
+    from twin.data import synth
+
     if args.minutes is not None:
         changes["minutes"] = args.minutes
     if args.start is not None:
@@ -180,6 +192,60 @@ def _synth_config(args):
         return replace(synth.ALL_PRESETS[args.preset], **changes)
     except ValueError as error:  # SynthConfig names the value it cannot take
         raise UsageError(str(error)) from None
+
+
+def _register_sumo(commands) -> None:
+    p = commands.add_parser(
+        "sumo",
+        help="write an I-24 MOTION day made by Eclipse SUMO's drivers (test data from another "
+        "simulator)",
+        description="Drive a synthesiser preset's road (its lane drop, on-ramp, bottleneck) and "
+        "demand with SUMO's own drivers (Krauss, LC2013) and write what the cameras see as an "
+        "I-24 MOTION day file. Needs Eclipse SUMO (pip install eclipse-sumo, in the test extra).",
+    )
+    p.add_argument(
+        "--preset",
+        choices=["C", "D", "E"],
+        required=True,
+        help="whose road and demand: C (the westbound morning, its bottleneck), D (lanes -3 "
+        "and -4 ending 300 m past the segment), E (the Old Hickory on-ramp)",
+    )
+    p.add_argument("--out", required=True, type=Path, help="JSON file to write")
+    p.add_argument(
+        "--minutes", type=float, default=None,
+        help="time recorded [min] (default: the preset's, 30)",
+    )  # fmt: skip
+    add_start(p, "first recorded time, unix or ISO 8601 with offset (default: the preset's)")
+    p.add_argument("--seed", type=int, default=0, help="SUMO's seed, and the tracking noise's")
+    p.add_argument(
+        "--lane-change-duration", type=float, default=3.0,
+        help="how long SUMO's lane changes take [s] (default: 3)",
+    )  # fmt: skip
+    p.add_argument(
+        "--keep", type=Path, default=None,
+        help="folder to keep SUMO's network, routes and outputs in (default: none kept)",
+    )  # fmt: skip
+    add_quiet(p)
+    p.set_defaults(handler=_sumo)
+
+
+def _sumo(args) -> int:
+    from twin.data.sumo_day import sumo_day
+
+    check_seed(args.seed)
+    config = _preset(args, {"seed": args.seed})
+    if not args.lane_change_duration > 0:
+        raise UsageError(f"--lane-change-duration must be > 0 s, got {args.lane_change_duration}")
+    result = sumo_day(config, args.out, lane_change_duration=args.lane_change_duration,
+                      keep=args.keep, progress=not args.quiet)  # fmt: skip
+    path = result.path
+    print(
+        f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {result.trajectories:,} "
+        f"trajectories made by SUMO, {config.road.value}; SUMO: {result.departed:,} vehicles, "
+        f"{result.lane_changes:,} lane changes, {result.collisions} collisions, "
+        f"{result.waiting} still waiting to enter"
+    )
+    return 0
 
 
 def _register_plot(commands) -> None:

@@ -30,6 +30,8 @@ import pandas as pd
 from mapgen.opendrive import write_opendrive
 from twin.core.atomic import AtomicFolder
 from twin.core.i24 import VEHICLE_CLASSES, Road
+from twin.core.sumo import SumoMissing
+from twin.core.sumo import sumo_home as core_sumo_home
 from twin.export.episode import ExportError, read_episode
 
 FCD_PERIOD = 0.1  # [s]
@@ -44,12 +46,9 @@ def sumo_home() -> Path:
         ExportError: it is not installed.
     """
     try:
-        import sumo
-    except ImportError:
-        raise ExportError(
-            "exporting to SUMO needs Eclipse SUMO: python3 -m pip install eclipse-sumo"
-        ) from None
-    return Path(sumo.SUMO_HOME)
+        return core_sumo_home()
+    except SumoMissing as error:
+        raise ExportError(f"exporting to SUMO: {error}") from None
 
 
 def sumo_lane(lane: int) -> int:

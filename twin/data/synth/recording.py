@@ -63,23 +63,14 @@ def synthesize(config: SynthConfig, *, progress: bool = False) -> SynthResult:
 
 def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
     """Tracks at the recording rate with a per-vehicle phase and tracking noise."""
-    period = 1.0 / config.sample_rate
     starts = np.flatnonzero(np.r_[True, vid[1:] != vid[:-1]])
     ends = np.r_[starts[1:], len(vid)]
     ids, tracks = [], []
     for a, b in zip(starts, ends, strict=True):
-        v = int(vid[a])
-        t_steps = t0 + step[a:b] * config.dt
-        phase = rng.uniform(0, period)
-        first = math.ceil((max(t_steps[0], config.start) - config.start - phase) / period)
-        last = math.floor((min(t_steps[-1], config.end) - config.start - phase) / period)
-        if last - first < 1:
-            continue
-        t = config.start + phase + np.arange(first, last + 1) * period
-        xs = np.interp(t, t_steps, x[a:b]) + config.position_noise * rng.standard_normal(len(t))
-        ys = np.interp(t, t_steps, y[a:b]) + config.position_noise * rng.standard_normal(len(t))
-        ids.append(v)
-        tracks.append((t, xs, ys))
+        track = camera_track(config, rng, t0 + step[a:b] * config.dt, x[a:b], y[a:b])
+        if track is not None:
+            ids.append(int(vid[a]))
+            tracks.append(track)
     ids = np.array(ids, dtype=np.int64)
     drivers = DriverTraits(
         *(
@@ -97,6 +88,23 @@ def _resample(config, sim, rng, t0, vid, step, x, y) -> SynthResult:
         lane_changes=sim.lane_changes,
         collisions=sim.collisions,
     )
+
+
+def camera_track(config: SynthConfig, rng, t_steps, x, y):
+    """One vehicle's simulated positions (x, y [m] at unix ``t_steps`` [s]) as the cameras
+    record them: at ``config.sample_rate`` with a phase of its own inside the recorded
+    times, with ``config.position_noise``; (t, x, y), or None where fewer than two
+    samples fall inside."""
+    period = 1.0 / config.sample_rate
+    phase = rng.uniform(0, period)
+    first = math.ceil((max(t_steps[0], config.start) - config.start - phase) / period)
+    last = math.floor((min(t_steps[-1], config.end) - config.start - phase) / period)
+    if last - first < 1:
+        return None
+    t = config.start + phase + np.arange(first, last + 1) * period
+    xs = np.interp(t, t_steps, x) + config.position_noise * rng.standard_normal(len(t))
+    ys = np.interp(t, t_steps, y) + config.position_noise * rng.standard_normal(len(t))
+    return t, xs, ys
 
 
 def write_i24_json(result: SynthResult, path: str | os.PathLike, *, progress: bool = False) -> Path:

@@ -1,0 +1,372 @@
+"""Test data from another simulator: I-24 MOTION days made by Eclipse SUMO's drivers.
+
+The synthesiser (:mod:`twin.data.synth`) shares its car following, its lane changing
+and its merging with the twin's own traffic manager, so a figure measured only on its
+data proves little. :func:`sumo_day` drives the same road, lanes, lane drop, on-ramp,
+bottleneck and demand as a synthesiser preset with SUMO's own drivers instead (Krauss
+car following, LC2013 lane changing, SUMO's defaults for each vehicle class), records
+what the cameras would see and writes it as an I-24 MOTION day file (the layout of
+:func:`twin.data.day_files.write_day`).
+
+SUMO's network of the road is its own, straight, in the road frame: SUMO's x is the
+road frame's x less the start of the simulated road, its lanes count from the right
+(index 0), the HOV lane (-1) is the leftmost, open to SUMO's ``hov`` class only. The
+edges change where the lanes do:
+
+* an on-ramp's acceleration lane is a fifth lane on the right from the ramp's start to
+  its end, where it ends: its vehicles depart on it at the ramp's speed and must merge
+  into lane -4 before its end (SUMO's strategic lane changing); the recording sees them
+  outside the lane bands until they are in lane -4, as I-24 MOTION's cameras do;
+* a lane drop ends the preset's lanes (the right ones) at its position;
+* a bottleneck is a stretch with the preset's lower speed limit.
+
+The preset's scripted slowdowns and its bottleneck's slow drivers are not reproduced:
+the waves come from SUMO's drivers at the merges and the bottleneck. SUMO runs at 0.1
+s steps with continuous lane changes of ``lane_change_duration`` seconds, no
+teleporting (a stuck vehicle waits) and collisions counted, not removed; it writes its
+floating-car data as Parquet (SUMO's own Arrow support: no Python binding to SUMO is
+loaded, whose Arrow build could clash with pyarrow's), which is resampled at the
+camera rate with a per-vehicle phase and the preset's tracking noise, back centre, as
+the synthesiser records.
+"""
+
+import itertools
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from twin.core import i24
+from twin.core.errors import TwinError
+from twin.core.sumo import SumoMissing, sumo_tool
+from twin.core.vehicle_classes import vehicle_classes
+from twin.data.day_files import write_day
+from twin.data.synth.config import SynthConfig
+from twin.data.synth.recording import camera_track
+
+SPEED_LIMIT = 70.0 * i24.MILE / 3600.0  # [m/s] the corridor's limit, 70 mph
+STEP = 0.1  # [s] SUMO's step
+#: SUMO's vehicle class of each I-24 class (sedan .. motorcycle)
+SUMO_CLASSES = ("passenger", "passenger", "passenger", "delivery", "trailer", "truck",
+                "motorcycle")  # fmt: skip
+RAMP = "ramp"  # the ramp's edges' name prefix
+
+
+class SumoDayError(TwinError):
+    """SUMO failed, or the preset cannot be driven in SUMO."""
+
+
+@dataclass(frozen=True)
+class SumoDayResult:
+    """What :func:`sumo_day` wrote: the day file and SUMO's own counts."""
+
+    path: Path
+    trajectories: int
+    lane_changes: int
+    collisions: int
+    departed: int
+    waiting: int  # vehicles still waiting to depart at the end (demand above capacity)
+
+
+@dataclass(frozen=True)
+class _Piece:
+    """One edge of SUMO's network: road-frame x from ``x0`` to ``x1`` [m]."""
+
+    x0: float
+    x1: float
+    lanes: int  # how many, the acceleration lane included
+    ramp: bool  # the rightmost lane is the on-ramp's acceleration lane
+    speed: float  # [m/s] its limit
+
+
+def sumo_day(config: SynthConfig, out, *, lane_change_duration: float = 3.0,
+             keep: Path | None = None, progress: bool = False) -> SumoDayResult:  # fmt: skip
+    """Drive ``config``'s road and demand with SUMO's drivers and write the recording
+    as an I-24 MOTION day file ``out`` (module doc). Deterministic by ``config.seed``.
+
+    Args:
+        config: the synthesiser preset whose road (lane drop, on-ramp, bottleneck),
+            demand (per-lane flows, the ramp's), times, recorded range, sample rate and
+            tracking noise are driven.
+        lane_change_duration: [s] SUMO's continuous lane changes take this long.
+        keep: a folder to keep SUMO's inputs and outputs in (default: a temporary one).
+
+    Raises:
+        SumoDayError: SUMO is missing or failed, or the preset has no flow.
+    """
+    if not sum(config.flow) and config.on_ramp is None:
+        raise SumoDayError("the preset has no demand: every lane's flow is 0")
+    if not lane_change_duration > 0:
+        raise SumoDayError(f"lane_change_duration must be > 0 s, got {lane_change_duration}")
+    pieces = _pieces(config)
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        return _drive(config, pieces, Path(keep), Path(out), lane_change_duration, progress)
+    with tempfile.TemporaryDirectory(prefix="i24-sumo-") as folder:
+        return _drive(config, pieces, Path(folder), Path(out), lane_change_duration, progress)
+
+
+def _drive(config, pieces, folder, out, lane_change_duration, progress) -> SumoDayResult:
+    _network(pieces, folder)
+    departures = _routes(config, pieces, folder)
+    stats = _run(config, folder, lane_change_duration, progress)
+    vid, tracks, classes, dims = _record(config, pieces, folder, departures)
+    if not tracks:
+        raise SumoDayError("SUMO's vehicles never entered the recorded range")
+    path = write_day(out, config.road, config.anchor, vid, tracks, classes, dims,
+                     flag="sumo", progress=progress)  # fmt: skip
+    return SumoDayResult(path=path, trajectories=len(tracks), **stats)
+
+
+# -- the network ------------------------------------------------------------------------------
+
+
+def _pieces(config: SynthConfig) -> list[_Piece]:
+    """The edges: cut where the lanes or the speed limit change."""
+    begin = config.x_record[0] - config.upstream
+    end = config.x_record[1] + config.downstream
+    cuts = {begin, end}
+    ramp, drop, neck = config.on_ramp, config.lane_drop, config.bottleneck
+    if ramp is not None:
+        cuts |= {min(max(ramp.x_start, begin), end), min(max(ramp.x_end, begin), end)}
+    if drop is not None:
+        cuts.add(min(max(drop.x, begin), end))
+    if neck is not None:
+        cuts |= {min(max(neck.x, begin), end), min(max(neck.x + neck.length, begin), end)}
+    edges = sorted(cuts)
+    pieces = []
+    for x0, x1 in itertools.pairwise(edges):
+        if x1 - x0 < 1.0:
+            continue
+        middle = 0.5 * (x0 + x1)
+        lanes = i24.N_LANES
+        if drop is not None and middle > drop.x:
+            lanes -= len(drop.lanes)
+        on_ramp = ramp is not None and ramp.x_start < middle < ramp.x_end
+        speed = SPEED_LIMIT
+        if neck is not None and neck.x < middle < neck.x + neck.length:
+            speed = min(speed, neck.speed)
+        pieces.append(_Piece(x0, x1, lanes + on_ramp, on_ramp, speed))
+    return pieces
+
+
+def _edge(k: int) -> str:
+    return f"e{k}"
+
+
+def _network(pieces: list[_Piece], folder: Path) -> None:
+    """SUMO's network: plain nodes, edges and connections, built by netconvert."""
+    begin = pieces[0].x0
+    nodes = ET.Element("nodes")
+    for k in range(len(pieces) + 1):
+        x = pieces[k].x0 if k < len(pieces) else pieces[-1].x1
+        ET.SubElement(nodes, "node", id=f"n{k}", x=f"{x - begin:.3f}", y="0")
+    edges = ET.Element("edges")
+    for k, piece in enumerate(pieces):
+        edge = ET.SubElement(edges, "edge", id=_edge(k), **{"from": f"n{k}", "to": f"n{k + 1}"},
+                             numLanes=str(piece.lanes), speed=f"{piece.speed:.3f}",
+                             width=f"{i24.LANE_WIDTH:.4f}", spreadType="right")  # fmt: skip
+        ET.SubElement(edge, "lane", index=str(piece.lanes - 1), allow="hov emergency")
+    connections = ET.Element("connections")
+    for k in range(len(pieces) - 1):
+        a, b = pieces[k], pieces[k + 1]
+        # the lanes are aligned on the left (the HOV lane): lane i from the left
+        # continues as lane i from the left; lanes beyond the next edge's end there
+        for left in range(min(a.lanes - a.ramp, b.lanes - b.ramp)):
+            ET.SubElement(connections, "connection", **{"from": _edge(k), "to": _edge(k + 1)},
+                          fromLane=str(a.lanes - 1 - left),
+                          toLane=str(b.lanes - 1 - left))  # fmt: skip
+        if a.ramp and b.ramp:
+            ET.SubElement(connections, "connection", **{"from": _edge(k), "to": _edge(k + 1)},
+                          fromLane="0", toLane="0")  # fmt: skip
+    for name, root in (("i24.nod.xml", nodes), ("i24.edg.xml", edges),
+                       ("i24.con.xml", connections)):  # fmt: skip
+        ET.ElementTree(root).write(folder / name, encoding="utf-8", xml_declaration=True)
+    _call(
+        [
+            str(_tool("netconvert")),
+            "--node-files", str(folder / "i24.nod.xml"),
+            "--edge-files", str(folder / "i24.edg.xml"),
+            "--connection-files", str(folder / "i24.con.xml"),
+            "--output-file", str(folder / "i24.net.xml"),
+            "--offset.disable-normalization", "true",
+            "--no-turnarounds", "true",
+            "--no-warnings", "true",
+        ],
+        "netconvert",
+    )  # fmt: skip
+
+
+# -- the demand -------------------------------------------------------------------------------
+
+
+def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataFrame:
+    """Vehicle types, one flow per lane and the ramp's; returns the types' table. Each
+    I-24 class is a type with its size, and with the preset's desired speeds, time
+    headways (Krauss's ``tau``) and standstill gaps, so that the road's capacity is the
+    preset's; how they accelerate, brake, dawdle (``sigma``) and change lanes is
+    SUMO's default for their SUMO class."""
+    frame = vehicle_classes().frame
+    drivers = config.drivers
+    routes = ET.Element("routes")
+    rows = []
+    for hov in (False, True):
+        for c in frame.index:
+            row = frame.loc[c]
+            if hov and not row["hov_allowed"]:
+                continue
+            name = f"{row['name']}{'_hov' if hov else ''}"
+            desired = row["desired_speed_mps"] * drivers.desired_speed_scale
+            factor = desired / SPEED_LIMIT
+            spread = row["desired_speed_sd_mps"] / row["desired_speed_mps"]
+            headway = row["time_headway_s"] * drivers.time_headway_scale
+            ET.SubElement(routes, "vType", id=name,
+                          vClass="hov" if hov else SUMO_CLASSES[int(c)],
+                          length=f"{row['length_m']:.3f}", width=f"{row['width_m']:.3f}",
+                          height=f"{row['height_m']:.3f}", carFollowModel="Krauss",
+                          tau=f"{headway:.3f}", minGap=f"{drivers.min_gap:.3f}",
+                          speedFactor=f"normc({factor:.4f},{spread:.4f},0.6,1.6)")  # fmt: skip
+            rows.append((name, int(c), row["length_m"], row["width_m"], row["height_m"], hov))
+    types = pd.DataFrame(rows, columns=["type", "vehicle_class", "length", "width", "height",
+                                        "hov"]).set_index("type")  # fmt: skip
+    shares = frame["share"].to_numpy(float)
+    heavy = frame["hov_allowed"].to_numpy() == 0
+    for hov in (False, True):
+        dist = ET.SubElement(routes, "vTypeDistribution", id="hov" if hov else "mix")
+        for c in frame.index:
+            if hov and heavy[c]:
+                continue
+            name = f"{frame.loc[c, 'name']}{'_hov' if hov else ''}"
+            ET.SubElement(dist, "vType", refId=name, probability=f"{shares[c]:.4f}")
+    last = len(pieces) - 1
+    first_general = 1 if pieces[0].ramp else 0  # the rightmost lane at the start
+    end = config.warmup + 60.0 * config.minutes
+    for k, lane in enumerate(i24.LANES):  # -1 .. -4
+        flow = config.flow[k]
+        if flow <= 0:
+            continue
+        index = pieces[0].lanes - 1 - k
+        if index < first_general:
+            continue
+        kind = "hov" if lane == i24.HOV_LANE else "mix"
+        ET.SubElement(routes, "flow", id=f"lane{lane}", type=kind,
+                      begin="0", end=f"{end:.1f}", vehsPerHour=f"{flow:.1f}",
+                      departLane=str(index), departSpeed="max", departPos="base",
+                      **{"from": _edge(0), "to": _edge(last)})  # fmt: skip
+    ramp = config.on_ramp
+    if ramp is not None and ramp.flow > 0:
+        start = next(k for k, p in enumerate(pieces) if p.ramp)
+        ET.SubElement(routes, "flow", id="ramp", type="mix", begin="0", end=f"{end:.1f}",
+                      vehsPerHour=f"{ramp.flow:.1f}", departLane="0",
+                      departSpeed=f"{min(ramp.speed, SPEED_LIMIT):.2f}", departPos="base",
+                      **{"from": _edge(start), "to": _edge(last)})  # fmt: skip
+    ET.ElementTree(routes).write(folder / "i24.rou.xml", encoding="utf-8", xml_declaration=True)
+    return types
+
+
+# -- the run ----------------------------------------------------------------------------------
+
+
+def _run(config: SynthConfig, folder: Path, lane_change_duration: float, progress) -> dict:
+    """Run SUMO; returns its counts (lane changes, collisions, departed, waiting)."""
+    end = config.warmup + 60.0 * config.minutes
+    _call(
+        [
+            str(_tool("sumo")),
+            "--net-file", str(folder / "i24.net.xml"),
+            "--route-files", str(folder / "i24.rou.xml"),
+            "--begin", "0", "--end", f"{end:.1f}",
+            "--step-length", f"{STEP}",
+            "--seed", str(int(config.seed) % (2**31)),
+            "--lanechange.duration", f"{lane_change_duration}",
+            "--time-to-teleport", "-1",
+            "--collision.action", "warn",
+            "--collision.check-junctions", "true",
+            "--fcd-output", str(folder / "fcd.parquet"),
+            "--fcd-output.attributes", "x,y,angle,speed,lane,type",
+            "--lanechange-output", str(folder / "lanechanges.xml"),
+            "--statistic-output", str(folder / "statistics.xml"),
+            "--no-step-log", "true",
+            "--no-warnings", "true",
+            "--duration-log.disable", "true",
+        ],
+        "sumo",
+    )  # fmt: skip
+    stats = ET.parse(folder / "statistics.xml").getroot()
+    vehicles = stats.find("vehicles")
+    safety = stats.find("safety")
+    changes = sum(1 for _ in ET.iterparse(folder / "lanechanges.xml") if _[1].tag == "change")
+    return {
+        "lane_changes": changes,
+        "collisions": int(safety.get("collisions", 0)) if safety is not None else 0,
+        "departed": int(vehicles.get("inserted", 0)) if vehicles is not None else 0,
+        "waiting": int(vehicles.get("waiting", 0)) if vehicles is not None else 0,
+    }
+
+
+# -- the recording ----------------------------------------------------------------------------
+
+
+def _record(config: SynthConfig, pieces: list[_Piece], folder: Path, types: pd.DataFrame):
+    """SUMO's floating-car data as recorded tracks: back centre in the road frame,
+    inside the recorded range and times, at the camera rate with the preset's tracking
+    noise and a per-vehicle phase."""
+    fcd = pd.read_parquet(folder / "fcd.parquet")
+    fcd = fcd.rename(columns=lambda c: c.removeprefix("vehicle_").removeprefix("timestep_"))
+    ids = fcd["id"].astype(str).to_numpy()
+    kinds = fcd["type"].astype(str).to_numpy()
+    length = types.loc[kinds, "length"].to_numpy(float)
+    angle = np.radians(fcd["angle"].to_numpy(float))  # SUMO's: clockwise from north
+    # SUMO gives the front bumper; the recording the back centre. SUMO's y grows to the
+    # left of travel from the left edge of the HOV lane; the road frame's y to the right,
+    # the HOV lane's centre 1.5 lane widths from its origin.
+    x = fcd["x"].to_numpy(float) - length * np.sin(angle) + pieces[0].x0
+    y = -(fcd["y"].to_numpy(float) - length * np.cos(angle)) + i24.LANE_WIDTH
+    t = config.start - config.warmup + fcd["time"].to_numpy(float)
+    lo, hi = config.x_record
+    seen = (x >= lo) & (x <= hi) & (t >= config.start - STEP)
+    frame = pd.DataFrame({"id": ids[seen], "type": kinds[seen], "t": t[seen], "x": x[seen],
+                          "y": y[seen]})  # fmt: skip
+    frame = frame.sort_values(["id", "t"], kind="stable")
+    rng = np.random.default_rng(config.seed)
+    vid, tracks, classes, dims = [], [], [], []
+    names = sorted(frame["id"].unique(), key=_departure_order)
+    groups = dict(tuple(frame.groupby("id", sort=False)))
+    for n, name in enumerate(names):
+        rows = groups[name]
+        track = camera_track(config, rng, rows["t"].to_numpy(), rows["x"].to_numpy(),
+                             rows["y"].to_numpy())  # fmt: skip
+        if track is None:
+            continue
+        kind = types.loc[rows["type"].iloc[0]]
+        vid.append(n)
+        tracks.append(track)
+        classes.append(int(kind["vehicle_class"]))
+        dims.append((kind["length"], kind["width"], kind["height"]))
+    return np.array(vid, np.int64), tracks, np.array(classes, np.int64), np.array(dims, float)
+
+
+def _departure_order(name: str) -> tuple[str, int]:
+    flow, _, number = name.rpartition(".")
+    return (flow, int(number)) if number.isdigit() else (name, 0)
+
+
+# -- helpers ----------------------------------------------------------------------------------
+
+
+def _tool(name: str) -> Path:
+    try:
+        return sumo_tool(name)
+    except SumoMissing as error:
+        raise SumoDayError(str(error)) from None
+
+
+def _call(command: list[str], what: str) -> None:
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        message = (done.stderr or done.stdout).strip().splitlines()[-5:]
+        raise SumoDayError(f"{what} failed (exit {done.returncode}): " + " / ".join(message))
