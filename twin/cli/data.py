@@ -205,10 +205,10 @@ def _register_sumo(commands) -> None:
     )
     p.add_argument(
         "--preset",
-        choices=["C", "D", "E"],
+        choices=["D", "E"],
         required=True,
-        help="whose road and demand: C (the westbound morning, its bottleneck), D (lanes -3 "
-        "and -4 ending 300 m past the segment), E (the Old Hickory on-ramp)",
+        help="whose road and demand: D (lanes -3 and -4 ending 300 m past the segment), E "
+        "(the Old Hickory on-ramp and C's bottleneck)",
     )
     p.add_argument("--out", required=True, type=Path, help="JSON file to write")
     p.add_argument(

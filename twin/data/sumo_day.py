@@ -31,6 +31,7 @@ the synthesiser records.
 """
 
 import itertools
+import os
 import subprocess
 import tempfile
 import xml.etree.ElementTree as ET
@@ -42,11 +43,12 @@ import pandas as pd
 
 from twin.core import i24
 from twin.core.errors import TwinError
-from twin.core.sumo import SumoMissing, sumo_tool
+from twin.core.sumo import SumoMissing, sumo_home, sumo_tool
 from twin.core.vehicle_classes import vehicle_classes
 from twin.data.day_files import write_day
 from twin.data.synth.config import SynthConfig
 from twin.data.synth.recording import camera_track
+from twin.data.synth.simulation import class_weights
 
 SPEED_LIMIT = 70.0 * i24.MILE / 3600.0  # [m/s] the corridor's limit, 70 mph
 STEP = 0.1  # [s] SUMO's step
@@ -98,12 +100,15 @@ def sumo_day(config: SynthConfig, out, *, lane_change_duration: float = 3.0,
     Raises:
         SumoDayError: SUMO is missing or failed, or the preset has no flow.
     """
-    if not sum(config.flow) and config.on_ramp is None:
+    if not sum(config.flow) and (config.on_ramp is None or config.on_ramp.flow <= 0):
         raise SumoDayError("the preset has no demand: every lane's flow is 0")
     if not lane_change_duration > 0:
         raise SumoDayError(f"lane_change_duration must be > 0 s, got {lane_change_duration}")
     pieces = _pieces(config)
     if keep is not None:
+        keep = Path(keep)
+        if keep.exists() and not keep.is_dir():
+            raise SumoDayError(f"--keep {keep}: a file, not a folder")
         keep.mkdir(parents=True, exist_ok=True)
         return _drive(config, pieces, Path(keep), Path(out), lane_change_duration, progress)
     with tempfile.TemporaryDirectory(prefix="i24-sumo-") as folder:
@@ -138,6 +143,10 @@ def _pieces(config: SynthConfig) -> list[_Piece]:
     if neck is not None:
         cuts |= {min(max(neck.x, begin), end), min(max(neck.x + neck.length, begin), end)}
     edges = sorted(cuts)
+    frame = vehicle_classes().frame
+    weights = class_weights(frame, config.heavy_factor, -1 - i24.N_LANES // 2)
+    mean_factor = float(weights @ frame["desired_speed_mps"].to_numpy(float))
+    mean_factor *= config.drivers.desired_speed_scale / SPEED_LIMIT
     pieces = []
     for x0, x1 in itertools.pairwise(edges):
         if x1 - x0 < 1.0:
@@ -149,7 +158,7 @@ def _pieces(config: SynthConfig) -> list[_Piece]:
         on_ramp = ramp is not None and ramp.x_start < middle < ramp.x_end
         speed = SPEED_LIMIT
         if neck is not None and neck.x < middle < neck.x + neck.length:
-            speed = min(speed, neck.speed)
+            speed = min(speed, neck.speed / mean_factor)  # SUMO's drivers: limit x factor
         pieces.append(_Piece(x0, x1, lanes + on_ramp, on_ramp, speed))
     return pieces
 
@@ -170,7 +179,11 @@ def _network(pieces: list[_Piece], folder: Path) -> None:
         edge = ET.SubElement(edges, "edge", id=_edge(k), **{"from": f"n{k}", "to": f"n{k + 1}"},
                              numLanes=str(piece.lanes), speed=f"{piece.speed:.3f}",
                              width=f"{i24.LANE_WIDTH:.4f}", spreadType="right")  # fmt: skip
-        ET.SubElement(edge, "lane", index=str(piece.lanes - 1), allow="hov emergency")
+        # the HOV lane behind its double line: open to the hov class, left by nobody,
+        # entered by nobody (SUMO's lane-change permissions; only emergency vehicles)
+        ET.SubElement(edge, "lane", index=str(piece.lanes - 1), allow="hov emergency",
+                      changeRight="emergency")  # fmt: skip
+        ET.SubElement(edge, "lane", index=str(piece.lanes - 2), changeLeft="emergency")
     connections = ET.Element("connections")
     for k in range(len(pieces) - 1):
         a, b = pieces[k], pieces[k + 1]
@@ -205,11 +218,14 @@ def _network(pieces: list[_Piece], folder: Path) -> None:
 
 
 def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataFrame:
-    """Vehicle types, one flow per lane and the ramp's; returns the types' table. Each
-    I-24 class is a type with its size, and with the preset's desired speeds, time
-    headways (Krauss's ``tau``) and standstill gaps, so that the road's capacity is the
-    preset's; how they accelerate, brake, dawdle (``sigma``) and change lanes is
-    SUMO's default for their SUMO class."""
+    """Vehicle types, one flow per lane and the ramp's (random arrivals: exponential
+    headways); returns the types' table. Each I-24 class is a type with its size, and
+    with the preset's desired speeds (their spread clipped at 2 sd, as the synthesiser
+    draws them), time headways (Krauss's ``tau``) and standstill gaps; each lane's
+    class mix is the preset's (heavy vehicles out of the HOV lane, scaled by its
+    ``heavy_factor`` elsewhere; the ramp's as lane -4's); how they accelerate, brake,
+    dawdle (``sigma``) and change lanes is SUMO's default for their SUMO class, so the
+    road's capacity is SUMO's drivers', not the preset's."""
     frame = vehicle_classes().frame
     drivers = config.drivers
     routes = ET.Element("routes")
@@ -220,28 +236,27 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
             if hov and not row["hov_allowed"]:
                 continue
             name = f"{row['name']}{'_hov' if hov else ''}"
-            desired = row["desired_speed_mps"] * drivers.desired_speed_scale
-            factor = desired / SPEED_LIMIT
-            spread = row["desired_speed_sd_mps"] / row["desired_speed_mps"]
+            factor = row["desired_speed_mps"] * drivers.desired_speed_scale / SPEED_LIMIT
+            spread = row["desired_speed_sd_mps"] * drivers.desired_speed_scale / SPEED_LIMIT
             headway = row["time_headway_s"] * drivers.time_headway_scale
+            low, high = factor - 2.0 * spread, factor + 2.0 * spread  # the synthesiser's clip
+            draw = f"normc({factor:.4f},{spread:.4f},{low:.4f},{high:.4f})"
             ET.SubElement(routes, "vType", id=name,
                           vClass="hov" if hov else SUMO_CLASSES[int(c)],
                           length=f"{row['length_m']:.3f}", width=f"{row['width_m']:.3f}",
                           height=f"{row['height_m']:.3f}", carFollowModel="Krauss",
                           tau=f"{headway:.3f}", minGap=f"{drivers.min_gap:.3f}",
-                          speedFactor=f"normc({factor:.4f},{spread:.4f},0.6,1.6)")  # fmt: skip
+                          speedFactor=draw)  # fmt: skip
             rows.append((name, int(c), row["length_m"], row["width_m"], row["height_m"], hov))
     types = pd.DataFrame(rows, columns=["type", "vehicle_class", "length", "width", "height",
                                         "hov"]).set_index("type")  # fmt: skip
-    shares = frame["share"].to_numpy(float)
-    heavy = frame["hov_allowed"].to_numpy() == 0
-    for hov in (False, True):
-        dist = ET.SubElement(routes, "vTypeDistribution", id="hov" if hov else "mix")
-        for c in frame.index:
-            if hov and heavy[c]:
-                continue
-            name = f"{frame.loc[c, 'name']}{'_hov' if hov else ''}"
-            ET.SubElement(dist, "vType", refId=name, probability=f"{shares[c]:.4f}")
+    for lane in i24.LANES:  # each lane's mix, as the synthesiser draws it
+        dist = ET.SubElement(routes, "vTypeDistribution", id=f"mix{lane}")
+        hov = lane == i24.HOV_LANE
+        for c, weight in enumerate(class_weights(frame, config.heavy_factor, lane)):
+            if weight > 0:
+                name = f"{frame.loc[c, 'name']}{'_hov' if hov else ''}"
+                ET.SubElement(dist, "vType", refId=name, probability=f"{weight:.6f}")
     last = len(pieces) - 1
     first_general = 1 if pieces[0].ramp else 0  # the rightmost lane at the start
     end = config.warmup + 60.0 * config.minutes
@@ -252,16 +267,15 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
         index = pieces[0].lanes - 1 - k
         if index < first_general:
             continue
-        kind = "hov" if lane == i24.HOV_LANE else "mix"
-        ET.SubElement(routes, "flow", id=f"lane{lane}", type=kind,
-                      begin="0", end=f"{end:.1f}", vehsPerHour=f"{flow:.1f}",
+        ET.SubElement(routes, "flow", id=f"lane{lane}", type=f"mix{lane}",
+                      begin="0", end=f"{end:.1f}", period=f"exp({flow / 3600.0:.6f})",
                       departLane=str(index), departSpeed="max", departPos="base",
                       **{"from": _edge(0), "to": _edge(last)})  # fmt: skip
     ramp = config.on_ramp
     if ramp is not None and ramp.flow > 0:
         start = next(k for k, p in enumerate(pieces) if p.ramp)
-        ET.SubElement(routes, "flow", id="ramp", type="mix", begin="0", end=f"{end:.1f}",
-                      vehsPerHour=f"{ramp.flow:.1f}", departLane="0",
+        ET.SubElement(routes, "flow", id="ramp", type=f"mix{-i24.N_LANES}", begin="0",
+                      end=f"{end:.1f}", period=f"exp({ramp.flow / 3600.0:.6f})", departLane="0",
                       departSpeed=f"{min(ramp.speed, SPEED_LIMIT):.2f}", departPos="base",
                       **{"from": _edge(start), "to": _edge(last)})  # fmt: skip
     ET.ElementTree(routes).write(folder / "i24.rou.xml", encoding="utf-8", xml_declaration=True)
@@ -287,7 +301,8 @@ def _run(config: SynthConfig, folder: Path, lane_change_duration: float, progres
             "--collision.action", "warn",
             "--collision.check-junctions", "true",
             "--fcd-output", str(folder / "fcd.parquet"),
-            "--fcd-output.attributes", "x,y,angle,speed,lane,type",
+            "--fcd-output.attributes", "x,y,angle,type",
+            "--device.fcd.begin", f"{max(config.warmup - 1.0, 0.0):.1f}",
             "--lanechange-output", str(folder / "lanechanges.xml"),
             "--statistic-output", str(folder / "statistics.xml"),
             "--no-step-log", "true",
@@ -315,8 +330,16 @@ def _record(config: SynthConfig, pieces: list[_Piece], folder: Path, types: pd.D
     """SUMO's floating-car data as recorded tracks: back centre in the road frame,
     inside the recorded range and times, at the camera rate with the preset's tracking
     noise and a per-vehicle phase."""
-    fcd = pd.read_parquet(folder / "fcd.parquet")
+    try:
+        fcd = pd.read_parquet(folder / "fcd.parquet", columns=None)
+    except (OSError, ValueError) as error:  # pyarrow's ArrowInvalid is a ValueError
+        raise SumoDayError(
+            f"SUMO's floating-car data is not Parquet ({error}): SUMO writes Parquet from "
+            "1.24 on; python3 -m pip install -U eclipse-sumo"
+        ) from None
     fcd = fcd.rename(columns=lambda c: c.removeprefix("vehicle_").removeprefix("timestep_"))
+    if "id" not in fcd or fcd.empty:
+        raise SumoDayError("SUMO's vehicles never entered the road")
     ids = fcd["id"].astype(str).to_numpy()
     kinds = fcd["type"].astype(str).to_numpy()
     length = types.loc[kinds, "length"].to_numpy(float)
@@ -366,7 +389,8 @@ def _tool(name: str) -> Path:
 
 
 def _call(command: list[str], what: str) -> None:
-    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    env = {**os.environ, "SUMO_HOME": str(sumo_home())}  # SUMO validates its inputs then
+    done = subprocess.run(command, capture_output=True, text=True, check=False, env=env)
     if done.returncode != 0:
         message = (done.stderr or done.stdout).strip().splitlines()[-5:]
         raise SumoDayError(f"{what} failed (exit {done.returncode}): " + " / ".join(message))

@@ -3,6 +3,7 @@ lane drop and on-ramp as SUMO drives them, recorded in the real layout, read bac
 the ingest, deterministic by seed."""
 
 import json
+import xml.etree.ElementTree as ET
 from dataclasses import replace
 
 import numpy as np
@@ -35,7 +36,7 @@ def lane_drop(tmp_path_factory):
 def on_ramp(tmp_path_factory):
     folder = tmp_path_factory.mktemp("sumo_e")
     config = replace(synth.ALL_PRESETS["E"], **SHORT, bottleneck=None)
-    return config, sumo_day(config, folder / "e.json")
+    return config, sumo_day(config, folder / "e.json", keep=folder / "work")
 
 
 def lane_of_samples(tracks):
@@ -77,6 +78,35 @@ def test_a_lane_drop_morning_is_recorded_in_the_real_layout(lane_drop, tmp_path)
         assert (lane == lane_of_samples(tracks)).any()
 
 
+def _changes(work):
+    """SUMO's lane changes (from lane, to lane) and each edge's lane count."""
+    lanes = {}
+    for edge in ET.parse(work / "i24.net.xml").getroot().iter("edge"):
+        if edge.get("function") != "internal":
+            lanes[edge.get("id")] = len(edge.findall("lane"))
+    changes = [(e.get("from"), e.get("to"))
+               for e in ET.parse(work / "lanechanges.xml").getroot().iter("change")]  # fmt: skip
+    return changes, lanes
+
+
+def _lane_start(work, edge):
+    """SUMO's x of the start of lane 0 of ``edge``."""
+    for lane in ET.parse(work / "i24.net.xml").getroot().iter("lane"):
+        if lane.get("id") == f"{edge}_0":
+            return float(lane.get("shape").split()[0].split(",")[0])
+    raise AssertionError(f"no lane {edge}_0")
+
+
+def test_nobody_crosses_the_hov_lanes_double_line(lane_drop):
+    _, result = lane_drop
+    changes, lanes = _changes(result.path.parent / "work")
+    assert changes
+    for a, b in changes:
+        for lane in (a, b):
+            edge, _, index = lane.rpartition("_")
+            assert int(index) != lanes[edge] - 1, (a, b)  # the HOV lane is SUMO's leftmost
+
+
 def test_the_same_seed_writes_the_same_bytes_and_another_seed_other_traffic(lane_drop, tmp_path):
     config, result = lane_drop
     again = sumo_day(config, tmp_path / "again.json")
@@ -95,6 +125,21 @@ def test_ramp_vehicles_merge_from_the_acceleration_lane_before_its_end(on_ramp):
         outside += on_ramp_lane.sum()
         assert not (on_ramp_lane & (x > ramp.x_end + 1.0)).any()  # merged by its end
     assert outside > 0  # the ramp's vehicles are seen on it, outside the lane bands
+    # they join lane -4 by changing lanes off the acceleration lane (SUMO's lane 0)
+    changes, lanes = _changes(result.path.parent / "work")
+    ramp_edges = {edge for edge, n in lanes.items() if n == i24.N_LANES + 1}
+    assert ramp_edges
+    assert any(a.rpartition("_")[0] in ramp_edges and a.endswith("_0") for a, _ in changes)
+    # recorded at the back: one that departs while recorded appears where the ramp lane
+    # begins (SUMO inserts it with its back there; its junction shifts the lane's start
+    # a few metres past the node), not a length further on
+    lane_start = _lane_start(result.path.parent / "work", min(ramp_edges)) + (
+        config.x_record[0] - config.upstream
+    )
+    side = i24.lane_center(-4) + 0.5 * i24.LANE_WIDTH
+    firsts = [x[0] - lane_start for t, x, y in tracks if t[0] > config.start + 0.5 and y[0] > side]
+    assert len(firsts) >= 3
+    assert min(firsts) > -0.3 and np.median(firsts) < 1.5
 
 
 def test_missing_sumo_and_a_road_without_demand_are_named(monkeypatch, tmp_path):

@@ -101,14 +101,7 @@ class Simulation:
 
     # -- creation ---------------------------------------------------------------------
     def _class_weights(self, lane: int) -> np.ndarray:
-        share = self.classes.column("share").astype(float).copy()
-        heavy = self.classes.column("hov_allowed") == 0
-        lane = max(lane, -i24.N_LANES)  # the on-ramp's traffic: lane -4's
-        if lane == i24.HOV_LANE:
-            share[heavy] = 0.0
-        else:
-            share[heavy] *= self.cfg.heavy_factor[i24.LANES.index(lane) - 1]
-        return share / share.sum()
+        return class_weights(self.classes.frame, self.cfg.heavy_factor, lane)
 
     def _new_vehicles(self, lanes: np.ndarray, x: np.ndarray, v: np.ndarray) -> _Vehicles:
         n = len(lanes)
@@ -495,6 +488,20 @@ class Simulation:
         progress = np.clip((self.t - veh.change_start) / veh.change_duration, 0.0, 1.0)
         blend = 0.5 - 0.5 * np.cos(np.pi * progress)
         return np.where(veh.lane_from == veh.lane, y_to, y_from + (y_to - y_from) * blend)
+
+
+def class_weights(frame, heavy_factor, lane: int) -> np.ndarray:
+    """Each vehicle class's probability in ``lane`` (the class table ``frame``): its
+    share, no heavy vehicle in the HOV lane, heavy ones scaled by ``heavy_factor`` in
+    lanes -2 to -4 (an on-ramp's traffic, lane < -4: lane -4's)."""
+    share = frame["share"].to_numpy(float).copy()
+    heavy = frame["hov_allowed"].to_numpy() == 0
+    lane = max(lane, -i24.N_LANES)
+    if lane == i24.HOV_LANE:
+        share[heavy] = 0.0
+    else:
+        share[heavy] *= heavy_factor[i24.LANES.index(lane) - 1]
+    return share / share.sum()
 
 
 def _fits(new: _Vehicles, gap: float, v_in: float) -> bool:
