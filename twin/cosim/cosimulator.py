@@ -37,9 +37,10 @@ import numpy as np
 from mapgen.build import MapBundle
 from twin.core.i24 import HOV_LANE, N_LANES
 from twin.cosim.config import CosimConfig
-from twin.cosim.core import handover, layout
+from twin.cosim.core import layout
 from twin.cosim.core import step as core_step
 from twin.cosim.core.batch import Batch, Shared, controller_kind
+from twin.cosim.core.room import CLEARANCE_SPEED
 from twin.cosim.log import TrajectoryLog
 from twin.cosim.windows import Ghosts, Windows
 from twin.data.empirical import EmpiricalTraffic, RecordedVehicle
@@ -47,8 +48,6 @@ from twin.physics.states import SpawnStates, VehicleStates, quaternion_of
 from twin.traffic.controlled import apply_controllers
 from twin.traffic.controller_api import load_controller
 from twin.traffic.kernels import state as kinds
-
-CLEARANCE_SPEED = handover.CLEARANCE_SPEED
 
 
 @dataclass
@@ -779,7 +778,7 @@ def spawn_room(cfg: CosimConfig, rear_speed: np.ndarray, closing: np.ndarray) ->
     at ``CLEARANCE_SPEED`` and above (a standing queue is spawned as recorded, its gaps
     are often under 2 m), plus the difference of braking distances at ``spawn_decel``
     (``closing`` = v_rear^2 - v_front^2). The kernel
-    :func:`twin.cosim.core.handover.spawn_room` decides with it."""
+    :func:`twin.cosim.core.room.spawn_room` decides with it."""
     share = np.clip(np.asarray(rear_speed) / CLEARANCE_SPEED, 0.0, 1.0)
     clearance = cfg.spawn_clearance_at_rest + share * (
         cfg.spawn_clearance - cfg.spawn_clearance_at_rest

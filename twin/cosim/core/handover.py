@@ -26,6 +26,7 @@ from twin.cosim.core.layout import (
     TABLE_FULL,
     WAITING,
 )
+from twin.cosim.core.room import CROWD_DECEL, spawn_room
 from twin.data.recording import lane_of, window
 from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
@@ -33,16 +34,12 @@ from twin.traffic.kernels.lane_change import clear_target
 from twin.traffic.kernels.steering import centre_y
 
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
-CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 #: [m] behind the rear ghost window, and behind the rearmost relaxing body, the recording
 #: is read too (``Episodes.lookback``): a recorded vehicle there that crowds a body
 #: becomes a relaxing body before it would run into it; a relaxing body stays while its
 #: recording is there, and any body this far behind the rear ghost window
 REAR_MARGIN = 50.0
-#: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
-#: with the braking distances at this deceleration (it would have to brake harder)
-CROWD_DECEL = relax.CROWD_DECEL
 #: [m/s^2] it becomes a body behind the one it crowds only where it can stop behind it
 #: braking this hard, ``spawn_clearance`` apart (else it stays a ghost: a contact with a
 #: ghost if they touch, counted)
@@ -194,16 +191,6 @@ def remove(b, core, i):
 
 
 # -- spawning --------------------------------------------------------------------------------
-
-
-@kernel(inline=True)
-def spawn_room(clearance, at_rest, decel, rear_speed, closing):
-    """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
-    ``at_rest`` for a rear vehicle at rest growing to ``clearance`` at CLEARANCE_SPEED,
-    plus the difference of braking distances at ``decel`` (``closing`` = v_rear^2 -
-    v_front^2; :func:`twin.cosim.cosimulator.spawn_room`)."""
-    share = min(max(rear_speed / CLEARANCE_SPEED, 0.0), 1.0)
-    return at_rest + share * (clearance - at_rest) + max(closing, 0.0) / (2.0 * decel)
 
 
 @kernel(inline=True)

@@ -43,16 +43,13 @@ slowest speed are measured in every run (``twin.metrics.handover``).
 import math
 
 from twin.core.jit import kernel
+from twin.cosim.core.room import CROWD_DECEL, spawn_room
 from twin.data.recording import lane_of, replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
 ACCEL_LOW, ACCEL_HIGH = -4.0, 2.0  # [m/s^2] a relaxing vehicle's command, emergencies aside
-#: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
-#: with the braking distances at this deceleration (it would have to brake harder;
-#: :mod:`twin.cosim.core.handover`)
-CROWD_DECEL = 2.0
 HAND_BACK_X = 0.3  # [m] along its recording
 HAND_BACK_SPEED = 0.3  # [m/s]
 HAND_BACK_Y = 0.5  # [m] across
@@ -177,8 +174,8 @@ def track(b, core):
 @kernel
 def _crowded_by_ghost(b, core, i):
     """Whether the ghost just behind slot ``i`` in a lane it occupies is closer than
-    the clearance plus the difference of their braking distances at
-    :data:`CROWD_DECEL` (the test a recorded vehicle crowding a body meets)."""
+    :func:`twin.cosim.core.room.spawn_room` with the whole clearance at any speed and
+    the braking distances at :data:`CROWD_DECEL`."""
     bo, dr, sc = core.bodies, core.traffic.drivers, core.traffic.scratch
     n = bo.valid.shape[1]  # owners from n on are ghosts
     v = max(bo.speed[b, i], 0.0)
@@ -189,6 +186,7 @@ def _crowded_by_ghost(b, core, i):
             continue
         gap = bo.x[b, i] - sc.sx[b, behind] - sc.slength[b, behind]
         vg = max(sc.sspeed[b, behind], 0.0)
-        if gap < core.settings.clearance + max(vg * vg - v * v, 0.0) / (2.0 * CROWD_DECEL):
+        clearance = core.settings.clearance  # the whole clearance, at rest too
+        if gap < spawn_room(clearance, clearance, CROWD_DECEL, vg, vg * vg - v * v):
             return True
     return False
