@@ -118,7 +118,7 @@ def sumo_day(config: SynthConfig, out, *, lane_change_duration: float = 3.0,
 def _drive(config, pieces, folder, out, lane_change_duration, progress) -> SumoDayResult:
     _network(pieces, folder)
     departures = _routes(config, pieces, folder)
-    stats = _run(config, folder, lane_change_duration, progress)
+    stats = _run(config, folder, lane_change_duration)
     vid, tracks, classes, dims = _record(config, pieces, folder, departures)
     if not tracks:
         raise SumoDayError("SUMO's vehicles never entered the recorded range")
@@ -247,9 +247,9 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
                           height=f"{row['height_m']:.3f}", carFollowModel="Krauss",
                           tau=f"{headway:.3f}", minGap=f"{drivers.min_gap:.3f}",
                           speedFactor=draw)  # fmt: skip
-            rows.append((name, int(c), row["length_m"], row["width_m"], row["height_m"], hov))
-    types = pd.DataFrame(rows, columns=["type", "vehicle_class", "length", "width", "height",
-                                        "hov"]).set_index("type")  # fmt: skip
+            rows.append((name, int(c), row["length_m"], row["width_m"], row["height_m"]))
+    types = pd.DataFrame(rows, columns=["type", "vehicle_class", "length", "width", "height"])
+    types = types.set_index("type")
     for lane in i24.LANES:  # each lane's mix, as the synthesiser draws it
         dist = ET.SubElement(routes, "vTypeDistribution", id=f"mix{lane}")
         hov = lane == i24.HOV_LANE
@@ -285,7 +285,7 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
 # -- the run ----------------------------------------------------------------------------------
 
 
-def _run(config: SynthConfig, folder: Path, lane_change_duration: float, progress) -> dict:
+def _run(config: SynthConfig, folder: Path, lane_change_duration: float) -> dict:
     """Run SUMO; returns its counts (lane changes, collisions, departed, waiting)."""
     end = config.warmup + 60.0 * config.minutes
     _call(
