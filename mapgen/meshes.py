@@ -1,10 +1,13 @@
 """The segment's meshes, built with trimesh in world coordinates.
 
 Every part is a plain triangle mesh with outward (or upward) faces: the pavement
-(lanes and shoulders), the lane markings, the median barrier, the terrain, the camera
-poles, the 0.1-mile posts and the Old Franklin Rd overpass. Pavement-bound meshes
-(pavement, markings, barrier, terrain edge) put a vertex at every profile point of
-the road, so they follow the elevation profile exactly rather than as a chord.
+(lanes, the on-ramps' acceleration lanes and shoulders), the lane markings, the median
+barrier, the terrain, the camera poles, the 0.1-mile posts and the Old Franklin Rd
+overpass. Pavement-bound meshes (pavement, markings, barrier, terrain edge) put a
+vertex at every profile point of the road, so they follow the elevation profile exactly
+rather than as a chord, and at every point where an acceleration lane's width changes
+slope, so that its opening and taper are exact. Where an acceleration lane runs, the
+shoulder, the edge line and the terrain lie beyond it.
 """
 
 import math
@@ -16,7 +19,7 @@ import trimesh
 from mapgen.params import MapParams, Terrain
 from mapgen.road import RoadModel, mile_marker_of, station_of
 from mapgen.sources import Sources
-from twin.core.i24 import LANE_WIDTH, N_LANES, lane_center
+from twin.core.i24 import LANE_WIDTH, N_LANES, SEGMENT_LENGTH, Road, lane_center
 
 INNER_EDGE = LANE_WIDTH  # [m] the yellow line: 12 ft from the median centre line
 LANES_OUTER_EDGE = (N_LANES + 1) * LANE_WIDTH  # [m] the white edge line
@@ -43,24 +46,22 @@ def build_meshes(
     model: RoadModel, params: MapParams, sources: Sources, rng: np.random.Generator
 ) -> SceneMeshes:
     """Build every part of the scene; ``rng`` shapes the terrain and nothing else."""
-    knots = model.profile_s
-    edge = model.outer_edge
+    knots = _stations(model)
     terrain, terrain_height = _terrain(model, params.terrain, rng)
     poles, pole_objects = _poles(model, params, sources, terrain_height)
     posts, post_objects = _posts(model, params, terrain_height)
     overpass, overpass_object = _overpass(model, params, sources)
     barrier = _barrier(model, params)
+    shoulder = params.cross_section.outer_shoulder
+    road, shoulders = [], [_strip(model, knots, -INNER_EDGE, INNER_EDGE, 0.0)]
+    for side in (1.0, -1.0):
+        lanes_edge = LANES_OUTER_EDGE + _ramp_width(model, side, knots)
+        road.append(_side_strip(model, knots, side, INNER_EDGE, LANES_OUTER_EDGE))
+        road += _ramp_strips(model, side)
+        shoulders.append(_side_strip(model, knots, side, lanes_edge, lanes_edge + shoulder))
     parts = {
-        "road": _concatenate(
-            [
-                _strip(model, knots, lo, hi, 0.0)
-                for lo, hi in _both_sides(INNER_EDGE, LANES_OUTER_EDGE)
-            ]
-        ),
-        "shoulder": _concatenate(
-            [_strip(model, knots, -INNER_EDGE, INNER_EDGE, 0.0)]
-            + [_strip(model, knots, lo, hi, 0.0) for lo, hi in _both_sides(LANES_OUTER_EDGE, edge)]
-        ),
+        "road": _concatenate(road),
+        "shoulder": _concatenate(shoulders),
         **_markings(model, params),
         "barrier": barrier,
         "terrain": terrain,
@@ -71,11 +72,19 @@ def build_meshes(
     unknown = set(parts) ^ set(params.parts)
     if unknown:
         raise ValueError(f"map.toml [parts] and the built parts differ: {sorted(unknown)}")
-    boundaries = np.concatenate([[-edge], -LANE_WIDTH * np.arange(N_LANES + 1, 0, -1), [0.0]])
-    laterals = np.concatenate([boundaries, -boundaries[-2::-1]])
+    inner = -LANE_WIDTH * np.arange(N_LANES + 1, 0, -1)
+    eastbound, westbound = (_outer_edge(model, side, knots) for side in (1.0, -1.0))
+    laterals = np.concatenate(
+        [
+            -westbound[:, None],
+            np.broadcast_to(np.concatenate([inner, [0.0], -inner[::-1]]), (knots.size, 11)),
+            eastbound[:, None],
+        ],
+        axis=1,
+    )
     collision = {
         "road": _grid(
-            model, knots, laterals, np.repeat(model.surface_z(knots)[:, None], laterals.size, 1)
+            model, knots, laterals, np.repeat(model.surface_z(knots)[:, None], laterals.shape[1], 1)
         ),
         "obstacles": _concatenate([barrier, overpass]),
     }
@@ -86,23 +95,81 @@ def build_meshes(
 # -- pavement and markings ------------------------------------------------------------
 
 
-def _both_sides(lo: float, hi: float) -> list[tuple[float, float]]:
-    """Lateral bands [lo, hi] on the eastbound side and its mirror on the westbound side."""
-    return [(lo, hi), (-hi, -lo)]
+def _stations(model: RoadModel) -> np.ndarray:
+    """(n,) [m] the stations pavement-bound meshes put vertices at: the profile's points
+    and the acceleration lanes' breakpoints (but where one lies within a millimetre of a
+    profile point, which is kept: no sliver between them)."""
+    knots, extra = model.profile_s, model.ramp_stations()
+    near = np.abs(extra[:, None] - knots[None, :]).min(axis=1, initial=np.inf) < 1e-3
+    return np.union1d(knots, extra[~near])
+
+
+def _road_x(side: float, stations: np.ndarray) -> tuple[Road, np.ndarray]:
+    """The carriageway on ``side`` (+1 eastbound, to the right of the reference line)
+    and the road-frame x of eastbound ``stations`` on it."""
+    if side > 0:
+        return Road.EASTBOUND, stations
+    return Road.WESTBOUND, SEGMENT_LENGTH - stations
+
+
+def _ramp_width(model: RoadModel, side: float, stations: np.ndarray) -> np.ndarray:
+    """(n,) [m] the acceleration lane's width at ``stations`` on ``side``."""
+    return model.ramp_width(*_road_x(side, stations))
+
+
+def _outer_edge(model: RoadModel, side: float, stations: np.ndarray) -> np.ndarray:
+    """(n,) [m] |lateral| of the paved shoulder's outer edge at ``stations`` on ``side``."""
+    return model.outer_edge_at(*_road_x(side, stations))
+
+
+def _side_strip(model, stations: np.ndarray, side: float, lo, hi, lift: float = 0.0):
+    """A band between |laterals| ``lo`` < ``hi`` (scalars or (n,) per station) on ``side``."""
+    lo, hi = (np.broadcast_to(np.asarray(v, dtype=np.float64), stations.shape) for v in (lo, hi))
+    bounds = np.stack([lo, hi], axis=-1) * side
+    return _strip(model, stations, np.sort(bounds, axis=-1), None, lift)
+
+
+def _ramp_strips(model: RoadModel, side: float) -> list[trimesh.Trimesh]:
+    """The acceleration lanes' pavement on ``side``, from their opening to their end."""
+    road, _ = _road_x(side, np.zeros(1))
+    strips = []
+    for ramp in model.ramps:
+        if ramp.road is not road:
+            continue
+        ends = np.sort(model.station(road, ramp.breakpoints[[0, -1]]))
+        s0, s1 = model.station_range
+        lo, hi = max(ends[0], s0), min(ends[1], s1)
+        if hi <= lo:
+            continue
+        knots = _stations(model)  # its ends among them, or within a millimetre
+        stations = knots[(knots >= lo - 1e-3) & (knots <= hi + 1e-3)]
+        width = _ramp_width(model, side, stations)
+        strip = _side_strip(model, stations, side, LANES_OUTER_EDGE, LANES_OUTER_EDGE + width)
+        strips.append(_without_slivers(strip))
+    return strips
+
+
+def _without_slivers(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """``mesh`` without its zero-area faces (where a lane's width comes to nothing)."""
+    tri = mesh.vertices[mesh.faces]
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces[area > 1e-9], process=False)
 
 
 def _grid(model: RoadModel, stations: np.ndarray, laterals: np.ndarray, z: np.ndarray):
     """Upward-facing grid mesh over (stations (n,), laterals (m,) increasing), heights (n, m).
 
-    ``stations`` may be (b, n) and ``z`` (b, n, m) for b separate grids in one mesh.
+    ``stations`` may be (b, n) and ``z`` (b, n, m) for b separate grids in one mesh;
+    ``laterals`` may be given per station, (n, m) or (b, n, m).
     """
     stations = np.atleast_2d(stations)
-    z = z.reshape((*stations.shape, laterals.size))
+    m = laterals.shape[-1]
+    laterals = np.broadcast_to(laterals, (*stations.shape, m))
+    z = z.reshape((*stations.shape, m))
     b, n = stations.shape
-    m = laterals.size
     xy = (
         stations[..., None, None] * model.direction_vector
-        + laterals[None, None, :, None] * model.right_vector
+        + laterals[..., None] * model.right_vector
     )
     vertices = np.concatenate([xy, z[..., None]], axis=-1).reshape(-1, 3)
     index = np.arange(b * n * m).reshape(b, n, m)
@@ -122,33 +189,43 @@ def _grid(model: RoadModel, stations: np.ndarray, laterals: np.ndarray, z: np.nd
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
 
 
-def _strip(model: RoadModel, stations: np.ndarray, lo: float, hi: float, lift: float):
-    """A band of pavement (or a marking lifted by ``lift``) between laterals lo < hi."""
+def _strip(model: RoadModel, stations: np.ndarray, lo, hi, lift: float):
+    """A band of pavement (or a marking lifted by ``lift``) between laterals lo < hi;
+    with ``hi`` None, ``lo`` holds both per station, (n, 2)."""
     stations = np.atleast_2d(stations)
+    laterals = np.array([lo, hi]) if hi is not None else np.asarray(lo)
     z = model.surface_z(stations)[..., None] + lift
-    return _grid(model, stations, np.array([lo, hi]), np.repeat(z, 2, axis=-1))
+    return _grid(model, stations, laterals, np.repeat(z, 2, axis=-1))
 
 
 def _markings(model: RoadModel, params: MapParams) -> dict[str, trimesh.Trimesh]:
-    """US freeway markings: yellow inner edge, white outer edge, a solid double white
-    line closing the HOV lane, broken white lines between the other lanes, HOV diamonds."""
+    """US freeway markings: yellow inner edge, white outer edge (beyond an acceleration
+    lane where there is one), a solid double white line closing the HOV lane, broken
+    white lines between the other lanes and between lane -4 and an acceleration lane
+    (from its gore to its end), HOV diamonds."""
     m = params.markings
-    knots = model.profile_s
+    knots = _stations(model)
     half = m.width / 2.0
     yellow, white = [], []
+    dashes = _dash_stations(knots, m.dash, m.gap)
     for side in (1.0, -1.0):
 
-        def line(center: float, stations: np.ndarray = knots, side: float = side):
-            lo, hi = sorted((side * (center - half), side * (center + half)))
-            return _strip(model, stations, lo, hi, m.lift)
+        def line(center, stations: np.ndarray = knots, side: float = side):
+            return _side_strip(model, stations, side, center - half, center + half, m.lift)
 
         yellow.append(line(INNER_EDGE))
-        white.append(line(LANES_OUTER_EDGE))
+        white.append(line(LANES_OUTER_EDGE + _ramp_width(model, side, knots)))
         hov_edge = 2.0 * LANE_WIDTH
         offset = (m.double_gap + m.width) / 2.0
         white += [line(hov_edge - offset), line(hov_edge + offset)]
-        dashes = _dash_stations(knots, m.dash, m.gap)
         white += [line(k * LANE_WIDTH, dashes) for k in range(3, N_LANES + 1)]
+        road, _ = _road_x(side, knots)
+        for ramp in model.ramps:
+            if ramp.road is road:
+                lo, hi = np.sort(model.station(road, np.array([ramp.x_start, ramp.x_end])))
+                beside = dashes[(dashes[:, 0] >= lo) & (dashes[:, -1] <= hi)]
+                if beside.size:
+                    white.append(line(LANES_OUTER_EDGE, beside))
         white.append(_diamonds(model, m, side * float(lane_center(-1))))
     return {"marking_white": _concatenate(white), "marking_yellow": _concatenate(yellow)}
 
@@ -282,7 +359,8 @@ def _poles(model, params, sources, terrain_height):
         [[0.0, 0.0], [p.base_radius, 0.0], [p.top_radius, p.height], [0.0, p.height]], sections=8
     )
     for pole_id, lat, lon, station, lateral in sorted(inside):
-        minimum = model.outer_edge + p.min_offset
+        side = math.copysign(1.0, lateral)
+        minimum = float(_outer_edge(model, side, np.array([station]))[0]) + p.min_offset
         placed = math.copysign(max(abs(lateral), minimum), lateral)
         base = terrain_height(station, placed) - 1.0
         frame = _frame(model, station, placed, base)
@@ -319,11 +397,11 @@ def _posts(model, params, terrain_height):
     first = math.ceil(round(float(mile_marker_of(s0)) / p.spacing_mi, 6))
     last = math.floor(round(float(mile_marker_of(s1)) / p.spacing_mi, 6))
     meshes, objects = [], []
-    lateral = model.outer_edge + p.offset
     for k in range(first, last + 1):
         mm = round(k * p.spacing_mi, 6)
         station = float(station_of(mm))
         for side, road in ((1.0, "eastbound"), (-1.0, "westbound")):
+            lateral = float(_outer_edge(model, side, np.array([station]))[0]) + p.offset
             base = terrain_height(station, side * lateral) - 0.5
             top = model.surface_z(station) + p.height
             meshes.append(_box(model, station, side * lateral, base, top, p.size, p.size))
@@ -354,7 +432,9 @@ def _overpass(model, params, sources):
     top = bottom + o.deck_depth
     # The deck ends on the abutments' centre lines; parapets and abutments stand a few
     # centimetres off the deck's faces, so that no two faces are coplanar (depth fighting).
-    reach = model.outer_edge + o.abutment_offset
+    deck = np.array([center - half, center + half])
+    edge = max(float(_outer_edge(model, side, deck).max()) for side in (1.0, -1.0))
+    reach = edge + o.abutment_offset
     road_z = float(model.surface_z(center))
     parts = [_box(model, center, 0.0, bottom, top, o.deck_width, 2.0 * reach)]
     inset = half - o.parapet_width / 2 - FACE_OFFSET
@@ -376,10 +456,10 @@ def _overpass(model, params, sources):
             )
         )
         for side in (1.0, -1.0):
-            lateral = side * (model.outer_edge + o.outer_pier_offset + o.pier_size / 2)
+            lateral = side * (edge + o.outer_pier_offset + o.pier_size / 2)
             parts.append(_box(model, s, lateral, road_z - 1.5, bottom, o.pier_size, o.pier_size))
     for side in (1.0, -1.0):
-        lateral = side * (model.outer_edge + o.abutment_offset)
+        lateral = side * (edge + o.abutment_offset)
         parts.append(
             _box(
                 model,
@@ -412,29 +492,37 @@ def _terrain(model: RoadModel, t: Terrain, rng: np.random.Generator):
     Returns the mesh and a function (station, lateral) -> the lowest terrain height
     of the grid cell there (to plant poles and posts without leaving them floating).
     """
-    edge = model.outer_edge
+    base = model.outer_edge
     s0, s1 = model.station_range
-    lattices = _noise_lattices(rng, t, (s0, s1), edge + t.width)
+    lattices = _noise_lattices(rng, t, (s0, s1), base + LANE_WIDTH + t.width)
     columns = np.asarray(t.columns)
+    stations = _stations(model)
+    edges = {side: _outer_edge(model, side, stations) for side in (1.0, -1.0)}
 
-    def height(station, lateral):
+    def height(station, lateral, edge):
         offset = np.abs(lateral) - edge
         ramp = _smoothstep(np.clip((offset - t.ditch_offset[-1]) / t.relief_ramp, 0.0, 1.0))
         ditch = np.interp(offset, t.ditch_offset, t.ditch_depth)
-        relief = t.relief * ramp * _noise(lattices, t, station - s0, lateral + edge + t.width)
+        relief = (
+            t.relief
+            * ramp
+            * _noise(lattices, t, station - s0, lateral + base + LANE_WIDTH + t.width)
+        )
         return model.surface_z(station) + ditch + relief
 
-    stations = model.profile_s
-    meshes, grids = [], []
-    for laterals in (edge + columns, -(edge + columns[::-1])):
-        z = height(stations[:, None], laterals[None, :])
+    meshes, grids = [], {}
+    for side in (1.0, -1.0):
+        edge = edges[side][:, None]
+        laterals = side * (edge + (columns if side > 0 else columns[::-1]))
+        z = height(stations[:, None], laterals, edge)
         meshes.append(_grid(model, stations, laterals, z))
-        grids.append((laterals, z))
+        grids[side] = (laterals, z)
 
     def lowest(station: float, lateral: float) -> float:
-        laterals, z = grids[0] if lateral >= 0 else grids[1]
+        laterals, z = grids[1.0 if lateral >= 0 else -1.0]
         i = int(np.clip(np.searchsorted(stations, station) - 1, 0, stations.size - 2))
-        j = int(np.clip(np.searchsorted(laterals, lateral) - 1, 0, laterals.size - 2))
+        row = laterals[i : i + 2].min(axis=0) if lateral >= 0 else laterals[i : i + 2].max(axis=0)
+        j = int(np.clip(np.searchsorted(row, lateral) - 1, 0, row.size - 2))
         return float(z[i : i + 2, j : j + 2].min())
 
     return _concatenate(meshes), lowest

@@ -10,7 +10,9 @@ themselves are closer together than a mile; :meth:`RoadModel.to_geodetic` accoun
 for that when it places a world point on the globe).
 
 Road frame per carriageway (``docs/design.md``): ``x`` along travel from the segment entry,
-``y`` from the median centre line outward, lanes -1 (inner, HOV) to -4. Eastbound
+``y`` from the median centre line outward, lanes -1 (inner, HOV) to -4 and, where an
+on-ramp's acceleration lane runs beside lane -4, lane -5 (:mod:`twin.core.ramps`: its
+pavement widens the road there, and the shoulder lies beyond it). Eastbound
 lies to the right of the eastbound direction, westbound to the left, so the world
 point of ``(road, x, y)`` is ``O + s * d + direction * y * r`` with ``d`` the unit
 vector along the bearing and ``r`` the unit vector to its right.
@@ -28,6 +30,7 @@ import numpy as np
 from mapgen import geodesy
 from mapgen.params import MapParams
 from mapgen.sources import PROFILE_STEP_MI, Sources
+from twin.core import ramps as ramp_lanes
 from twin.core.errors import MapError
 from twin.core.i24 import (
     LANE_WIDTH,
@@ -59,7 +62,8 @@ class RoadCoordinates(NamedTuple):
     """Road-frame coordinates of world points (arrays of shape (n,)).
 
     ``road`` is the direction of the carriageway (+1 eastbound, -1 westbound; see
-    :meth:`twin.core.i24.Road.parse`), ``lane`` is -1..-4 or 0 off the lanes, and
+    :meth:`twin.core.i24.Road.parse`), ``lane`` is -1..-4, -5 on an acceleration lane
+    (:func:`twin.core.ramps.lane_at`) or 0 off the lanes, and
     ``height`` [m] is above the pavement (NaN off the map's ends).
     """
 
@@ -81,7 +85,9 @@ class RoadModel:
         profile_z: (k,) float [m] pavement height there (world z).
         post_mm: (p,) float, mile markers of the posts; post_along: (p,) [m] their
             geographic distance from the origin along the bearing.
-        outer_edge: [m] road-frame y of the outer edge of the paved shoulder.
+        outer_edge: [m] road-frame y of the outer edge of the paved shoulder beside
+            lane -4 (:meth:`outer_edge_at` adds an acceleration lane where there is one).
+        ramps: the on-ramps' acceleration lanes (:class:`twin.core.ramps.Ramp`).
     """
 
     origin: tuple[float, float, float]
@@ -91,6 +97,7 @@ class RoadModel:
     post_mm: np.ndarray
     post_along: np.ndarray
     outer_edge: float
+    ramps: tuple[ramp_lanes.Ramp, ...] = ()
     _d: np.ndarray = field(init=False, repr=False)
     _r: np.ndarray = field(init=False, repr=False)
 
@@ -150,6 +157,12 @@ class RoadModel:
                 f"the map needs {wanted[0] / 100:.2f}..{wanted[-1] / 100:.2f}"
             )
         elevation = sources.profile_elevation[np.searchsorted(have, wanted)]
+        try:
+            ramps = ramp_lanes.ramps_from_landmarks(
+                {name: (d, mm) for name, (d, mm, _, _) in sources.landmarks.items()}
+            )
+        except ValueError as error:
+            raise MapError(f"the landmark layer's on-ramps: {error}") from None
         return cls(
             origin=origin,
             bearing=bearing,
@@ -158,6 +171,7 @@ class RoadModel:
             post_mm=sources.post_mm.copy(),
             post_along=enu @ d,
             outer_edge=(N_LANES + 1) * LANE_WIDTH + params.cross_section.outer_shoulder,
+            ramps=ramps,
         )
 
     def to_dict(self) -> dict:
@@ -172,6 +186,10 @@ class RoadModel:
             "profile": {"station_m": self.profile_s.tolist(), "z_m": self.profile_z.tolist()},
             "posts": {"mm": self.post_mm.tolist(), "along_m": self.post_along.tolist()},
             "outer_edge_m": self.outer_edge,
+            "ramps": [
+                {"road": r.road.value, "name": r.name, "x_start_m": r.x_start, "x_end_m": r.x_end}
+                for r in self.ramps
+            ],
         }
 
     @classmethod
@@ -195,6 +213,15 @@ class RoadModel:
                 post_mm=np.asarray(data["posts"]["mm"], dtype=np.float64),
                 post_along=np.asarray(data["posts"]["along_m"], dtype=np.float64),
                 outer_edge=float(data["outer_edge_m"]),
+                ramps=tuple(
+                    ramp_lanes.Ramp(
+                        Road.parse(r["road"]),
+                        str(r["name"]),
+                        float(r["x_start_m"]),
+                        float(r["x_end_m"]),
+                    )
+                    for r in data["ramps"]
+                ),
             )
         except (KeyError, TypeError, ValueError) as error:
             raise MapError(f"road description malformed: {error!r}") from None
@@ -229,6 +256,25 @@ class RoadModel:
         if Road.parse(road) is Road.WESTBOUND:
             yaw = math.atan2(-self._d[1], -self._d[0])
         return yaw
+
+    def ramp_width(self, road, x: np.ndarray) -> np.ndarray:
+        """[m] width of the acceleration lane (lane -5) at road-frame ``x`` on ``road``
+        (a Road or (n,) directions), 0 where there is none."""
+        return ramp_lanes.ramp_width(road, x, self.ramps)
+
+    def outer_edge_at(self, road, x: np.ndarray) -> np.ndarray:
+        """[m] road-frame y of the paved shoulder's outer edge at ``x`` on ``road``: beyond
+        the acceleration lane where there is one."""
+        return self.outer_edge + self.ramp_width(road, x)
+
+    def ramp_stations(self) -> np.ndarray:
+        """(k,) [m] eastbound stations on the map where an acceleration lane's width
+        changes slope (its opening, gore, taper and end), increasing."""
+        if not self.ramps:
+            return np.empty(0)
+        stations = np.concatenate([self.station(r.road, r.breakpoints) for r in self.ramps])
+        s0, s1 = self.station_range
+        return np.unique(stations[(stations > s0) & (stations < s1)])
 
     def surface_z(self, station: np.ndarray) -> np.ndarray:
         """[m] pavement height at eastbound stations (anywhere across the carriageways)."""
@@ -304,11 +350,12 @@ class RoadModel:
         s0, s1 = self.station_range
         on_map = (s >= s0 - STATION_TOLERANCE) & (s <= s1 + STATION_TOLERANCE)
         height = np.where(on_map, positions[:, 2] - self.surface_z(s), np.nan)
+        x = np.where(direction > 0, s, SEGMENT_LENGTH - s)
         return RoadCoordinates(
             road=direction,
-            x=np.where(direction > 0, s, SEGMENT_LENGTH - s),
+            x=x,
             y=y,
-            lane=lane_of(y),
+            lane=ramp_lanes.lane_at(direction, x, y, self.ramps),
             height=height,
         )
 

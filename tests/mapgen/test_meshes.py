@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from tests.mapgen import oracles
-from twin.core import i24
+from twin.core import i24, ramps
 
 CONCAVE = p.GEOM_FORCE_CONCAVE_TRIMESH | p.GEOM_CONCAVE_INTERNAL_EDGE
 
@@ -98,8 +98,9 @@ def test_collision_mesh_loads_as_a_concave_mesh_not_a_hull(built_map):
 
 def test_lane_lines_are_one_lane_width_apart(built_map, meshes):
     coords = built_map.road.to_road(meshes["marking_white"].vertices)
+    clear = (coords.x > 300.0) & (coords.x < 1300.0)  # beyond the acceleration lanes
     for direction in (1, -1):
-        y = np.round(coords.y[coords.road == direction], 4)
+        y = np.round(coords.y[(coords.road == direction) & clear], 4)
         edges = np.unique(y[y > 6.5])  # lines only: the HOV diamonds lie within lane -1
         # each line is a band of two edges; the HOV double line is two bands
         centres = (edges[0::2] + edges[1::2]) / 2
@@ -147,14 +148,16 @@ def test_terrain_meets_the_shoulders_without_gaps_and_stays_off_the_road(built_m
     road = built_map.road
     terrain = meshes["terrain"]
     coords = road.to_road(terrain.vertices)
-    inside = coords.y < road.outer_edge - 1e-6
+    edge = road.outer_edge_at(coords.road, coords.x)  # beyond an acceleration lane
+    inside = coords.y < edge - 1e-6
     assert not inside.any()  # no terrain within the road's footprint at all
-    at_edge = np.abs(coords.y - road.outer_edge) < 1e-6
+    at_edge = np.abs(coords.y - edge) < 1e-6
     assert np.abs(coords.height[at_edge]).max() < 1e-6  # meets the pavement's edge height
+    assert (edge[at_edge] > road.outer_edge + 1.0).any()  # also where a ramp widens it
     # the terrain's inner edge is exactly the shoulders' outer edge, vertex for vertex
-    shoulder = meshes["shoulder"]
-    shoulder_edge = shoulder.vertices[
-        np.abs(road.to_road(shoulder.vertices).y - road.outer_edge) < 1e-6
+    shoulder = road.to_road(meshes["shoulder"].vertices)
+    shoulder_edge = meshes["shoulder"].vertices[
+        np.abs(shoulder.y - road.outer_edge_at(shoulder.road, shoulder.x)) < 1e-6
     ]
     mine = {tuple(v) for v in np.round(terrain.vertices[at_edge], 5)}
     theirs = {tuple(v) for v in np.round(shoulder_edge, 5)}
@@ -172,7 +175,7 @@ def test_terrain_seam_has_no_gap_for_rays(built_map, parts):
         x = np.arange(-390.0, 2000.0, 13.7)
         for name in ("eastbound", "westbound"):
             for offset in (-0.01, 0.01):
-                y = np.full(x.size, road.outer_edge + offset)
+                y = road.outer_edge_at(name, x) + offset
                 heights, names = world.cast(_xy(road, name, x, y), 200.0, -200.0)
                 assert np.isfinite(heights).all()
                 expected = road.surface_z(road.station(name, x))
@@ -257,3 +260,63 @@ def test_every_part_carries_a_known_semantic_class(built_map):
         assert classes[part.semantic_class] == part.class_id
     wanted = {"road", "lane_marking", "barrier", "terrain", "pole", "overpass", "sky"}
     assert wanted <= set(classes)
+
+
+def test_the_on_ramps_lanes_are_pavement_beside_lane_4_with_a_300_ft_taper(built_map, parts):
+    """Lane -5 where the landmark layer puts the two on-ramps' merges (ending at MM 60.70
+    eastbound, 61.51 westbound): a full lane beside lane -4 up to the taper, half a lane
+    half-way down it, nothing past its end, with the shoulder beyond it; the physics'
+    road holds it too."""
+    road = built_map.road
+    world = RayWorld({"road": parts["road"].visual, "shoulder": parts["shoulder"].visual})
+    physics = RayWorld({"road": built_map.collision["road"]})
+    lanes_edge = (i24.N_LANES + 1) * i24.LANE_WIDTH
+    w = i24.LANE_WIDTH
+    try:
+        for name, mm_end in (("eastbound", 60.70), ("westbound", 61.51)):
+            x_end = float(
+                i24.road_x(np.array([mm_end * i24.FEET_PER_MILE]), i24.Road.parse(name))[0]
+            )
+            full, middle, past = x_end - ramps.TAPER - 20.0, x_end - ramps.TAPER / 2, x_end + 5.0
+            probes = [  # (x, y, the part hit)
+                (full, lanes_edge + w / 2, "road"),
+                (full, lanes_edge + w - 0.2, "road"),
+                (full, lanes_edge + w + 0.2, "shoulder"),
+                (full, lanes_edge + w + 2.8, "shoulder"),
+                (middle, lanes_edge + w / 2 - 0.2, "road"),
+                (middle, lanes_edge + w / 2 + 0.2, "shoulder"),
+                (past, lanes_edge + 0.2, "shoulder"),
+            ]
+            x = np.array([p[0] for p in probes])
+            y = np.array([p[1] for p in probes])
+            heights, names = world.cast(_xy(road, name, x, y), 60.0, -60.0)
+            assert names == [p[2] for p in probes], name
+            np.testing.assert_allclose(heights, road.surface_z(road.station(name, x)), atol=0.01)
+            lane = road.to_road(road.to_world(name, x, y)[0]).lane
+            assert lane.tolist() == [-5, -5, 0, 0, -5, 0, 0]
+            # the rigid bodies drive on it: the collision road reaches the shoulder's edge
+            edge = road.outer_edge_at(name, x) - 0.1
+            _, hit = physics.cast(_xy(road, name, x, edge), 60.0, -60.0)
+            assert hit == ["road"] * len(x)
+            assert road.outer_edge_at(name, [full])[0] == pytest.approx(road.outer_edge + w)
+    finally:
+        world.close()
+        physics.close()
+
+
+def test_a_broken_line_parts_lane_4_from_the_on_ramp_and_the_edge_line_follows_it(
+    built_map, meshes
+):
+    coords = built_map.road.to_road(meshes["marking_white"].vertices)
+    lanes_edge = (i24.N_LANES + 1) * i24.LANE_WIDTH
+    for ramp in built_map.road.ramps:
+        mine = coords.road == ramp.road.direction
+        beside = mine & (coords.x > ramp.x_start + 15) & (coords.x < ramp.x_taper)
+        at_line = beside & (np.abs(coords.y - lanes_edge) < 0.1)
+        x = np.unique(np.round(coords.x[at_line], 3))
+        starts = x[np.r_[True, np.diff(x) > 5.0]]
+        assert len(starts) > 10 and np.diff(starts) == pytest.approx(40 * i24.FT, abs=1e-3)
+        assert (beside & (np.abs(coords.y - lanes_edge - i24.LANE_WIDTH) < 0.1)).sum() > 4
+        after = mine & (coords.x > ramp.x_end + 1) & (coords.x < ramp.x_end + 100)
+        assert (after & (np.abs(coords.y - lanes_edge) < 0.1)).any()
+        assert not (after & (coords.y > lanes_edge + 0.2)).any()

@@ -1,0 +1,64 @@
+"""The on-ramps' acceleration lanes read from the landmark layer, and the lane query
+that knows them."""
+
+import numpy as np
+import pytest
+
+from twin.core import i24, ramps
+from twin.core.i24 import LANE_WIDTH, Road
+
+
+def test_the_segment_has_the_two_on_ramps_the_landmark_layer_places():
+    found = {r.name: r for r in ramps.segment_ramps()}
+    assert sorted(found) == ["eb_HH_on", "wb_OH_on"]
+    hickory, old_hickory = found["eb_HH_on"], found["wb_OH_on"]
+    assert hickory.road is Road.EASTBOUND and old_hickory.road is Road.WESTBOUND
+    # MM 60.43 -> 60.70 eastbound, 62.29 -> 61.51 westbound (x from MM 60.6 / 61.6)
+    assert hickory.x_start == pytest.approx((60.43 - 60.6) * i24.MILE)
+    assert hickory.x_end == pytest.approx((60.70 - 60.6) * i24.MILE)
+    assert old_hickory.x_start == pytest.approx((61.6 - 62.29) * i24.MILE)
+    assert old_hickory.x_end == pytest.approx((61.6 - 61.51) * i24.MILE)
+    assert ramps.ramp_of("westbound") is old_hickory
+
+
+def test_a_lane_opens_runs_full_and_tapers_to_nothing_at_its_end():
+    ramp = ramps.Ramp(Road.EASTBOUND, "test_on", 100.0, 500.0)
+    x = np.array([60.0, 85.0, 100.0, 300.0, 500.0 - ramps.TAPER, 500.0 - ramps.TAPER / 2, 500.0])
+    np.testing.assert_allclose(
+        ramp.width(x),
+        [0.0, LANE_WIDTH / 2, LANE_WIDTH, LANE_WIDTH, LANE_WIDTH, LANE_WIDTH / 2, 0.0],
+    )
+    lanes_edge = 5 * LANE_WIDTH
+    lane = ramps.lane_at(
+        Road.EASTBOUND,
+        np.array([300.0, 300.0, 300.0, 600.0, 300.0]),
+        np.array(
+            [
+                lanes_edge + 1.0,
+                lanes_edge + LANE_WIDTH + 0.1,
+                lanes_edge - 1.0,
+                lanes_edge + 1,
+                np.nan,
+            ]
+        ),
+        (ramp,),
+    )
+    assert lane.tolist() == [ramps.RAMP_LANE, 0, -4, 0, 0]
+    # per point directions: the westbound side has no lane here
+    both = ramps.lane_at(
+        np.array([1, -1]), np.array([300.0, 300.0]), np.full(2, lanes_edge + 1), (ramp,)
+    )
+    assert both.tolist() == [ramps.RAMP_LANE, 0]
+
+
+def test_the_landmarks_of_a_ramp_that_ends_before_it_starts_are_refused():
+    with pytest.raises(ValueError, match="x_on: its end lies before its start"):
+        ramps.ramps_from_landmarks({"x_on_start": ("eb", 60.9), "x_on_end": ("eb", 60.7)})
+    with pytest.raises(ValueError, match="its ends lie on eb and wb"):
+        ramps.ramps_from_landmarks({"x_on_start": ("eb", 60.7), "x_on_end": ("wb", 60.9)})
+    with pytest.raises(ValueError, match="shorter than its"):
+        ramps.Ramp(Road.EASTBOUND, "short", 0.0, 50.0)
+    # a pair far from the segment is not the segment's
+    assert (
+        ramps.ramps_from_landmarks({"y_on_start": ("eb", 62.86), "y_on_end": ("eb", 63.07)}) == ()
+    )

@@ -1,0 +1,176 @@
+"""The segment's on-ramps: their acceleration lanes, the twin's lane -5.
+
+Two on-ramps' acceleration lanes reach the segment (the I-24 MOTION landmark layer,
+``assets/i24_aux/ramp_and_landmark_layer.csv``, Gloudemans et al. 2023): eastbound the
+Hickory Hollow Pkwy on-ramp (``eb_HH_on_start`` MM 60.43 to ``eb_HH_on_end`` MM 60.70),
+westbound the Old Hickory Blvd on-ramp (``wb_OH_on_start`` MM 62.29 to ``wb_OH_on_end``
+MM 61.51). Each is a lane beside lane -4, lane :data:`RAMP_LANE` (-5), spanning
+``y in [5, 6] * 12 ft`` where it is a full lane:
+
+* its pavement opens over :data:`OPENING` before the landmark's start (the gore, where
+  the ramp's roadway, which joins at an angle, becomes a lane beside lane -4);
+* it runs beside lane -4 at full width to the taper;
+* it narrows linearly over :data:`TAPER` to nothing at the landmark's end, where the
+  merge must be done.
+
+Its width at ``x`` is :meth:`Ramp.width`, and :func:`lane_at` is the lane query that
+knows it (``twin.core.i24.lane_of`` knows the four through lanes only).
+"""
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from twin.core.i24 import FEET_PER_MILE, LANE_WIDTH, N_LANES, SEGMENT_LENGTH, Road, lane_of, road_x
+
+RAMP_LANE = -5
+#: [m] the acceleration lane's taper, 300 ft: a parallel-type entrance's taper on a
+#: freeway (AASHTO, A Policy on Geometric Design of Highways and Streets, 2018, 10.9.6)
+TAPER = 91.44
+#: [m] over which the ramp's pavement widens to a full lane before its gore
+OPENING = 30.0
+LANDMARKS = "ramp_and_landmark_layer.csv"
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """An on-ramp's acceleration lane in the road frame of its carriageway.
+
+    Attributes:
+        road: the carriageway it joins.
+        name: its landmarks' stem (``eb_HH_on``).
+        x_start: [m] the gore: where it is a full lane beside lane -4.
+        x_end: [m] where its taper ends (its width is 0 there).
+    """
+
+    road: Road
+    name: str
+    x_start: float
+    x_end: float
+
+    def __post_init__(self):
+        if not self.x_end - self.x_start >= TAPER:
+            raise ValueError(
+                f"on-ramp {self.name}: its lane from x = {self.x_start:.1f} to {self.x_end:.1f} m "
+                f"is shorter than its {TAPER} m taper"
+            )
+
+    @property
+    def x_taper(self) -> float:
+        """[m] where the taper begins."""
+        return self.x_end - TAPER
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """(4,) [m] x where its width changes slope: opening, gore, taper, end."""
+        return np.array([self.x_start - OPENING, self.x_start, self.x_taper, self.x_end])
+
+    def width(self, x: np.ndarray) -> np.ndarray:
+        """[m] the lane's width at road-frame ``x`` (0 where it is not), shape of ``x``."""
+        return np.interp(x, self.breakpoints, [0.0, LANE_WIDTH, LANE_WIDTH, 0.0], 0.0, 0.0)
+
+
+def ramps_from_landmarks(landmarks: dict[str, tuple[str, float]]) -> tuple[Ramp, ...]:
+    """The acceleration lanes that reach the segment.
+
+    Args:
+        landmarks: landmark name -> (direction ``eb``/``wb``, mile marker), as in
+            ``ramp_and_landmark_layer.csv``; an on-ramp is a pair ``<stem>_on_start``,
+            ``<stem>_on_end``.
+
+    Returns:
+        one :class:`Ramp` per pair whose lane overlaps the segment (0 <= x <= its
+        length), ordered by road then x.
+
+    Raises:
+        ValueError: a pair's direction is unknown or differs between its ends, or its
+            end lies before its start along travel.
+    """
+    found = []
+    for name, (direction, mm_end) in landmarks.items():
+        if not name.endswith("_on_end") or name[:-4] + "_start" not in landmarks:
+            continue
+        stem = name[: -len("_end")]
+        start_direction, mm_start = landmarks[stem + "_start"]
+        if start_direction != direction:
+            raise ValueError(f"on-ramp {stem}: its ends lie on {start_direction} and {direction}")
+        road = Road.parse(direction)
+        x_start, x_end = (float(road_x(mm * FEET_PER_MILE, road)) for mm in (mm_start, mm_end))
+        if x_end < x_start:
+            raise ValueError(f"on-ramp {stem}: its end lies before its start along travel")
+        if x_end > 0.0 and x_start - OPENING < SEGMENT_LENGTH:
+            found.append(Ramp(road, stem, x_start, x_end))
+    return tuple(sorted(found, key=lambda r: (r.road.code, r.x_start)))
+
+
+@functools.cache
+def segment_ramps() -> tuple[Ramp, ...]:
+    """The segment's on-ramps, from the shipped landmark layer (read once)."""
+    from twin.core.paths import asset
+
+    return ramps_from_landmarks(read_landmarks(asset("i24_aux") / LANDMARKS))
+
+
+def read_landmarks(path: Path) -> dict[str, tuple[str, float]]:
+    """Landmark name -> (direction, mile marker) of a ``ramp_and_landmark_layer.csv``.
+
+    Raises:
+        ValueError: the file lacks a column or holds a mile marker that is not a number.
+    """
+    import pandas as pd
+
+    frame = pd.read_csv(path)
+    missing = {"Direction", "Landmark name", "MM"} - set(frame.columns)
+    if missing:
+        raise ValueError(f"{path.name}: missing column(s) {sorted(missing)}")
+    mm = pd.to_numeric(frame["MM"], errors="coerce").to_numpy(dtype=np.float64)
+    if not np.all(np.isfinite(mm)):
+        raise ValueError(f"{path.name}: a mile marker is not a number")
+    return {
+        str(name): (str(direction), float(m))
+        for name, direction, m in zip(frame["Landmark name"], frame["Direction"], mm, strict=True)
+    }
+
+
+def ramp_of(road: Road | str | int) -> Ramp | None:
+    """The acceleration lane on ``road`` (None where it has none; one at most here)."""
+    road = Road.parse(road)
+    on_road = [r for r in segment_ramps() if r.road is road]
+    return on_road[0] if on_road else None
+
+
+def ramp_width(road, x: np.ndarray, ramps: tuple[Ramp, ...] | None = None) -> np.ndarray:
+    """[m] the acceleration lanes' width at road-frame ``x``, 0 where there is none.
+
+    Args:
+        road: a :class:`~twin.core.i24.Road` for all points, or (n,) directions +1/-1.
+        x: (n,) [m] along travel.
+        ramps: the acceleration lanes (default: :func:`segment_ramps`).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    direction = Road.parse(road).direction if isinstance(road, (Road, str)) else np.asarray(road)
+    width = np.zeros(x.shape)
+    for ramp in segment_ramps() if ramps is None else ramps:
+        width = np.where(direction == ramp.road.direction, ramp.width(x), width)
+    return width
+
+
+def lane_at(road, x: np.ndarray, y: np.ndarray, ramps: tuple[Ramp, ...] | None = None):
+    """Lane id of road-frame points, the acceleration lanes included: -1..-4 in the
+    through lanes' bands, :data:`RAMP_LANE` within an acceleration lane's width beyond
+    lane -4, 0 elsewhere (the shoulders, NaN).
+
+    Args:
+        road, x, ramps: as :func:`ramp_width`'s.
+        y: (n,) [m] from the median centre line outward.
+
+    Returns:
+        (n,) int8.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    lane = lane_of(y)
+    beyond = y - (N_LANES + 1) * LANE_WIDTH
+    ramp = (lane == 0) & (beyond >= 0.0) & (beyond < ramp_width(road, x, ramps))
+    return np.where(ramp, np.int8(RAMP_LANE), lane).astype(np.int8)
