@@ -20,6 +20,16 @@ OpenDRIVE   twin                          type       outer road mark
 +-6         the outer paved shoulder      shoulder   none
 ==========  ============================  =========  =================================
 
+Where an on-ramp's acceleration lane runs beside lane -4 (:mod:`twin.core.ramps`: the
+eastbound Hickory Hollow Pkwy and westbound Old Hickory Blvd on-ramps), the road has
+lane sections of their own, cut where its width changes slope (its opening, gore,
+taper and end): there lane +-6 is that lane, type ``entry`` (OpenDRIVE's acceleration
+lane, which netconvert imports with its default options and CARLA keeps), with a linear
+width record (its opening from nothing and its taper to nothing), a solid white outer
+edge line, lane +-5's outer line broken, and the shoulder is +-7. Lanes link to
+themselves across sections (the shoulder from +-6 to +-7); the acceleration lane links
+to nothing where it opens and where its taper ends.
+
 The HOV lane is a ``driving`` lane, so that every reader drives it (netconvert's
 default import, CARLA, whose road model has no HOV type), with its restriction where
 readers look for it: a lane ``rule`` ``car pool`` (OpenDRIVE 1.6's value for it), an
@@ -43,10 +53,11 @@ import numpy as np
 
 from mapgen.params import load_params
 from twin.core.atomic import atomic_file
-from twin.core.i24 import LANE_WIDTH
+from twin.core.i24 import LANE_WIDTH, SEGMENT_LENGTH, Road
 
 XODR = "i24.xodr"  # its name in a map folder (twin map build)
 HOV_ID = 2  # [-] |OpenDRIVE lane id| of the HOV lane (the twin's lane -1)
+RAMP_ID = 6  # [-] |OpenDRIVE lane id| of an on-ramp's acceleration lane (the twin's lane -5)
 SHOULDER_WIDTH = 3.048  # [m] 10 ft
 MARK_WIDTH = 0.1524  # [m] 6 in
 DASH, GAP = 3.048, 9.144  # [m] 10 ft painted, 30 ft gap
@@ -97,7 +108,9 @@ def opendrive(bundle) -> ET.ElementTree:
         value=(
             "right lanes (negative ids) carry eastbound traffic, left lanes (positive ids) "
             "westbound; on each side, outward: 1 paved median strip, 2 the twin's lane -1 "
-            "(HOV, double solid line), 3 and 4 lanes -2 and -3, 5 lane -4, 6 the shoulder"
+            "(HOV, double solid line), 3 and 4 lanes -2 and -3, 5 lane -4, 6 the shoulder; "
+            "where an on-ramp's acceleration lane (the twin's lane -5) runs, 6 is that lane "
+            "(type entry) and 7 the shoulder"
         ),
     )
 
@@ -123,17 +136,55 @@ def opendrive(bundle) -> ET.ElementTree:
     ET.SubElement(lateral, "superelevation", s="0", a="0", b="0", c="0", d="0")
 
     lanes = ET.SubElement(road, "lanes")
-    section = ET.SubElement(lanes, "laneSection", s="0")
+    cuts = _section_starts(road_model)
+    for k, start in enumerate(cuts):
+        end = cuts[k + 1] if k + 1 < len(cuts) else s1
+        after = cuts[k + 2] if k + 2 < len(cuts) else s1
+        neighbours = (cuts[k - 1] if k else None, after if k + 1 < len(cuts) else None)
+        _lane_section(lanes, road_model, start, end, neighbours, s0)
+    _objects(road, road_model, description, s0)
+    tree = ET.ElementTree(root)
+    ET.indent(tree)
+    return tree
+
+
+def _section_starts(road_model) -> list[float]:
+    """[m] eastbound stations where a lane section starts: the map's first, and every
+    point where an acceleration lane's width changes slope."""
+    return [road_model.station_range[0], *(float(s) for s in road_model.ramp_stations())]
+
+
+def _ramp_widths(road_model, side: int, start: float, end: float) -> tuple[float, float]:
+    """[m] the acceleration lane's width at a section's two ends on ``side`` (-1 right,
+    eastbound; +1 left, westbound)."""
+    road = Road.EASTBOUND if side < 0 else Road.WESTBOUND
+    stations = np.array([start, end])
+    x = stations if side < 0 else SEGMENT_LENGTH - stations
+    w = road_model.ramp_width(road, x)
+    w[w < 1e-9] = 0.0  # round-off at the ends of a taper is no lane
+    return float(w[0]), float(w[1])
+
+
+def _lane_section(lanes, road_model, start: float, end: float, neighbours, s0: float) -> None:
+    """One ``laneSection`` from eastbound station ``start`` to ``end``; ``neighbours``
+    are where the section before it starts and the one after it ends (None at the
+    road's ends)."""
+    section = ET.SubElement(lanes, "laneSection", s=_f(start - s0))
     groups = {side: ET.SubElement(section, side) for side in ("left", "center", "right")}
     for side, sign in (("left", 1), ("right", -1)):  # the schema's order: left, center, right
-        group = groups[side]
-        ordered = LANES if sign < 0 else tuple(reversed(LANES))
-        for number, kind, width, (mark, color), _ in ordered:
-            lane = ET.SubElement(group, "lane", id=str(sign * number), type=kind, level="false")
-            ET.SubElement(lane, "link")
-            ET.SubElement(lane, "width", sOffset="0", a=_f(width), b="0", c="0", d="0")
+        ramp = _ramp_widths(road_model, sign, start, end)
+        first, last = neighbours
+        before = None if first is None else _ramp_widths(road_model, sign, first, start)
+        after = None if last is None else _ramp_widths(road_model, sign, end, last)
+        rows = _lanes(ramp)
+        for number, kind, width, (mark, color), _ in rows if sign < 0 else rows[::-1]:
+            lane = ET.SubElement(groups[side], "lane", id=str(sign * number), type=kind,
+                                 level="false")  # fmt: skip
+            _lane_links(lane, sign, number, kind, before, after)
+            length = end - start
+            ET.SubElement(lane, "width", sOffset="0", **_width(width, length))
             _road_mark(lane, mark, color)
-            if kind == "driving":
+            if kind in ("driving", "entry"):
                 ET.SubElement(lane, "speed", sOffset="0", max="70", unit="mph")
             if number == HOV_ID:
                 _hov_restriction(lane)
@@ -141,10 +192,39 @@ def opendrive(bundle) -> ET.ElementTree:
     ET.SubElement(middle, "link")
     _road_mark(middle, "none", "standard")
 
-    _objects(road, road_model, description, s0)
-    tree = ET.ElementTree(root)
-    ET.indent(tree)
-    return tree
+
+def _lanes(ramp: tuple[float, float]) -> list[tuple]:
+    """The lanes of a side, outward, with an acceleration lane (``entry``) between lane
+    -4 and the shoulder where ``ramp`` (its widths at the section's ends) is not nothing;
+    widths as (start, end) pairs."""
+    rows = [(n, k, (w, w), m, name) for n, k, w, m, name in LANES]
+    if max(ramp) > 0.0:
+        n, kind, width, _, name = rows[-2]
+        rows[-2] = (n, kind, width, ("broken", "white"), name)
+        shoulder = rows[-1]
+        rows[-1] = (RAMP_ID, "entry", ramp, ("solid", "white"), "the on-ramp's lane (-5)")
+        rows.append((RAMP_ID + 1, *shoulder[1:]))
+    return rows
+
+
+def _width(width: tuple[float, float], length: float) -> dict:
+    """A linear width record from ``width`` at the section's start to its end."""
+    return {"a": _f(width[0]), "b": _f((width[1] - width[0]) / length), "c": "0", "d": "0"}
+
+
+def _lane_links(lane, sign, number, kind, before, after) -> None:
+    """Links to the same lane in the sections before and after (``before``/``after``:
+    their acceleration lane's widths, None at the road's ends): the shoulder's id moves
+    out by one where an acceleration lane runs; that lane links only to itself, where
+    it begins (it opens from nothing) and ends (its taper) to nothing."""
+    link = ET.SubElement(lane, "link")
+    for tag, other in (("predecessor", before), ("successor", after)):
+        if other is None or (kind == "entry" and max(other) == 0.0):
+            continue
+        their = number
+        if kind == "shoulder":
+            their = RAMP_ID + 1 if max(other) > 0.0 else RAMP_ID
+        ET.SubElement(link, tag, id=str(sign * their))
 
 
 def write_opendrive(bundle, path: str | Path) -> Path:

@@ -1,6 +1,7 @@
 """The OpenDRIVE export against the twin's road model, and read by an independent
 reader: Eclipse SUMO's netconvert (``eclipse-sumo`` on PyPI)."""
 
+import itertools
 import subprocess
 import xml.etree.ElementTree as ET
 
@@ -8,7 +9,8 @@ import numpy as np
 import pytest
 
 from mapgen.opendrive import LANES, write_opendrive
-from twin.core.i24 import LANE_WIDTH, Road, lane_center
+from twin.core import i24, ramps
+from twin.core.i24 import LANE_WIDTH, Road
 
 
 @pytest.fixture(scope="module")
@@ -74,66 +76,122 @@ def test_the_export_is_the_same_bit_for_bit(xodr, built_map, tmp_path):
     assert again.read_bytes() == xodr.read_bytes()
 
 
-def test_netconvert_drives_four_lanes_each_way_with_its_default_options(xodr, tmp_path):
-    """netconvert imports only lanes it can drive unless told otherwise: the HOV lane is
-    one of them, so each carriageway has the twin's four lanes, lane -1 (HOV) included."""
+def _netconvert(xodr, net, *options):
     sumo = pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
     from pathlib import Path
 
-    net = tmp_path / "default.net.xml"
     done = subprocess.run(
         [str(Path(sumo.SUMO_HOME) / "bin" / "netconvert"), "--opendrive-files", str(xodr),
-         "--output-file", str(net)],
+         "--output-file", str(net), *options],
         capture_output=True, text=True, env={"SUMO_HOME": sumo.SUMO_HOME},
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     edges = [e for e in ET.parse(net).getroot().findall("edge") if e.get("function") is None]
-    assert [len(edge.findall("lane")) for edge in edges] == [4, 4]
-    for edge in edges:  # the access record keeps trucks out of the HOV lane (index 3)
-        hov = edge.findall("lane")[3].get("allow").split()
-        assert "hov" in hov and "passenger" in hov and "truck" not in hov
+    sides = {Road.EASTBOUND: [], Road.WESTBOUND: []}
+    for edge in edges:  # netconvert cuts a side into edges where its lanes change
+        sides[Road.EASTBOUND if edge.get("id").startswith("-") else Road.WESTBOUND].append(edge)
+    return sides
+
+
+def _length(edge) -> float:
+    return float(edge.find("lane").get("length"))
+
+
+def test_netconvert_drives_the_lanes_and_the_on_ramps_lanes_with_its_default_options(
+    xodr, built_map, tmp_path
+):
+    """netconvert imports only lanes it can drive unless told otherwise: the HOV lane and
+    the on-ramps' acceleration lanes (OpenDRIVE ``entry`` lanes) are among them, so each
+    carriageway has the twin's four lanes, and a fifth beside an on-ramp's lane."""
+    sides = _netconvert(xodr, tmp_path / "default.net.xml")
+    for road, edges in sides.items():
+        assert sorted({len(edge.findall("lane")) for edge in edges}) == [4, 5]
+        for edge in edges:  # the access record keeps trucks out of the HOV lane (the last)
+            hov = edge.findall("lane")[-1].get("allow").split()
+            assert "hov" in hov and "passenger" in hov and "truck" not in hov
+        # the acceleration lane's edges span it: from its opening (or the map's start)
+        # to its taper's end
+        (ramp,) = [r for r in built_map.road.ramps if r.road is road]
+        start = max(ramp.x_start - ramps.OPENING, built_map.road.x_range(road)[0])
+        beside = sum(_length(e) for e in edges if len(e.findall("lane")) == 5)
+        assert beside == pytest.approx(ramp.x_end - start, rel=0.05)
 
 
 def test_netconvert_reads_it_as_the_twins_lanes(xodr, built_map, tmp_path):
-    """SUMO's network from the file: two edges of six lanes, the twin's widths, its
-    length within 0.1 % and its lane centres within 5 cm of ``RoadModel.to_world``."""
-    sumo = pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
-    from pathlib import Path
-
-    netconvert = Path(sumo.SUMO_HOME) / "bin" / "netconvert"
-    net = tmp_path / "i24.net.xml"
-    done = subprocess.run(
-        [str(netconvert), "--opendrive-files", str(xodr), "--output-file", str(net),
-         "--offset.disable-normalization", "true", "--opendrive.import-all-lanes", "true"],
-        capture_output=True, text=True, env={"SUMO_HOME": sumo.SUMO_HOME},
+    """SUMO's network from the file: each carriageway a chain of edges of six lanes,
+    seven beside an on-ramp's lane, the twin's widths, end to end with no more than 10 m
+    between edges (netconvert's junctions), and lane centres within 5 cm of
+    ``RoadModel.to_world``, the on-ramp's lane's too."""
+    sides = _netconvert(
+        xodr, tmp_path / "i24.net.xml", "--offset.disable-normalization", "true",
+        "--opendrive.import-all-lanes", "true",
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    edges = [e for e in ET.parse(net).getroot().findall("edge") if e.get("function") is None]
-    assert len(edges) == 2
-    s0, s1 = built_map.road.station_range
     road_model = built_map.road
-    for edge in edges:
-        lanes = edge.findall("lane")
-        assert len(lanes) == 6
-        # SUMO counts lanes from the outside: 0 the shoulder .. 5 the median strip
-        widths = [float(lane.get("width")) for lane in lanes]
-        assert widths == pytest.approx([3.048] + [LANE_WIDTH] * 5, abs=0.006)
-        for lane in lanes:
-            assert float(lane.get("length")) == pytest.approx(s1 - s0, rel=1e-3)
-        road = Road.EASTBOUND if edge.get("id").startswith("-") else Road.WESTBOUND
-        for index, twin_lane in ((4, -1), (3, -2), (2, -3), (1, -4)):
-            shape = np.array(
-                [
-                    [float(v) for v in point.split(",")]
-                    for point in lanes[index].get("shape").split()
-                ]
-            )
-            coordinates = road_model.to_road(shape)
-            assert np.all(coordinates.road == road.direction)
-            assert np.abs(coordinates.y - lane_center(twin_lane)).max() < 0.05
-            # on the twin's pavement (SUMO's 1 cm rounding puts an end a hair off the map)
-            height = coordinates.height[np.isfinite(coordinates.height)]
-            assert height.size >= len(shape) - 2 and np.abs(height).max() < 0.05
-            x = coordinates.x
-            assert x.min() < road_model.x_range(road)[0] + 1.0  # from end to end
-            assert x.max() > road_model.x_range(road)[1] - 1.0
+    for road, edges in sides.items():
+        x_all, spans = [], []
+        for edge in edges:
+            lanes = edge.findall("lane")
+            assert len(lanes) in (6, 7)
+            # SUMO counts lanes from the outside: 0 the shoulder .. the median strip
+            widths = [float(lane.get("width")) for lane in lanes]
+            assert widths[0] == pytest.approx(3.048, abs=0.006)
+            assert widths[-5:] == pytest.approx([LANE_WIDTH] * 5, abs=0.006)
+            n = len(lanes)
+            pairs = [(n - 1 + k, k) for k in (-1, -2, -3, -4)]
+            if n == 7 and widths[1] == pytest.approx(LANE_WIDTH, abs=0.006):
+                pairs.append((1, ramps.RAMP_LANE))  # where the on-ramp's lane is full
+            for index, twin_lane in pairs:
+                shape = np.array(
+                    [
+                        [float(v) for v in point.split(",")]
+                        for point in lanes[index].get("shape").split()
+                    ]
+                )
+                coordinates = road_model.to_road(shape)
+                assert np.all(coordinates.road == road.direction)
+                assert np.abs(coordinates.y - (-twin_lane + 0.5) * LANE_WIDTH).max() < 0.05
+                # on the twin's pavement (SUMO's 1 cm rounding puts an end a hair off the map)
+                height = coordinates.height[np.isfinite(coordinates.height)]
+                assert height.size >= len(shape) - 2 and np.abs(height).max() < 0.05
+                x_all.append(coordinates.x)
+                if twin_lane == -1:
+                    spans.append((coordinates.x.min(), coordinates.x.max()))
+        spans.sort()
+        assert max(b[0] - a[1] for a, b in itertools.pairwise(spans)) < 10.0
+        x = np.concatenate(x_all)
+        assert x.min() < road_model.x_range(road)[0] + 1.0  # from end to end
+        assert x.max() > road_model.x_range(road)[1] - 1.0
+
+
+def test_the_on_ramps_lanes_are_entry_lanes_as_wide_as_the_maps(xodr, built_map):
+    """Each on-ramp's acceleration lane is an ``entry`` lane (id -6 eastbound, 6
+    westbound) beside lane -4 in the lane sections it runs through, as wide as the map's
+    lane -5 along its opening, gore and taper, with a broken line between it and lane
+    -4 and the shoulder beyond it."""
+    road = ET.parse(xodr).getroot().find("road")
+    s0 = built_map.road.station_range[0]
+    sections = road.findall("lanes/laneSection")
+    starts = [float(sec.get("s")) for sec in sections]
+    ends = [*starts[1:], float(road.get("length"))]
+    for side, sign, name in (("right", -1, Road.EASTBOUND), ("left", 1, Road.WESTBOUND)):
+        seen = 0.0
+        for section, start, end in zip(sections, starts, ends, strict=True):
+            lanes = {int(lane.get("id")): lane for lane in section.findall(f"{side}/lane")}
+            ds = np.linspace(0.0, end - start, 9)
+            station = s0 + start + ds
+            x = station if sign < 0 else i24.SEGMENT_LENGTH - station
+            expected = built_map.road.ramp_width(name, x)
+            entry = lanes.get(sign * 6)
+            if entry is None or entry.get("type") != "entry":
+                assert expected.max() < 1e-6
+                assert lanes[sign * 6].get("type") == "shoulder"
+                continue
+            width = entry.find("width")
+            a, b = float(width.get("a")), float(width.get("b"))
+            np.testing.assert_allclose(a + b * ds, expected, atol=1e-6)
+            assert lanes[sign * 5].find("roadMark").get("type") == "broken"
+            assert lanes[sign * 7].get("type") == "shoulder"
+            seen += end - start
+        ramp = built_map.road.ramps[0 if sign < 0 else 1]
+        lo, hi = built_map.road.x_range(name)
+        assert seen == pytest.approx(min(ramp.x_end, hi) - max(ramp.x_start - ramps.OPENING, lo))

@@ -17,11 +17,17 @@ def test_sumo_runs_the_exported_episode_with_every_vehicle(run, tmp_path, capsys
     out = tmp_path / "sumo"
     assert main(["export", str(run), "--format", "sumo", "--out", str(out)]) == 0
     assert "vehicles in routes.rou.xml" in capsys.readouterr().out
-    # the HOV lane's double solid line: nobody but emergency vehicles crosses it
-    for edge in ET.parse(out / "i24.net.xml").getroot().findall("edge"):
-        if edge.get("id") in ("1", "-1"):
-            lanes = {lane.get("index"): lane for lane in edge.findall("lane")}
-            assert lanes["3"].get("changeLeft") == lanes["4"].get("changeRight") == "emergency"
+    # the HOV lane's double solid line: nobody but emergency vehicles crosses it, on
+    # every edge netconvert cut the carriageways into (where an on-ramp's lane runs
+    # beside lane -4, an edge has seven lanes: the shoulder, that lane, four, the median)
+    edges = [e for e in ET.parse(out / "i24.net.xml").getroot().findall("edge")
+             if e.get("function") is None]  # fmt: skip
+    assert sorted({len(e.findall("lane")) for e in edges}) == [6, 7]
+    for edge in edges:
+        lanes = edge.findall("lane")
+        hov, second = lanes[-2], lanes[-3]
+        assert second.get("changeLeft") == hov.get("changeRight") == "emergency"
+    net_lanes = {lane.get("id") for edge in edges for lane in edge.findall("lane")}
     rows = pd.read_parquet(run / "trajectories.parquet")
     routes = ET.parse(out / "routes.rou.xml").getroot().findall("vehicle")
     recorded = set(rows.loc[rows["lane"].isin([-1, -2, -3, -4]), "record_id"])
@@ -31,6 +37,9 @@ def test_sumo_runs_the_exported_episode_with_every_vehicle(run, tmp_path, capsys
     assert len(fcd) == 81 and {v.get("id") for v in fcd[0]} == set(
         rows.loc[rows["time"] == 0.0, "record_id"]
     )
+    # each on a lane of the edge under it
+    on = {v.get("lane") for step in fcd for v in step} - {""}
+    assert on and on <= net_lanes
     home = Path(sumo.SUMO_HOME)
     done = subprocess.run(
         [str(home / "bin" / "sumo"), "-c", str(out / "i24.sumocfg"),
