@@ -22,7 +22,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.ipc as ipc
 
-from twin.core import i24
+from twin.core import i24, ramps
 from twin.core.errors import DataFormatError
 from twin.core.i24 import Road
 from twin.core.progress import progress_bar
@@ -220,7 +220,7 @@ def _ingest_document(doc, source_index, options, report, seen, spill, trajectori
         n_out = int(np.count_nonzero(~inside))
         report.samples_outside_margin += n_out
         if n_out:
-            if n_out == len(inside):
+            if not np.any(inside & (traj.lane != ramps.RAMP_LANE)):  # none in the lanes
                 report.documents_outside_margin += 1
                 return
             traj = _select(traj, inside)
@@ -286,6 +286,10 @@ def _parse_document(doc, options: IngestOptions, report: IngestReport) -> _Traje
         report.samples_rejected["too_few_valid_samples"] += int(np.count_nonzero(keep))
         raise _Rejected("too_few_valid_samples")
     t, x, y = t[keep], i24.road_x(x_ft[keep], road), i24.road_y(y_ft[keep])
+    lane = ramps.lane_at(road, x, y)
+    if np.count_nonzero(lane != ramps.RAMP_LANE) < 2:  # a vehicle seen on its ramp only
+        report.samples_rejected["too_few_valid_samples"] += int(np.count_nonzero(keep))
+        raise _Rejected("too_few_valid_samples")
     return _Trajectory(
         oid=oid,
         road=road,
@@ -298,7 +302,7 @@ def _parse_document(doc, options: IngestOptions, report: IngestReport) -> _Traje
         x=x,
         y=y,
         speed=smoothed_speed(t, x, options.speed_smoothing),
-        lane=i24.lane_of(y),
+        lane=lane,
     )
 
 
@@ -314,7 +318,8 @@ def _valid_samples(t, x_ft, y_ft, road: Road, rejected: Counter) -> np.ndarray:
 
     # I-24 MOTION: y < 0 eastbound, y > 0 westbound.
     keep &= ~_count(rejected, "wrong_side_of_median", keep & (np.sign(y_ft) == road.direction))
-    outside = i24.lane_of(i24.road_y(y_ft)) == 0
+    with np.errstate(invalid="ignore"):  # NaN positions are rejected above
+        outside = ramps.lane_at(road, i24.road_x(x_ft, road), i24.road_y(y_ft)) == 0
     keep &= ~_count(rejected, "outside_lane_bands", keep & outside)
     return keep
 
@@ -388,6 +393,11 @@ class _TrajectoryTable:
         mask = 0
         for lane in np.unique(traj.lane):
             mask |= 1 << (-int(lane) - 1)
+        # the row describes the vehicle in the through lanes, as every reader of the
+        # store but the ramps' own uses it (samples on an acceleration lane are kept,
+        # lane -5, and marked in lanes_seen)
+        through = np.flatnonzero(traj.lane != ramps.RAMP_LANE)
+        first, last = through[0], through[-1]
         row = {
             "tid": tid,
             "id": traj.oid,
@@ -397,11 +407,11 @@ class _TrajectoryTable:
             "length": traj.length,
             "width": traj.width,
             "height": traj.height,
-            "t_first": float(traj.t[0]),
-            "t_last": float(traj.t[-1]),
-            "x_first": float(traj.x[0]),
-            "x_last": float(traj.x[-1]),
-            "n_samples": len(traj.t),
+            "t_first": float(traj.t[first]),
+            "t_last": float(traj.t[last]),
+            "x_first": float(traj.x[first]),
+            "x_last": float(traj.x[last]),
+            "n_samples": len(through),
             "lanes_seen": mask,
             "source": source_index,
         }
@@ -495,7 +505,9 @@ def _write_samples(writer: StoreWriter, spill: _Spill) -> dict:
                 parquet.write_table(table, row_group_size=table.num_rows)
                 lanes, n = np.unique(table.column("lane").to_numpy(), return_counts=True)
                 counts.update(dict(zip(lanes.tolist(), n.tolist(), strict=True)))
-        lane_counts[road.value] = {str(lane): counts[lane] for lane in i24.LANES}
+        lane_counts[road.value] = {
+            str(lane): counts[lane] for lane in (*i24.LANES, ramps.RAMP_LANE)
+        }
     return lane_counts
 
 
@@ -512,7 +524,7 @@ def _metadata(paths, options, report, trajectories, lane_counts) -> dict:
         xs = np.r_[np.array(table["x_first"])[rows], np.array(table["x_last"])[rows]]
         roads[road.value] = {
             "trajectories": int(rows.sum()),
-            "samples": int(np.array(table["n_samples"])[rows].sum()),
+            "samples": int(sum(lane_counts[road.value].values())),  # the ramps' too
             "samples_per_lane": lane_counts[road.value],
             "t_min": float(t_first.min()),
             "t_max": float(t_last.max()),

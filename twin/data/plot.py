@@ -1,4 +1,5 @@
-"""Time-space diagrams of recorded traffic, one panel per lane, as in the paper's figures."""
+"""Time-space diagrams of recorded traffic, one panel per lane, as in the paper's figures
+(and one for an on-ramp's acceleration lane, lane -5, where vehicles were recorded on it)."""
 
 import os
 from pathlib import Path
@@ -14,6 +15,7 @@ from twin.core import i24
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
+from twin.core.ramps import RAMP_LANE
 from twin.core.timeutil import CST, format_local
 from twin.data.store import TrajectoryStore
 
@@ -28,6 +30,8 @@ def time_space_plot(
     store: TrajectoryStore, road: Road | str, start: float, minutes: float, out: str | os.PathLike
 ) -> Path:
     """Plot every lane's trajectories as points coloured by speed; mile markers on the y axis.
+    Samples on an on-ramp's acceleration lane (lane -5) get a panel of their own below
+    lane -4's, where there are any.
 
     Args:
         store: the data.
@@ -41,7 +45,7 @@ def time_space_plot(
     """
     road = Road.parse(road)
     end = start + 60.0 * minutes
-    samples = store.samples(road, start, end)
+    samples = store.samples(road, start, end, ramps=True)
     if len(samples["t"]) == 0:
         t_min, t_max = store.time_range(road)
         raise StoreError(
@@ -49,11 +53,14 @@ def time_space_plot(
             f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
             f"{format_local(t_max)} CST on this road"
         )
+    lanes = i24.LANES + ((RAMP_LANE,) if np.any(samples["lane"] == RAMP_LANE) else ())
     fig, axes = plt.subplots(
-        len(i24.LANES), 1, figsize=(12, 11), sharex=True, constrained_layout=True
+        len(lanes), 1, figsize=(12, 2.75 * len(lanes)), sharex=True, constrained_layout=True
     )
     points = None
-    for ax, lane in zip(axes, i24.LANES, strict=True):
+    mm = i24.mile_marker(samples["x"], road)
+    span = (float(mm.min()), float(mm.max()))
+    for ax, lane in zip(axes, lanes, strict=True):
         rows = np.flatnonzero(samples["lane"] == lane)
         step = max(1, len(rows) // MAX_POINTS_PER_LANE)
         rows = rows[::step]
@@ -71,9 +78,10 @@ def time_space_plot(
         )
         for mm in (i24.SEGMENT_START_MM, i24.SEGMENT_END_MM):
             ax.axhline(mm, color="0.4", lw=0.6, ls="--")
-        ax.set_ylabel(f"lane {lane}{' (HOV)' if lane == i24.HOV_LANE else ''}\nmile marker")
-        if road is Road.WESTBOUND:
-            ax.invert_yaxis()  # travel goes up the page either way
+        name = {i24.HOV_LANE: " (HOV)", RAMP_LANE: " (on-ramp)"}.get(lane, "")
+        ax.set_ylabel(f"lane {lane}{name}\nmile marker")
+        # one scale for every panel; travel goes up the page either way
+        ax.set_ylim(span[::-1] if road is Road.WESTBOUND else span)
         ax.grid(alpha=0.2)
     axes[-1].xaxis.set_major_locator(mdates.MinuteLocator(interval=max(1, round(minutes / 8))))
     axes[-1].xaxis.set_major_formatter(mdates.DateFormatter("%H:%M", tz=CST))

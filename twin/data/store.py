@@ -29,6 +29,7 @@ from twin.core import faults, i24
 from twin.core.atomic import AtomicFolder, marked_as, naming
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
+from twin.core.ramps import RAMP_LANE
 from twin.core.timeutil import format_local, local_days
 
 FORMAT = "i24-twin-store"
@@ -42,7 +43,7 @@ SAMPLE_SCHEMA = pa.schema(
         ("x", pa.float64()),  # [m] road frame, back centre
         ("y", pa.float32()),  # [m] from the median centre line
         ("speed", pa.float32()),  # [m/s] smoothed
-        ("lane", pa.int8()),  # -1..-4
+        ("lane", pa.int8()),  # -1..-4, -5 on an on-ramp's acceleration lane
     ]
 )
 
@@ -61,7 +62,7 @@ TRAJECTORY_SCHEMA = pa.schema(
         ("x_first", pa.float64()),  # [m]
         ("x_last", pa.float64()),  # [m]
         ("n_samples", pa.int32()),
-        ("lanes_seen", pa.int8()),  # bit k-1 set when the vehicle was recorded in lane -k
+        ("lanes_seen", pa.int8()),  # bit k-1 set when the vehicle was recorded in lane -k (k <= 5)
         ("source", pa.int16()),  # index into metadata "sources"
     ]
 )
@@ -197,10 +198,13 @@ class TrajectoryStore:
         return arrays
 
     def samples(
-        self, road: Road | str, t_min: float, t_max: float, tids=None
+        self, road: Road | str, t_min: float, t_max: float, tids=None, *, ramps: bool = False
     ) -> dict[str, np.ndarray]:
         """All samples on ``road`` with ``t_min <= t <= t_max`` (of the trajectories
-        ``tids`` only, if given), sorted by (tid, t).
+        ``tids`` only, if given), sorted by (tid, t), in the four through lanes; with
+        ``ramps`` also those on the on-ramps' acceleration lanes (lane -5: a ramp
+        vehicle before it merges). The trajectory table (``t_first`` ... ``n_samples``)
+        describes the through lanes' samples.
 
         Returns:
             dict of (n,) arrays: tid int32, t float64, x float64, y float32,
@@ -218,6 +222,8 @@ class TrajectoryStore:
             table = file.read_row_groups(groups) if groups else SAMPLE_SCHEMA.empty_table()
         columns = {name: table.column(name).to_numpy() for name in SAMPLE_SCHEMA.names}
         keep = (columns["t"] >= t_min) & (columns["t"] <= t_max)
+        if not ramps:
+            keep &= columns["lane"] != RAMP_LANE
         if tids is not None:  # before the sort, which dominates for a few trajectories
             keep &= np.isin(columns["tid"], np.asarray(tids))
         columns = {name: col[keep] for name, col in columns.items()}
@@ -344,6 +350,13 @@ class TrajectoryStore:
                 samples = info["samples_per_lane"][str(lane)]
                 hov = "  (HOV)" if lane == i24.HOV_LANE else ""
                 lines.append(f"  lane {lane}: {seen:,} trajectories, {samples:,} samples{hov}")
+            ramp = info["samples_per_lane"].get(str(RAMP_LANE), 0)
+            if ramp:
+                seen = int(np.count_nonzero(arrays["lanes_seen"][rows] & (1 << (-RAMP_LANE - 1))))
+                lines.append(
+                    f"  lane {RAMP_LANE}: {seen:,} trajectories, {ramp:,} samples  (on-ramp, "
+                    "before the merge)"
+                )
         ingest = meta["ingest"]
         for kind in ("documents", "samples"):
             part = ingest[kind]

@@ -311,7 +311,7 @@ def _write_folder(
         f"scenario {cfg.scenario}: {cfg.road.value}, ego {sim.ego.id} from lane {sim.ego.lane}, "
         f"x = {sim.ego.x:.0f} m"
     )
-    recorded = store.samples(cfg.road, sim.t0, sim.t0 + sim_s)
+    recorded = store.samples(cfg.road, sim.t0, sim.t0 + sim_s, ramps=True)
     plots.timespace_plot(
         recorded, vehicles, windows, recorded_ego, sim.t0, title, tmp / "timespace.png"
     )

@@ -98,3 +98,21 @@ def test_bev_is_to_scale_with_lanes_windows_and_a_legend(episode):
         assert image.dtype == np.uint8 and image.shape[2] == 3
     finally:
         figure.close()
+
+
+def test_timespace_draws_the_recorded_ramp_vehicles_in_a_panel_of_their_own(episode):
+    sim, windows, recorded, recorded_ego = episode
+    time = np.round(np.arange(0.0, 10.0, 0.1), 6)
+    ramp = {"t": T0 + time, "x": 600 + 15 * time, "lane": np.full(100, -5),
+            "speed": np.full(100, 15.0)}  # fmt: skip
+    with_ramp = {k: np.r_[recorded[k], ramp[k]] for k in recorded}
+    fig = plots.timespace_figure(with_ramp, sim, windows, recorded_ego, T0, "on-ramp")
+    try:
+        panels = fig.axes[: 2 + len(i24.LANES)]
+        assert "lane -5 (on-ramp)" in panels[-1].get_ylabel()
+        assert len(panels[-1].collections[1].get_offsets()) == 100  # after the window
+        # "all lanes" holds theirs too: every lane panel's points, the ramp's included
+        counts = [len(ax.collections[1].get_offsets()) for ax in panels]
+        assert counts[0] == sum(counts[1:])
+    finally:
+        plt.close(fig)

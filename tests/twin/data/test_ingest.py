@@ -232,3 +232,34 @@ def test_leftovers_of_a_killed_ingest_are_cleaned_and_an_interrupt_leaves_nothin
         ingest([day], tmp_path / "other", progress=False)
     assert not (tmp_path / "other").exists()
     assert not list(tmp_path.glob(".other.partial-*"))
+
+
+def test_samples_on_an_on_ramps_lane_are_ramp_traffic_and_the_shoulder_stays_out(tmp_path):
+    """The westbound Old Hickory on-ramp's acceleration lane runs beside lane -4 to MM
+    61.51: a vehicle recorded on it (|y| 60 to 72 ft) before it merges is kept as lane
+    -5; the same band where no ramp runs is the shoulder, counted out; a vehicle seen on
+    its ramp only is not a trajectory of the lanes."""
+    merging = make_doc("1" * 24, direction=-1, mm=61.72, y_ft=66.0, speed=20.0, n=100)
+    merging["y_position"] = [66.0] * 50 + [54.0] * 50  # on the ramp, then in lane -4
+    shoulder = make_doc("2" * 24, direction=1, mm=61.0, y_ft=-54.0, n=50)
+    shoulder["y_position"] = [-66.0] * 5 + [-54.0] * 45  # no ramp at MM 61.0 eastbound
+    ramp_only = make_doc("3" * 24, direction=-1, mm=61.72, y_ft=66.0, speed=20.0, n=50)
+    report = ingest([write_day(tmp_path / "d.json", [merging, shoulder, ramp_only])],
+                    tmp_path / "store", progress=False)  # fmt: skip
+
+    assert dict(report.samples_rejected) == {"outside_lane_bands": 5, "too_few_valid_samples": 50}
+    assert dict(report.documents_rejected) == {"too_few_valid_samples": 1}
+    store = TrajectoryStore(tmp_path / "store")
+    tid = store.tid_of("1" * 24)
+    row = store.trajectories.iloc[tid]
+    t = np.array(merging["timestamp"])
+    # the trajectory table describes the vehicle in the lanes (from its merge on)
+    assert row["t_first"] == t[50] and row["n_samples"] == 50
+    assert row["lanes_seen"] == (1 << 3) | (1 << 4)  # lanes -4 and -5
+    lanes = store.samples("westbound", t[0], t[-1])["lane"]
+    assert set(lanes.tolist()) == {-4} and lanes.size == 50
+    with_ramps = store.samples("westbound", t[0], t[-1], ramps=True)
+    assert with_ramps["lane"].tolist() == [-5] * 50 + [-4] * 50
+    assert store.metadata["roads"]["westbound"]["samples_per_lane"]["-5"] == 50
+    store.verify()
+    assert "lane -5: 1 trajectories, 50 samples  (on-ramp" in store.describe()

@@ -90,8 +90,8 @@ class LaneDrop:
 class OnRamp:
     """An on-ramp's acceleration lane beside lane -4, from ``x_start`` to ``x_end``
     (where the merge ends): vehicles arrive on it at ``flow`` and merge into lane -4.
-    The recording sees them outside the lane bands until they are in lane -4, as
-    I-24 MOTION's cameras do.
+    The recording sees them in the acceleration lane's band (|y| 60 to 72 ft), which
+    ``twin data ingest`` keeps as lane -5 where the map has an on-ramp's lane.
 
     Attributes:
         x_start, x_end: [m] road-frame ends of the acceleration lane.

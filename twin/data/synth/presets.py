@@ -132,8 +132,8 @@ PRESET_D = replace(
 #: Preset E, test data with strategic lane changes (issue 30): preset C's morning with
 #: the westbound Old Hickory Blvd on-ramp, whose acceleration lane beside lane -4 ends
 #: at MM 61.51 (145 m into the segment) and carries 600 veh/h. The ramp's vehicles are
-#: recorded outside the lane bands until they are in lane -4, as the real data show them
-#: (``twin data ingest`` counts those samples as ``outside_lane_bands``).
+#: recorded on the acceleration lane until they are in lane -4 (``twin data ingest``
+#: keeps those samples as lane -5, where they lie within the map's lane there).
 PRESET_E = replace(
     PRESET_C,
     on_ramp=OnRamp(
