@@ -4,6 +4,7 @@ inputs, run by SUMO itself for the episode's length."""
 import subprocess
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -28,6 +29,32 @@ def test_sumo_runs_the_exported_episode_with_every_vehicle(run, tmp_path, capsys
         hov, second = lanes[-2], lanes[-3]
         assert second.get("changeLeft") == hov.get("changeRight") == "emergency"
     net_lanes = {lane.get("id") for edge in edges for lane in edge.findall("lane")}
+    # each carriageway's chain in travel order, and the twin's lanes on every edge of
+    # it: the HOV lane keeps trucks out, the acceleration lane (-5) is where one runs
+    from mapgen.build import default_map
+    from twin.core.i24 import LANE_WIDTH
+    from twin.export.sumo import edges_of, sumo_lane
+
+    road_model = default_map().road
+    by_id = {e.get("id"): e for e in edges}
+    for road, chain in edges_of(out / "i24.net.xml", road_model).items():
+        assert len(chain) == len(
+            [e for e in edges if (e.get("id")[0] == "-") == (road.direction > 0)]
+        )
+        starts = [e.x_start for e in chain]
+        assert any(e.lanes == 7 for e in chain)  # each carriageway has its on-ramp
+        assert starts == sorted(starts) and chain[0].x_start < road_model.x_range(road)[0] + 1
+        for edge in chain:
+            lanes = by_id[edge.id].findall("lane")
+            assert "truck" not in lanes[sumo_lane(-1, edge.lanes)].get("allow", "truck")
+            shape = lanes[sumo_lane(-4, edge.lanes)].get("shape").split()
+            middle = np.array([[float(v) for v in shape[len(shape) // 2].split(",")]])
+            assert road_model.to_road(middle).lane[0] == -4
+            if edge.lanes == 7:  # beside lane -4, in the acceleration lane's band
+                ramp = lanes[sumo_lane(-5, edge.lanes)].get("shape").split()
+                point = np.array([[float(v) for v in ramp[len(ramp) // 2].split(",")]])
+                y = road_model.to_road(point).y[0]
+                assert 5 * LANE_WIDTH < y < 6 * LANE_WIDTH
     rows = pd.read_parquet(run / "trajectories.parquet")
     routes = ET.parse(out / "routes.rou.xml").getroot().findall("vehicle")
     recorded = set(rows.loc[rows["lane"].isin([-1, -2, -3, -4]), "record_id"])
