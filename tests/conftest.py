@@ -56,6 +56,15 @@ def make_doc(
     }
 
 
+def make_merging_doc(oid: str, *, on_ramp: int = 50, in_lane: int = 50, speed: float = 20.0):
+    """A westbound vehicle recorded ``on_ramp`` samples on the Old Hickory Blvd on-ramp's
+    acceleration lane (|y| 66 ft, from MM 61.72) and then ``in_lane`` samples in lane -4
+    (54 ft), at a constant ``speed`` [m/s]."""
+    doc = make_doc(oid, direction=-1, mm=61.72, y_ft=66.0, speed=speed, n=on_ramp + in_lane)
+    doc["y_position"] = [66.0] * on_ramp + [54.0] * in_lane
+    return doc
+
+
 def write_day(path: Path, docs) -> Path:
     path.write_text(json.dumps(docs))
     return path

@@ -134,13 +134,6 @@ def read_landmarks(path: Path) -> dict[str, tuple[str, float]]:
     }
 
 
-def ramp_of(road: Road | str | int) -> Ramp | None:
-    """The acceleration lane on ``road`` (None where it has none; one at most here)."""
-    road = Road.parse(road)
-    on_road = [r for r in segment_ramps() if r.road is road]
-    return on_road[0] if on_road else None
-
-
 def ramp_width(road, x: np.ndarray, ramps: tuple[Ramp, ...] | None = None) -> np.ndarray:
     """[m] the acceleration lanes' width at road-frame ``x``, 0 where there is none.
 
@@ -153,7 +146,7 @@ def ramp_width(road, x: np.ndarray, ramps: tuple[Ramp, ...] | None = None) -> np
     direction = Road.parse(road).direction if isinstance(road, (Road, str)) else np.asarray(road)
     width = np.zeros(x.shape)
     for ramp in segment_ramps() if ramps is None else ramps:
-        width = np.where(direction == ramp.road.direction, ramp.width(x), width)
+        width = np.maximum(width, np.where(direction == ramp.road.direction, ramp.width(x), 0.0))
     return width
 
 
@@ -171,6 +164,8 @@ def lane_at(road, x: np.ndarray, y: np.ndarray, ramps: tuple[Ramp, ...] | None =
     """
     y = np.asarray(y, dtype=np.float64)
     lane = lane_of(y)
-    beyond = y - (N_LANES + 1) * LANE_WIDTH
+    # in lane widths beyond lane -4, with lane_of's nanometre: a lane's inner edge given
+    # in feet (60 ft) belongs to it, its outer edge (72 ft where it is full) does not
+    beyond = (y / LANE_WIDTH + 1e-9 - (N_LANES + 1)) * LANE_WIDTH
     ramp = (lane == 0) & (beyond >= 0.0) & (beyond < ramp_width(road, x, ramps))
     return np.where(ramp, np.int8(RAMP_LANE), lane).astype(np.int8)

@@ -196,7 +196,8 @@ def _nothing_kept(paths: list[Path], out: Path, report: IngestReport) -> str:
     if report.documents_outside_margin:
         why = (
             f"no document within the margin ({report.documents_outside_margin} of "
-            f"{report.documents_read} lie wholly beyond it: a larger --margin keeps them)"
+            f"{report.documents_read} have no sample in the lanes within it: a larger --margin "
+            "keeps them)"
         )
     elif reasons:
         why += f" (rejected: {reasons})"
@@ -220,8 +221,11 @@ def _ingest_document(doc, source_index, options, report, seen, spill, trajectori
         n_out = int(np.count_nonzero(~inside))
         report.samples_outside_margin += n_out
         if n_out:
-            if not np.any(inside & (traj.lane != ramps.RAMP_LANE)):  # none in the lanes
+            if not np.any(inside & (traj.lane != ramps.RAMP_LANE)):
+                # none of it in the four lanes within the margin: left out whole, every
+                # sample counted as left out by the margin
                 report.documents_outside_margin += 1
+                report.samples_outside_margin += len(inside) - n_out
                 return
             traj = _select(traj, inside)
     tid = trajectories.add(traj, source_index)
@@ -301,9 +305,19 @@ def _parse_document(doc, options: IngestOptions, report: IngestReport) -> _Traje
         t=t,
         x=x,
         y=y,
-        speed=smoothed_speed(t, x, options.speed_smoothing),
+        speed=_speeds(t, x, lane, options.speed_smoothing),
         lane=lane,
     )
+
+
+def _speeds(t: np.ndarray, x: np.ndarray, lane: np.ndarray, sigma: float) -> np.ndarray:
+    """:func:`smoothed_speed` of the samples in the four lanes from those samples alone
+    (as when the ramps' were not kept), of the ramps' samples from all of them."""
+    speed = smoothed_speed(t, x, sigma)
+    through = lane != ramps.RAMP_LANE
+    if not through.all():
+        speed[through] = smoothed_speed(t[through], x[through], sigma)
+    return speed
 
 
 def _valid_samples(t, x_ft, y_ft, road: Road, rejected: Counter) -> np.ndarray:

@@ -171,7 +171,7 @@ class TrajectoryStore:
         return [Road(r) for r in self.metadata["roads"]]
 
     def time_range(self, road: Road | str) -> tuple[float, float]:
-        """[s] unix time of the first and last sample on ``road``."""
+        """[s] unix time of the first and last sample on ``road`` in the four lanes."""
         info = self._road_info(road)
         return info["t_min"], info["t_max"]
 
@@ -202,7 +202,7 @@ class TrajectoryStore:
     ) -> dict[str, np.ndarray]:
         """All samples on ``road`` with ``t_min <= t <= t_max`` (of the trajectories
         ``tids`` only, if given), sorted by (tid, t), in the four through lanes; with
-        ``ramps`` also those on the on-ramps' acceleration lanes (lane -5: a ramp
+        ``ramps`` also those on the on-ramps' acceleration lanes (lane -5: mostly a ramp
         vehicle before it merges). The trajectory table (``t_first`` ... ``n_samples``)
         describes the through lanes' samples.
 
@@ -354,8 +354,8 @@ class TrajectoryStore:
             if ramp:
                 seen = int(np.count_nonzero(arrays["lanes_seen"][rows] & (1 << (-RAMP_LANE - 1))))
                 lines.append(
-                    f"  lane {RAMP_LANE}: {seen:,} trajectories, {ramp:,} samples  (on-ramp, "
-                    "before the merge)"
+                    f"  lane {RAMP_LANE}: {seen:,} trajectories, {ramp:,} samples  (an on-ramp's "
+                    "acceleration lane)"
                 )
         ingest = meta["ingest"]
         for kind in ("documents", "samples"):

@@ -18,7 +18,6 @@ def test_the_segment_has_the_two_on_ramps_the_landmark_layer_places():
     assert hickory.x_end == pytest.approx((60.70 - 60.6) * i24.MILE)
     assert old_hickory.x_start == pytest.approx((61.6 - 62.29) * i24.MILE)
     assert old_hickory.x_end == pytest.approx((61.6 - 61.51) * i24.MILE)
-    assert ramps.ramp_of("westbound") is old_hickory
 
 
 def test_a_lane_opens_runs_full_and_tapers_to_nothing_at_its_end():
@@ -49,6 +48,15 @@ def test_a_lane_opens_runs_full_and_tapers_to_nothing_at_its_end():
         np.array([1, -1]), np.array([300.0, 300.0]), np.full(2, lanes_edge + 1), (ramp,)
     )
     assert both.tolist() == [ramps.RAMP_LANE, 0]
+
+
+def test_the_lanes_inner_edge_belongs_to_it_and_its_outer_edge_does_not():
+    """As I-24 MOTION's bands: |y_position| 60 ft is lane -5 where an acceleration lane
+    runs, and 72 ft (its full width's outer edge) the shoulder; 48 ft is lane -4."""
+    ramp = ramps.Ramp(Road.WESTBOUND, "test_on", -500.0, 500.0)
+    y = i24.road_y(np.array([48.0, 59.999, 60.0, 71.999, 72.0]))
+    lane = ramps.lane_at(Road.WESTBOUND, np.zeros(5), y, (ramp,))
+    assert lane.tolist() == [-4, -4, ramps.RAMP_LANE, ramps.RAMP_LANE, 0]
 
 
 def test_the_landmarks_of_a_ramp_that_ends_before_it_starts_are_refused():

@@ -6,7 +6,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from tests.conftest import SHARED, make_doc, write_day
+from tests.conftest import SHARED, make_doc, make_merging_doc, write_day
 from twin.core.errors import DataFormatError, StoreError
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.ingest import IngestOptions, ingest, smoothed_speed
@@ -239,8 +239,7 @@ def test_samples_on_an_on_ramps_lane_are_ramp_traffic_and_the_shoulder_stays_out
     61.51: a vehicle recorded on it (|y| 60 to 72 ft) before it merges is kept as lane
     -5; the same band where no ramp runs is the shoulder, counted out; a vehicle seen on
     its ramp only is not a trajectory of the lanes."""
-    merging = make_doc("1" * 24, direction=-1, mm=61.72, y_ft=66.0, speed=20.0, n=100)
-    merging["y_position"] = [66.0] * 50 + [54.0] * 50  # on the ramp, then in lane -4
+    merging = make_merging_doc("1" * 24)  # 50 samples on the ramp, then 50 in lane -4
     shoulder = make_doc("2" * 24, direction=1, mm=61.0, y_ft=-54.0, n=50)
     shoulder["y_position"] = [-66.0] * 5 + [-54.0] * 45  # no ramp at MM 61.0 eastbound
     ramp_only = make_doc("3" * 24, direction=-1, mm=61.72, y_ft=66.0, speed=20.0, n=50)
@@ -263,3 +262,33 @@ def test_samples_on_an_on_ramps_lane_are_ramp_traffic_and_the_shoulder_stays_out
     assert store.metadata["roads"]["westbound"]["samples_per_lane"]["-5"] == 50
     store.verify()
     assert "lane -5: 1 trajectories, 50 samples  (on-ramp" in store.describe()
+
+
+def test_the_lanes_speeds_are_smoothed_from_the_lanes_samples_alone(tmp_path):
+    """A vehicle that speeds up as it merges: its speeds in lane -4 are those of its lane
+    -4 samples alone, as before the ramps' samples were kept."""
+    merging = make_merging_doc("1" * 24)
+    t = np.array(merging["timestamp"])
+    x_ft = np.array(merging["x_position"])
+    x_ft[50:] -= np.cumsum(np.linspace(0.0, 0.4, 50))  # faster once in the lane
+    merging["x_position"] = x_ft.tolist()
+    ingest([write_day(tmp_path / "d.json", [merging])], tmp_path / "s", progress=False)
+    s = TrajectoryStore(tmp_path / "s").samples("westbound", t[0], t[-1], ramps=True)
+    x = (61.6 - x_ft / 5280.0) * 1609.344
+    lane_only = smoothed_speed(t[50:], x[50:], IngestOptions().speed_smoothing)
+    np.testing.assert_allclose(s["speed"][50:], lane_only, rtol=1e-6)
+    assert not np.allclose(lane_only, smoothed_speed(t, x, 0.5)[50:], rtol=1e-3)
+
+
+def test_a_margin_that_leaves_a_vehicle_only_its_ramp_samples_leaves_it_out_counted(tmp_path):
+    """Eastbound, in lane -4 far before the segment, then on the Hickory Hollow on-ramp's
+    acceleration lane inside the margin: no sample in the lanes within the margin, so the
+    vehicle is left out, and every sample read is accounted for."""
+    doc = make_doc("4" * 24, direction=1, mm=60.30, y_ft=-54.0, speed=30.0, n=350)
+    doc["y_position"] = [-54.0] * 40 + [-66.0] * 310  # x < -435 m, then the ramp's band
+    other = make_doc("5" * 24, direction=1, mm=60.5, y_ft=-30.0, n=50)
+    report = ingest([write_day(tmp_path / "d.json", [doc, other])], tmp_path / "s",
+                    options=IngestOptions(margin=400.0), progress=False)  # fmt: skip
+    assert report.documents_outside_margin == 1 and report.documents_kept == 1
+    rejected = sum(report.samples_rejected.values())
+    assert report.samples_read == report.samples_kept + rejected + report.samples_outside_margin

@@ -23,13 +23,12 @@ def test_a_ramp_vehicle_gets_a_panel_of_the_on_ramps_lane(tmp_path, monkeypatch)
     their own below lane -4's, on the same mile-marker scale."""
     import numpy as np
 
-    from tests.conftest import make_doc, write_day
+    from tests.conftest import make_doc, make_merging_doc, write_day
     from twin.data import plot
     from twin.data.ingest import ingest
     from twin.data.store import TrajectoryStore
 
-    merging = make_doc("1" * 24, direction=-1, mm=61.72, y_ft=66.0, speed=20.0, n=100)
-    merging["y_position"] = [66.0] * 50 + [54.0] * 50
+    merging = make_merging_doc("1" * 24)
     other = make_doc("2" * 24, direction=-1, mm=61.9, y_ft=30.0, n=100)
     ingest([write_day(tmp_path / "d.json", [merging, other])], tmp_path / "s", progress=False)
     figures = []
