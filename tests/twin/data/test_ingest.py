@@ -261,7 +261,8 @@ def test_samples_on_an_on_ramps_lane_are_ramp_traffic_and_the_shoulder_stays_out
     assert with_ramps["lane"].tolist() == [-5] * 50 + [-4] * 50
     assert store.metadata["roads"]["westbound"]["samples_per_lane"]["-5"] == 50
     store.verify()
-    assert "lane -5: 1 trajectories, 50 samples  (on-ramp" in store.describe()
+    described = store.describe()
+    assert "lane -5: 1 trajectories, 50 samples  (an on-ramp's acceleration lane)" in described
 
 
 def test_the_lanes_speeds_are_smoothed_from_the_lanes_samples_alone(tmp_path):
