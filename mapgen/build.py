@@ -35,7 +35,7 @@ from mapgen.params import MAP_TOML, MapParams, load_params
 from mapgen.road import RoadModel
 from mapgen.semantics import SEMANTIC_CSV, class_id, semantic_classes
 from mapgen.vehicles import ModelLevel, write_vehicle_models
-from twin.core import i24
+from twin.core import i24, ramps
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import MapError
 from twin.core.locks import build_lock
@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # trimesh (and scipy under it) is imported only to build a ma
     from mapgen.meshes import SceneMeshes
 
 FORMAT = "i24-twin-map"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3  # 3: the on-ramps' acceleration lanes (road.json's ramps)
 ROAD_JSON = "road.json"
 VEHICLE_CSV = "vehicle_classes.csv"  # the vehicle models take the classes' mean sizes
 SCENE_GLB = "scene.glb"
@@ -122,10 +122,12 @@ class MapBundle:
 
 
 def map_key(seed: int = DEFAULT_SEED) -> str:
-    """Hash of everything a map is made from: the mapgen code, the parameter and class
-    tables, the I-24 sources, the trimesh version and the seed."""
+    """Hash of everything a map is made from: the mapgen code and the road frame's and
+    on-ramps' (``twin/core/i24.py``, ``ramps.py``), the parameter and class tables, the
+    I-24 sources, the trimesh version and the seed."""
     digest = hashlib.sha256()
-    for path in sorted(Path(__file__).parent.glob("*.py")):
+    code = [*sorted(Path(__file__).parent.glob("*.py")), Path(i24.__file__), Path(ramps.__file__)]
+    for path in code:
         digest.update(path.name.encode() + path.read_bytes())
     inputs = (asset(MAP_TOML), asset(SEMANTIC_CSV), asset(VEHICLE_CSV))
     for path in (*inputs, *sources_module.source_paths()):
@@ -301,6 +303,14 @@ def _describe(
             "broken_lines_y_m": [k * lane_width for k in range(3, i24.N_LANES + 1)],
             "outer_shoulder_m": params.cross_section.outer_shoulder,
             "outer_edge_y_m": road.outer_edge,
+            # beside an on-ramp's acceleration lane (road.ramps) the white edge line and
+            # the outer edge lie further out by its width (RoadModel.outer_edge_at)
+            "ramp_lane": {
+                "lane": -5,
+                "y_m": [(i24.N_LANES + 1) * lane_width, (i24.N_LANES + 2) * lane_width],
+                "where": f"road.ramps: an opening of {ramps.OPENING} m before x_start_m, "
+                f"full width to a taper of {ramps.TAPER} m that ends at x_end_m",
+            },
             "barrier_profile": {
                 "y_m": list(params.barrier.profile_y),
                 "z_m": list(params.barrier.profile_z),

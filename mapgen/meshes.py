@@ -19,7 +19,7 @@ import trimesh
 from mapgen.params import MapParams, Terrain
 from mapgen.road import RoadModel, mile_marker_of, station_of
 from mapgen.sources import Sources
-from twin.core.i24 import LANE_WIDTH, N_LANES, SEGMENT_LENGTH, Road, lane_center
+from twin.core.i24 import LANE_WIDTH, N_LANES, Road, lane_center
 
 INNER_EDGE = LANE_WIDTH  # [m] the yellow line: 12 ft from the median centre line
 LANES_OUTER_EDGE = (N_LANES + 1) * LANE_WIDTH  # [m] the white edge line
@@ -104,22 +104,21 @@ def _stations(model: RoadModel) -> np.ndarray:
     return np.union1d(knots, extra[~near])
 
 
-def _road_x(side: float, stations: np.ndarray) -> tuple[Road, np.ndarray]:
+def _road_x(model: RoadModel, side: float, stations: np.ndarray) -> tuple[Road, np.ndarray]:
     """The carriageway on ``side`` (+1 eastbound, to the right of the reference line)
     and the road-frame x of eastbound ``stations`` on it."""
-    if side > 0:
-        return Road.EASTBOUND, stations
-    return Road.WESTBOUND, SEGMENT_LENGTH - stations
+    road = Road.EASTBOUND if side > 0 else Road.WESTBOUND
+    return road, model.station(road, stations)  # its own inverse
 
 
 def _ramp_width(model: RoadModel, side: float, stations: np.ndarray) -> np.ndarray:
     """(n,) [m] the acceleration lane's width at ``stations`` on ``side``."""
-    return model.ramp_width(*_road_x(side, stations))
+    return model.ramp_width(*_road_x(model, side, stations))
 
 
 def _outer_edge(model: RoadModel, side: float, stations: np.ndarray) -> np.ndarray:
     """(n,) [m] |lateral| of the paved shoulder's outer edge at ``stations`` on ``side``."""
-    return model.outer_edge_at(*_road_x(side, stations))
+    return model.outer_edge_at(*_road_x(model, side, stations))
 
 
 def _side_strip(model, stations: np.ndarray, side: float, lo, hi, lift: float = 0.0):
@@ -131,7 +130,7 @@ def _side_strip(model, stations: np.ndarray, side: float, lo, hi, lift: float = 
 
 def _ramp_strips(model: RoadModel, side: float) -> list[trimesh.Trimesh]:
     """The acceleration lanes' pavement on ``side``, from their opening to their end."""
-    road, _ = _road_x(side, np.zeros(1))
+    road, _ = _road_x(model, side, np.zeros(1))
     strips = []
     for ramp in model.ramps:
         if ramp.road is not road:
@@ -202,7 +201,8 @@ def _markings(model: RoadModel, params: MapParams) -> dict[str, trimesh.Trimesh]
     """US freeway markings: yellow inner edge, white outer edge (beyond an acceleration
     lane where there is one), a solid double white line closing the HOV lane, broken
     white lines between the other lanes and between lane -4 and an acceleration lane
-    (from its gore to its end), HOV diamonds."""
+    (from its gore to its end; lane -4's solid edge line goes on along its opening),
+    HOV diamonds."""
     m = params.markings
     knots = _stations(model)
     half = m.width / 2.0
@@ -219,13 +219,20 @@ def _markings(model: RoadModel, params: MapParams) -> dict[str, trimesh.Trimesh]
         offset = (m.double_gap + m.width) / 2.0
         white += [line(hov_edge - offset), line(hov_edge + offset)]
         white += [line(k * LANE_WIDTH, dashes) for k in range(3, N_LANES + 1)]
-        road, _ = _road_x(side, knots)
+        road, _ = _road_x(model, side, knots)
         for ramp in model.ramps:
             if ramp.road is road:
                 lo, hi = np.sort(model.station(road, np.array([ramp.x_start, ramp.x_end])))
                 beside = dashes[(dashes[:, 0] >= lo) & (dashes[:, -1] <= hi)]
                 if beside.size:
                     white.append(line(LANES_OUTER_EDGE, beside))
+                # lane -4's edge line goes on along the opening, up to the gore
+                ends = model.station(road, ramp.breakpoints[:2])
+                a, b = max(ends.min(), knots[0]), min(ends.max(), knots[-1])
+                if b > a:  # its ends are among the knots (or within a millimetre)
+                    white.append(
+                        line(LANES_OUTER_EDGE, knots[(knots >= a - 1e-3) & (knots <= b + 1e-3)])
+                    )
         white.append(_diamonds(model, m, side * float(lane_center(-1))))
     return {"marking_white": _concatenate(white), "marking_yellow": _concatenate(yellow)}
 

@@ -53,7 +53,7 @@ import numpy as np
 
 from mapgen.params import load_params
 from twin.core.atomic import atomic_file
-from twin.core.i24 import LANE_WIDTH, SEGMENT_LENGTH, Road
+from twin.core.i24 import LANE_WIDTH, Road
 
 XODR = "i24.xodr"  # its name in a map folder (twin map build)
 HOV_ID = 2  # [-] |OpenDRIVE lane id| of the HOV lane (the twin's lane -1)
@@ -154,15 +154,25 @@ def _section_starts(road_model) -> list[float]:
     return [road_model.station_range[0], *(float(s) for s in road_model.ramp_stations())]
 
 
-def _ramp_widths(road_model, side: int, start: float, end: float) -> tuple[float, float]:
-    """[m] the acceleration lane's width at a section's two ends on ``side`` (-1 right,
-    eastbound; +1 left, westbound)."""
-    road = Road.EASTBOUND if side < 0 else Road.WESTBOUND
-    stations = np.array([start, end])
-    x = stations if side < 0 else SEGMENT_LENGTH - stations
-    w = road_model.ramp_width(road, x)
+def _side(sign: int) -> Road:
+    """The carriageway on OpenDRIVE's ``sign`` side: -1 right (eastbound), +1 left."""
+    return Road.EASTBOUND if sign < 0 else Road.WESTBOUND
+
+
+def _ramp_widths(road_model, sign: int, start: float, end: float) -> tuple[float, float]:
+    """[m] the acceleration lane's width at a section's two ends on side ``sign``."""
+    road = _side(sign)
+    w = road_model.ramp_width(road, road_model.station(road, np.array([start, end])))
     w[w < 1e-9] = 0.0  # round-off at the ends of a taper is no lane
     return float(w[0]), float(w[1])
+
+
+def _beside(road_model, sign: int, start: float, end: float) -> bool:
+    """Whether a section lies between an acceleration lane's gore and its end on side
+    ``sign`` (lane -4's line is broken there; not on the lane's opening)."""
+    road = _side(sign)
+    x = float(road_model.station(road, np.array([0.5 * (start + end)]))[0])
+    return any(r.road is road and r.x_start <= x <= r.x_end for r in road_model.ramps)
 
 
 def _lane_section(lanes, road_model, start: float, end: float, neighbours, s0: float) -> None:
@@ -176,7 +186,7 @@ def _lane_section(lanes, road_model, start: float, end: float, neighbours, s0: f
         first, last = neighbours
         before = None if first is None else _ramp_widths(road_model, sign, first, start)
         after = None if last is None else _ramp_widths(road_model, sign, end, last)
-        rows = _lanes(ramp)
+        rows = _lanes(ramp, _beside(road_model, sign, start, end))
         for number, kind, width, (mark, color), _ in rows if sign < 0 else rows[::-1]:
             lane = ET.SubElement(groups[side], "lane", id=str(sign * number), type=kind,
                                  level="false")  # fmt: skip
@@ -193,14 +203,15 @@ def _lane_section(lanes, road_model, start: float, end: float, neighbours, s0: f
     _road_mark(middle, "none", "standard")
 
 
-def _lanes(ramp: tuple[float, float]) -> list[tuple]:
+def _lanes(ramp: tuple[float, float], beside: bool) -> list[tuple]:
     """The lanes of a side, outward, with an acceleration lane (``entry``) between lane
-    -4 and the shoulder where ``ramp`` (its widths at the section's ends) is not nothing;
-    widths as (start, end) pairs."""
+    -4 and the shoulder where ``ramp`` (its widths at the section's ends) is not nothing,
+    and lane -4's outer line broken ``beside`` it; widths as (start, end) pairs."""
     rows = [(n, k, (w, w), m, name) for n, k, w, m, name in LANES]
     if max(ramp) > 0.0:
-        n, kind, width, _, name = rows[-2]
-        rows[-2] = (n, kind, width, ("broken", "white"), name)
+        if beside:
+            n, kind, width, _, name = rows[-2]
+            rows[-2] = (n, kind, width, ("broken", "white"), name)
         shoulder = rows[-1]
         rows[-1] = (RAMP_ID, "entry", ramp, ("solid", "white"), "the on-ramp's lane (-5)")
         rows.append((RAMP_ID + 1, *shoulder[1:]))

@@ -40,7 +40,6 @@ from twin.core.i24 import (
     SEGMENT_START_MM,
     Road,
     lane_center,
-    lane_of,
     mile_marker,
 )
 
@@ -363,11 +362,6 @@ class RoadModel:
         """(n, 3) [m] world points of lane ``lane``'s centre line at road-frame ``x``."""
         x = np.atleast_1d(np.asarray(x, dtype=np.float64))
         return self.to_world(road, x, np.full(x.shape, float(lane_center(lane))))[0]
-
-    @staticmethod
-    def lane_at(y: np.ndarray) -> np.ndarray:
-        """Lane id (-1..-4, 0 off the lanes) of road-frame y; see :func:`twin.core.i24.lane_of`."""
-        return lane_of(y)
 
     def _slope_ahead(self, s: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """dz/ds of the profile piece the traveller is about to drive on."""

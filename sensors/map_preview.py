@@ -32,9 +32,16 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
     with MapView(bundle) as view:
         overview = _top_view(view, road, (s0, s1), half_width, WIDTH)
         close = _top_view(view, road, (overpass - 110.0, overpass + 110.0), 55.0, WIDTH)
-        ramp = road.ramps[0]  # the eastbound Hickory Hollow Pkwy on-ramp's taper
-        end = float(road.station(ramp.road, ramp.x_end))
-        merge = _top_view(view, road, (end - 180.0, end + 40.0), 55.0, WIDTH)
+        merges = []
+        for ramp in road.ramps[:1]:  # the eastbound Hickory Hollow Pkwy on-ramp's taper
+            end = float(road.station(ramp.road, ramp.x_end))
+            merges.append(
+                _titled(
+                    _top_view(view, road, (end - 180.0, end + 40.0), 55.0, WIDTH),
+                    f"Top view of the {ramp.road.value} on-ramp's acceleration lane ending at "
+                    f"MM {mile_marker_of(end):.2f} (its 300 ft taper)",
+                )
+            )
         eye = _drivers_eye(view, road, overpass - 140.0, WIDTH, WIDTH * 9 // 16)
     panels = [
         _titled(
@@ -42,11 +49,7 @@ def render_preview(bundle: MapBundle, out: Path) -> Path:
             f"Overview: MM {mile_marker_of(s0):.2f} to {mile_marker_of(s1):.2f}, westbound on top",
         ),
         _titled(close, "Top view at the Old Franklin Rd overpass (MM 60.82)"),
-        _titled(
-            merge,
-            f"Top view of the {ramp.road.value} on-ramp's acceleration lane ending at "
-            f"MM {mile_marker_of(end):.2f} (its 300 ft taper)",
-        ),
+        *merges,
         _titled(eye, "Driver's eye: eastbound lane -2, 140 m before the overpass"),
     ]
     picture = cv2.cvtColor(np.concatenate(panels, axis=0), cv2.COLOR_RGB2BGR)

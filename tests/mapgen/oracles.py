@@ -49,3 +49,20 @@ def haversine(lat1, lon1, lat2, lon2) -> float:
         + math.cos(p1) * math.cos(p2) * math.sin(math.radians(lon2 - lon1) / 2) ** 2
     )
     return 2 * EARTH_RADIUS * math.asin(math.sqrt(a))
+
+
+def ramp_lane_width(road_name: str, x: float) -> float:
+    """[m] the acceleration lane's width at road-frame ``x``, from the landmark layer's
+    mile markers and the geometry the map documents (a 30 m opening before the gore, a
+    300 ft taper ending at the merge's end), worked out here in feet and mile markers."""
+    table = pd.read_csv(asset("i24_aux/ramp_and_landmark_layer.csv")).set_index("Landmark name")
+    stem = "eb_HH_on" if road_name == "eastbound" else "wb_OH_on"
+    start, end = table.loc[f"{stem}_start", "MM"], table.loc[f"{stem}_end", "MM"]
+    mm = 60.6 + x / 1609.344 if road_name == "eastbound" else 61.6 - x / 1609.344
+    along = (mm - start) * 5280.0 if road_name == "eastbound" else (start - mm) * 5280.0  # [ft]
+    to_end = abs(end - mm) * 5280.0 * (1 if (end - mm) * (end - start) > 0 else -1)  # [ft]
+    if along < -30.0 / FT or to_end <= 0.0:
+        return 0.0
+    if along < 0.0:
+        return 12.0 * FT * (1.0 + along / (30.0 / FT))
+    return 12.0 * FT * min(1.0, to_end / 300.0)

@@ -317,6 +317,11 @@ def test_a_broken_line_parts_lane_4_from_the_on_ramp_and_the_edge_line_follows_i
         starts = x[np.r_[True, np.diff(x) > 5.0]]
         assert len(starts) > 10 and np.diff(starts) == pytest.approx(40 * i24.FT, abs=1e-3)
         assert (beside & (np.abs(coords.y - lanes_edge - i24.LANE_WIDTH) < 0.1)).sum() > 4
+        if ramp.x_start - ramps.OPENING > built_map.road.x_range(ramp.road)[0]:
+            # lane -4's solid edge line goes on along the opening, to the gore
+            opening = mine & (np.abs(coords.x - (ramp.x_start - ramps.OPENING / 2)) < 15.1)
+            at_edge = opening & (np.abs(coords.y - lanes_edge) < 0.1)
+            assert np.ptp(coords.x[at_edge]) == pytest.approx(ramps.OPENING, abs=0.01)
         after = mine & (coords.x > ramp.x_end + 1) & (coords.x < ramp.x_end + 100)
         assert (after & (np.abs(coords.y - lanes_edge) < 0.1)).any()
         assert not (after & (coords.y > lanes_edge + 0.2)).any()

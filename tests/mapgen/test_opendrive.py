@@ -189,7 +189,11 @@ def test_the_on_ramps_lanes_are_entry_lanes_as_wide_as_the_maps(xodr, built_map)
             width = entry.find("width")
             a, b = float(width.get("a")), float(width.get("b"))
             np.testing.assert_allclose(a + b * ds, expected, atol=1e-6)
-            assert lanes[sign * 5].find("roadMark").get("type") == "broken"
+            middle = x[4]  # lane -4's line: broken from the gore to the end, solid before
+            ramp = built_map.road.ramps[0 if sign < 0 else 1]
+            beside = ramp.x_start <= middle <= ramp.x_end
+            mark = lanes[sign * 5].find("roadMark").get("type")
+            assert mark == ("broken" if beside else "solid")
             assert lanes[sign * 7].get("type") == "shoulder"
             seen += end - start
         ramp = built_map.road.ramps[0 if sign < 0 else 1]

@@ -11,7 +11,7 @@ from mapgen.params import load_params
 from mapgen.road import RoadModel
 from mapgen.sources import load_sources
 from tests.mapgen import oracles
-from twin.core import i24, ramps
+from twin.core import i24
 
 
 @pytest.fixture(scope="module")
@@ -114,9 +114,16 @@ def test_round_trip_road_world_road_is_below_a_millimetre(road, road_name, x, y,
     assert back.road[0] == i24.Road.parse(road_name).direction
     assert abs(back.x[0] - x) < 1e-3 and abs(back.y[0] - y) < 1e-3
     assert abs(back.height[0] - height) < 1e-3
-    assert back.lane[0] == ramps.lane_at(road_name, [x], [y], road.ramps)[0]
-    if not road.ramp_width(road_name, [x])[0]:
-        assert back.lane[0] == i24.lane_of(np.array([y]))[0]
+    # the lane: the four bands, and the acceleration lane's where it runs (an oracle
+    # worked out from the landmark layer in feet; points within a micron of an edge,
+    # where rounding decides, are not judged)
+    width = oracles.ramp_lane_width(road_name, x)
+    beyond = y - 5 * i24.LANE_WIDTH
+    expected = i24.lane_of(np.array([y]))[0]
+    if 0.0 <= beyond < width:
+        expected = -5
+    if min(abs(beyond), abs(beyond - width), abs(y % i24.LANE_WIDTH)) > 1e-6:
+        assert back.lane[0] == expected
 
 
 def test_round_trip_world_road_world_vectorised(road):
@@ -148,8 +155,8 @@ def test_lane_centre_lines_and_lookup(road):
         coords = road.to_road(line)
         np.testing.assert_allclose(coords.y, (-lane + 0.5) * i24.LANE_WIDTH)
         assert (coords.lane == lane).all()
-        assert (road.lane_at(coords.y) == lane).all()
-    assert road.lane_at(np.array([1.0, 19.0]))[0] == 0  # median and shoulder are no lane
+        assert (i24.lane_of(coords.y) == lane).all()
+    assert i24.lane_of(np.array([1.0, 19.0]))[0] == 0  # median and shoulder are no lane
 
 
 def test_bad_inputs_raise_clear_errors(road):

@@ -22,8 +22,7 @@ from matplotlib.patches import Patch, Rectangle
 from mapgen.params import load_params
 from twin.core import i24
 from twin.core.atomic import atomic_file
-from twin.core.ramps import RAMP_LANE
-from twin.data.plot import SPEED_CMAP, SPEED_RANGE, clock, save_figure
+from twin.data.plot import SPEED_CMAP, SPEED_RANGE, clock, lane_name, panel_lanes, save_figure
 
 #: Okabe-Ito colours (distinct to colour-blind readers), each doubled by a fill or a style.
 COLOURS = {
@@ -75,13 +74,13 @@ def timespace_figure(
     on = (ego_rec_t >= 0) & (ego_rec_t <= t_end)
     ego_rec = {"t": ego_rec_t[on], "x": recorded_ego["x"][on], "lane": recorded_ego["lane"][on]}
 
-    lanes = i24.LANES + ((RAMP_LANE,) if np.any(rec["lane"] == RAMP_LANE) else ())
+    lanes = panel_lanes(rec["lane"])
     fig, axes = plt.subplots(
         1 + len(lanes), 1, figsize=(11, 3 * (1 + len(lanes))), sharex=True,
         constrained_layout=True,
     )  # fmt: skip
     panels = [("all lanes", np.ones(len(rec_t), bool), None)]
-    panels += [(f"lane {lane}", rec["lane"] == lane, lane) for lane in lanes]
+    panels += [(lane_name(lane), rec["lane"] == lane, lane) for lane in lanes]
     points = None
     for ax, (label, rows, lane) in zip(axes, panels, strict=True):
         ax.fill_between(
@@ -98,9 +97,8 @@ def timespace_figure(
         _trajectory_lines(ax, others, label="simulated vehicles")
         _ego_line(ax, ego_rec["t"], ego_rec["x"], ego_rec["lane"], lane, recorded=True)
         _ego_line(ax, ego["time"], ego["x"], ego["lane"], lane, recorded=False)
-        hov = {i24.HOV_LANE: " (HOV)", RAMP_LANE: " (on-ramp)"}.get(lane, "")
         mine = lane is not None and lane == ego_lane
-        ax.set_ylabel(f"{label}{hov}{chr(10)}{'ego lane, ' if mine else ''}x [m]")
+        ax.set_ylabel(f"{label}{chr(10)}{'ego lane, ' if mine else ''}x [m]")
         if mine:
             for spine in ax.spines.values():
                 spine.set_linewidth(2.2)

@@ -14,6 +14,7 @@ import inspect
 from dataclasses import replace
 from pathlib import Path
 
+from twin.core import ramps
 from twin.core.errors import StoreError
 from twin.core.locks import build_lock
 from twin.core.paths import asset, cache_dir
@@ -28,7 +29,7 @@ from twin.traffic.models import base, gipps, idm
 #: The code the embedded data are made with: a change to any of it rebuilds them.
 GENERATOR = (
     synth, config, presets, simulation, recording, ingest_module, day_files,
-    base, idm, gipps, drivers, lanes, mobil,
+    base, idm, gipps, drivers, lanes, mobil, ramps,
 )  # fmt: skip
 
 DEFAULT_SEED = 0

@@ -53,13 +53,13 @@ def time_space_plot(
             f"(unix {start:.0f} to {end:.0f}); the store covers {format_local(t_min)} to "
             f"{format_local(t_max)} CST on this road"
         )
-    lanes = i24.LANES + ((RAMP_LANE,) if np.any(samples["lane"] == RAMP_LANE) else ())
+    lanes = panel_lanes(samples["lane"])
     fig, axes = plt.subplots(
         len(lanes), 1, figsize=(12, 2.75 * len(lanes)), sharex=True, constrained_layout=True
     )
     points = None
-    mm = i24.mile_marker(samples["x"], road)
-    span = (float(mm.min()), float(mm.max()))
+    where = i24.mile_marker(samples["x"], road)
+    span = (float(where.min()), float(where.max()))
     for ax, lane in zip(axes, lanes, strict=True):
         rows = np.flatnonzero(samples["lane"] == lane)
         step = max(1, len(rows) // MAX_POINTS_PER_LANE)
@@ -78,8 +78,7 @@ def time_space_plot(
         )
         for mm in (i24.SEGMENT_START_MM, i24.SEGMENT_END_MM):
             ax.axhline(mm, color="0.4", lw=0.6, ls="--")
-        name = {i24.HOV_LANE: " (HOV)", RAMP_LANE: " (on-ramp)"}.get(lane, "")
-        ax.set_ylabel(f"lane {lane}{name}\nmile marker")
+        ax.set_ylabel(f"{lane_name(lane)}\nmile marker")
         # one scale for every panel; travel goes up the page either way
         ax.set_ylim(span[::-1] if road is Road.WESTBOUND else span)
         ax.grid(alpha=0.2)
@@ -89,6 +88,17 @@ def time_space_plot(
     fig.colorbar(points, ax=axes, label="speed [m/s]", shrink=0.6)
     fig.suptitle(f"I-24 {road.value}, {len(np.unique(samples['tid'])):,} trajectories")
     return save_figure(fig, out, dpi=110)
+
+
+def panel_lanes(lanes: np.ndarray) -> tuple[int, ...]:
+    """The lanes a time-space figure gives a panel: the four, and an on-ramp's
+    acceleration lane (-5) where ``lanes`` (the samples') hold it."""
+    return i24.LANES + ((RAMP_LANE,) if np.any(lanes == RAMP_LANE) else ())
+
+
+def lane_name(lane: int) -> str:
+    """``lane -1 (HOV)``, ``lane -2``, ..., ``lane -5 (on-ramp)``."""
+    return f"lane {lane}" + {i24.HOV_LANE: " (HOV)", RAMP_LANE: " (on-ramp)"}.get(lane, "")
 
 
 def clock(t: float) -> str:

@@ -33,7 +33,10 @@ from twin.core.ramps import RAMP_LANE
 from twin.core.timeutil import format_local, local_days
 
 FORMAT = "i24-twin-store"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: samples on the on-ramps' acceleration lanes (lane -5)
+#: the versions this twin reads: a version 1 store has no lane -5 samples, and is read
+#: as it was written
+READS = (1, 2)
 METADATA = "metadata.json"
 
 SAMPLE_SCHEMA = pa.schema(
@@ -151,10 +154,10 @@ class TrajectoryStore:
             raise StoreError(
                 f"{self.path} is not an i24-twin store (format {self.metadata.get('format')!r})"
             )
-        if self.metadata.get("version") != FORMAT_VERSION:
+        if self.metadata.get("version") not in READS:
             raise StoreError(
                 f"{self.path} has store version {self.metadata.get('version')}, this twin reads "
-                f"version {FORMAT_VERSION}: ingest the data again"
+                f"versions {', '.join(map(str, READS))}: ingest the data again"
             )
         if not isinstance(self.metadata.get("roads"), dict):
             raise StoreError(f"{meta} is damaged (no roads table); ingest the data again")

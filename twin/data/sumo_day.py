@@ -16,7 +16,8 @@ edges change where the lanes do:
 * an on-ramp's acceleration lane is a fifth lane on the right from the ramp's start to
   its end, where it ends: its vehicles depart on it at the ramp's speed and must merge
   into lane -4 before its end (SUMO's strategic lane changing); the recording sees them
-  on it (lane -5 once ingested) until they are in lane -4;
+  on it until they are in lane -4 (ingested as lane -5 where they lie within the map's
+  acceleration lane, which tapers from 53 m into the segment);
 * a lane drop ends the preset's lanes (the right ones) at its position;
 * a bottleneck is a stretch with the preset's lower speed limit.
 

@@ -69,7 +69,7 @@ class Edge:
     x_end: float
 
 
-def sumo_lane(lane: int, lanes: int = 6) -> int:
+def sumo_lane(lane: int, lanes: int) -> int:
     """SUMO's lane index of the twin's lane -1..-5 on an edge of ``lanes`` lanes (SUMO
     counts from the outside, 0 the shoulder, ``lanes - 1`` the median strip)."""
     return lanes - 1 + int(lane)

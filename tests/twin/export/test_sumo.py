@@ -83,3 +83,45 @@ def test_exporting_what_is_not_a_run_is_a_named_error(tmp_path, capsys):
     pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
     assert main(["export", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
     assert "is not a run folder" in capsys.readouterr().err
+
+
+def test_vehicles_depart_and_are_logged_on_the_edge_and_lane_under_them(built_map, tmp_path):
+    """On netconvert's chain of edges: a westbound vehicle on the Old Hickory on-ramp's
+    lane (-5) and one in lane -4 beside it depart on the seven-lane edge under their
+    front bumpers, in SUMO's lanes 1 and 2; an eastbound one far from its ramp on a
+    six-lane edge, in lane 1; the floating-car data name the same lanes."""
+    pytest.importorskip("sumo", reason="eclipse-sumo is not installed")
+    from mapgen.opendrive import write_opendrive
+    from twin.core.i24 import LANE_WIDTH
+    from twin.export import sumo as export
+
+    xodr = write_opendrive(built_map, tmp_path / "i24.xodr")
+    net = tmp_path / "i24.net.xml"
+    subprocess.run(
+        [str(export.sumo_home() / "bin" / "netconvert"), "--opendrive-files", str(xodr),
+         "--output-file", str(net), "--offset.disable-normalization", "true",
+         "--opendrive.import-all-lanes", "true"],
+        check=True, capture_output=True, env={"SUMO_HOME": str(export.sumo_home())},
+    )  # fmt: skip
+    edges = export.edges_of(net, built_map.road)
+    rows = pd.DataFrame(
+        {"time": [0.0] * 3, "record_id": ["ramp", "lane4", "east"], "road": [-1, -1, 1],
+         "lane": [-5, -4, -4], "x": [0.0, 50.0, 1000.0], "length": [4.5] * 3,
+         "width": [1.8] * 3, "vehicle_class": [0] * 3, "speed": [20.0] * 3,
+         "y": [5.5 * LANE_WIDTH, 4.5 * LANE_WIDTH, 4.5 * LANE_WIDTH], "heading": [0.0] * 3,
+         "role": ["ghost"] * 3}
+    )  # fmt: skip
+    export._routes(rows, edges, tmp_path / "routes.rou.xml")
+    root = ET.parse(tmp_path / "routes.rou.xml").getroot()
+    routes = {r.get("id"): r.get("edges").split() for r in root.findall("route")}
+    got = {}
+    for vehicle in root.findall("vehicle"):
+        first = routes[vehicle.get("route")][0]
+        edge = next(e for chain in edges.values() for e in chain if e.id == first)
+        got[vehicle.get("id")] = (edge.lanes, vehicle.get("departLane"))
+        front = float(rows.set_index("record_id").loc[vehicle.get("id"), "x"]) + 4.5
+        assert edge.x_start <= front <= edge.x_end
+    assert got == {"ramp": (7, "1"), "lane4": (7, "2"), "east": (6, "1")}
+    export._fcd(rows, built_map.road, edges, tmp_path / "fcd.xml")
+    logged = {v.get("id"): v.get("lane") for v in ET.parse(tmp_path / "fcd.xml").iter("vehicle")}
+    assert [logged[k].rsplit("_", 1)[1] for k in ("ramp", "lane4", "east")] == ["1", "2", "1"]

@@ -26,10 +26,10 @@ one road, so that slot is free).
 import numpy as np
 
 from twin.core import i24
+from twin.core.ramps import RAMP_LANE
 from twin.data.synth.config import SynthConfig
 from twin.traffic.lanes import Occupancy
 
-RAMP_LANE = -5
 #: [m/s^2] the hardest braking a driver at its lane's very end asks of its new follower
 MAX_ACCEPT_DECEL = 4.0
 #: [m] the gap a seeking driver needs ahead of it in the next lane before a courteous
