@@ -243,7 +243,7 @@ def _dash_stations(knots: np.ndarray, dash: float, gap: float) -> np.ndarray:
     period = dash + gap
     starts = knots[0] + period * np.arange(math.floor((knots[-1] - knots[0] - dash) / period) + 1)
     ends = starts + dash
-    inside = np.searchsorted(knots, ends, side="left")
+    inside = np.searchsorted(knots, starts, side="right")  # the first point past its start
     knot = knots[np.clip(inside, 0, knots.size - 1)]
     middle = np.where((knot > starts) & (knot < ends), knot, (starts + ends) / 2.0)
     return np.stack([starts, middle, ends], axis=1)

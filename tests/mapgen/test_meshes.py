@@ -325,3 +325,20 @@ def test_a_broken_line_parts_lane_4_from_the_on_ramp_and_the_edge_line_follows_i
         after = mine & (coords.x > ramp.x_end + 1) & (coords.x < ramp.x_end + 100)
         assert (after & (np.abs(coords.y - lanes_edge) < 0.1)).any()
         assert not (after & (coords.y > lanes_edge + 0.2)).any()
+
+
+def test_a_dash_across_a_profile_point_bends_at_it(built_map, meshes):
+    """A 10 ft dash that spans a point where the grade changes has a vertex there, so it
+    lies on both planes of the pavement rather than on a chord."""
+    road = built_map.road
+    coords = road.to_road(meshes["marking_white"].vertices)
+    on_line = (coords.road == 1) & (np.abs(coords.y - 3 * i24.LANE_WIDTH) < 0.1)
+    x = np.unique(np.round(coords.x[on_line], 4))
+    starts = x[np.r_[True, np.diff(x) > 5.0]]
+    ends = x[np.r_[np.diff(x) > 5.0, True]]
+    knots = road.profile_s
+    spanned = [
+        k for a, b in zip(starts, ends, strict=True) for k in knots if a + 1e-3 < k < b - 1e-3
+    ]
+    assert len(spanned) > 10
+    assert all(np.isclose(x, k, atol=1e-3).any() for k in spanned)
