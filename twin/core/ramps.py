@@ -156,8 +156,10 @@ def lane_at(road, x: np.ndarray, y: np.ndarray, ramps: tuple[Ramp, ...] | None =
     lane -4, 0 elsewhere (the shoulders, NaN).
 
     Args:
-        road, x, ramps: as :func:`ramp_width`'s.
+        road: a :class:`~twin.core.i24.Road` for all points, or (n,) directions +1/-1.
+        x: (n,) [m] along travel.
         y: (n,) [m] from the median centre line outward.
+        ramps: the acceleration lanes (default: :func:`segment_ramps`).
 
     Returns:
         (n,) int8.
