@@ -22,8 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from twin.core.i24 import FEET_PER_MILE, LANE_WIDTH, N_LANES, SEGMENT_LENGTH, Road, lane_of, road_x
+from twin.core.paths import asset
 
 RAMP_LANE = -5
 #: [m] the acceleration lane's taper, 300 ft: a parallel-type entrance's taper on a
@@ -108,8 +110,6 @@ def ramps_from_landmarks(landmarks: dict[str, tuple[str, float]]) -> tuple[Ramp,
 @functools.cache
 def segment_ramps() -> tuple[Ramp, ...]:
     """The segment's on-ramps, from the shipped landmark layer (read once)."""
-    from twin.core.paths import asset
-
     return ramps_from_landmarks(read_landmarks(asset("i24_aux") / LANDMARKS))
 
 
@@ -119,8 +119,6 @@ def read_landmarks(path: Path) -> dict[str, tuple[str, float]]:
     Raises:
         ValueError: the file lacks a column or holds a mile marker that is not a number.
     """
-    import pandas as pd
-
     frame = pd.read_csv(path)
     missing = {"Direction", "Landmark name", "MM"} - set(frame.columns)
     if missing:
