@@ -22,9 +22,10 @@ import math
 
 import numpy as np
 
-from twin.core.i24 import MILE
+from twin.core.i24 import MILE, N_LANES
 from twin.core.jit import kernel
-from twin.data.recording import lane_of, replay, window
+from twin.core.ramps import lane_of_y
+from twin.data.recording import replay, window
 from twin.metrics.collisions import count_collisions
 from twin.metrics.economy import GRAMS_PER_GALLON
 
@@ -153,8 +154,8 @@ def _ahead(b, core, ego_x, o, snap_r, snap_x, snap_y, snap_v, bins):
     for j in range(2 * N_BINS):
         bins[j] = 0.0
     for k in range(max(n, 0)):
-        lane = lane_of(snap_y[k])
-        if lane == 0:
+        lane = lane_of_y(snap_y[k])
+        if not -N_LANES <= lane <= -1:  # off the lanes, or on an on-ramp
             continue
         d = snap_x[k] - ego_x
         for j in range(3):

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from twin.core.i24 import FEET_PER_MILE, LANE_WIDTH, N_LANES, SEGMENT_LENGTH, Road, lane_of, road_x
+from twin.core.jit import kernel
 from twin.core.paths import asset
 
 RAMP_LANE = -5
@@ -34,6 +35,21 @@ TAPER = 91.44
 #: [m] over which the ramp's pavement widens to a full lane before its gore
 OPENING = 30.0
 LANDMARKS = "ramp_and_landmark_layer.csv"
+
+
+@kernel(inline=True)
+def lane_of_y(y):
+    """The lane (-1..-5) of road-frame ``y`` [m], one value, for the compiled kernels; 0
+    outside the five bands or NaN (:func:`twin.core.i24.lane_of` with lane -5's band).
+
+    Lane -5's band counts wherever ``y`` lies in it, without asking whether a ramp is
+    there: the recording holds samples in it only on an acceleration lane (the ingest
+    keeps no other, :func:`lane_at`), and the simulated vehicles drive in it only from
+    one."""
+    band = y / LANE_WIDTH + 1e-9
+    if not band >= 1.0 or band >= -RAMP_LANE + 1.0:
+        return 0
+    return -int(band)
 
 
 @dataclass(frozen=True)

@@ -619,7 +619,13 @@ class TrafficView:
 
     @property
     def lane_changes(self) -> int:
+        """Lane changes started between the through lanes."""
         return int(self._sim.state.counters.lane_changes[0])
+
+    @property
+    def merges(self) -> int:
+        """Merges started from an on-ramp's acceleration lane into lane -4."""
+        return int(self._sim.state.counters.merges[0])
 
     @property
     def safety_overrides(self) -> int:
@@ -843,3 +849,4 @@ class _Counts:
         self.lane_changes = int(counters.lane_changes[b])
         self.safety_overrides = int(counters.safety_overrides[b])
         self.emergency_steps = int(counters.emergency_steps[b])
+        self.merges = int(counters.merges[b])

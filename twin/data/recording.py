@@ -2,7 +2,9 @@
 per process and answered by compiled kernels.
 
 Every trajectory is resampled onto one time grid (``GRID_DT``, the data's 25 Hz) from
-the frame before its first sample to the frame after its last: its position, lateral
+the frame before its first sample to the frame after its last (its samples on an
+on-ramp's acceleration lane, lane -5, included, though the store's trajectory table
+describes the four lanes only): its position, lateral
 offset and speed at each grid time, interpolated linearly between its samples and
 extended along its first and last piece beyond them. Between two frames a query
 interpolates linearly again, so a snapshot departs from the samples' polyline by at
@@ -43,10 +45,12 @@ import numpy as np
 
 from twin.core.atomic import AtomicFolder, marked_as
 from twin.core.errors import NoVehicleNearError, StoreError
-from twin.core.i24 import LANE_WIDTH, N_LANES, Road
+from twin.core.i24 import Road
 from twin.core.jit import kernel
 from twin.core.locks import build_lock
 from twin.core.paths import cache_dir
+from twin.core.ramps import RAMP_LANE
+from twin.core.ramps import lane_of_y as lane_of
 from twin.core.timeutil import format_local
 from twin.data.store import TrajectoryStore
 
@@ -57,7 +61,7 @@ BLOCK_S = 120.0  # [s] of samples read from the store at a time while building
 PRESENT_EPS = 1e-6  # [s] tolerance on a trajectory's first and last time
 IN_MEMORY_SAMPLES = 2_000_000  # a road with fewer samples is built in memory, not cached
 FORMAT = "i24-twin-recording"
-VERSION = 1
+VERSION = 2  # 2: samples on an on-ramp's acceleration lane replayed too
 MARKER = "recording.json"
 CACHE_FOLDER = ".recording"  # inside a store: its cached recordings
 
@@ -83,16 +87,6 @@ _ARRAYS = (
 
 
 # -- kernels ----------------------------------------------------------------------------
-
-
-@kernel(inline=True)
-def lane_of(y):
-    """The lane (-1..-4) of road-frame ``y`` [m]; 0 outside the four bands or NaN
-    (:func:`twin.core.i24.lane_of`, one value)."""
-    band = y / LANE_WIDTH + 1e-9
-    if not band >= 1.0 or band >= N_LANES + 1.0:
-        return 0
-    return -int(band)
 
 
 @kernel(inline=True)
@@ -422,12 +416,14 @@ def build(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
         StoreError: the store has no such road.
     """
     road = Road.parse(road)
-    t_min, t_max = store.time_range(road)
     meta = store.trajectory_arrays
     rows = np.flatnonzero((meta["road"] == road.value) & (meta["n_samples"] >= 2))
     rows = rows[meta["t_last"][rows] > meta["t_first"][rows]]
+    t_first, t_last = _with_ramp_samples(store, road, rows)
+    t_min, t_max = store.time_range(road)
+    if rows.size:
+        t_min, t_max = min(t_min, t_first.min()), max(t_max, t_last.max())
     base = math.floor(t_min)
-    t_first, t_last = meta["t_first"][rows], meta["t_last"][rows]
     frame0 = np.floor((t_first - base) / GRID_DT + 1e-9).astype(np.int64)
     frame1 = np.ceil((t_last - base) / GRID_DT - 1e-9).astype(np.int64)
     frame1 = np.maximum(frame1, frame0 + 1)
@@ -442,7 +438,9 @@ def build(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
     local = np.full(meta["tid"].size, -1, dtype=np.int64)
     local[rows] = np.arange(rows.size)
     for start in np.arange(base, t_max + BLOCK_S, BLOCK_S):
-        s = store.samples(road, start - MAX_GAP - GRID_DT, start + BLOCK_S + MAX_GAP + GRID_DT)
+        s = store.samples(
+            road, start - MAX_GAP - GRID_DT, start + BLOCK_S + MAX_GAP + GRID_DT, ramps=True
+        )
         r = local[s["tid"]]
         keep = r >= 0
         if not keep.any():
@@ -469,6 +467,28 @@ def build(store: TrajectoryStore, road: Road | str) -> RecordingArrays:
         x=x, y=y, speed=v, bucket_start=bucket_start, bucket_r=bucket_r, bucket_x=bucket_x,
         bucket_pad=bucket_pad, **sizes,
     )  # fmt: skip
+
+
+def _with_ramp_samples(store: TrajectoryStore, road: Road, rows):
+    """(t_first, t_last) [s] of trajectories ``rows``, their samples on an on-ramp's
+    acceleration lane (lane -5) included: the trajectory table describes the four
+    through lanes only. Read only where a trajectory has such samples."""
+    meta = store.trajectory_arrays
+    t_first = meta["t_first"][rows].astype(np.float64)
+    t_last = meta["t_last"][rows].astype(np.float64)
+    if not np.any(meta["lanes_seen"][rows] & (1 << (-RAMP_LANE - 1))):
+        return t_first, t_last
+    local = np.full(meta["tid"].size, -1, dtype=np.int64)
+    local[rows] = np.arange(rows.size)
+    t_min, t_max = store.sample_time_range(road)
+    for start in np.arange(math.floor(t_min), t_max + BLOCK_S, BLOCK_S):
+        s = store.samples(road, start, start + BLOCK_S, ramps=True)
+        on_ramp = s["lane"] == RAMP_LANE
+        r, t = local[s["tid"][on_ramp]], s["t"][on_ramp]
+        keep = r >= 0
+        np.minimum.at(t_first, r[keep], t[keep])
+        np.maximum.at(t_last, r[keep], t[keep])
+    return t_first, t_last
 
 
 def _buckets(frame0, count, offset, x, base, n_buckets):

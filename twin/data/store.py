@@ -178,6 +178,16 @@ class TrajectoryStore:
         info = self._road_info(road)
         return info["t_min"], info["t_max"]
 
+    def sample_time_range(self, road: Road | str) -> tuple[float, float]:
+        """[s] unix time of the first and last sample on ``road``, those on an on-ramp's
+        acceleration lane (lane -5) included (from the sample file's statistics)."""
+        road = Road.parse(road)
+        self._road_info(road)
+        spans = self._row_group_spans(road)
+        if not spans:
+            return self.time_range(road)
+        return min(lo for lo, _ in spans), max(hi for _, hi in spans)
+
     @cached_property
     def trajectories(self) -> pd.DataFrame:
         """One row per trajectory, indexed by tid (columns as ``TRAJECTORY_SCHEMA``)."""

@@ -34,11 +34,15 @@ def pair_key(lane_from: int, lane_to: int) -> str:
 
 def simulated_changes(vehicles: pd.DataFrame, dt: float) -> pd.DataFrame:
     """The simulated vehicles' lane changes in a run's log (``vehicles``: every step),
-    as ``time`` [s since t0], ``x`` [m], ``lane_from``, ``lane_to``."""
+    as ``time`` [s since t0], ``x`` [m], ``lane_from``, ``lane_to``: between the through
+    lanes, as the recording's are found (a merge from an on-ramp's lane is none:
+    :mod:`twin.metrics.merges`)."""
     rows = vehicles.sort_values(["id", "time"], kind="stable")
     row, lane_from, lane_to = following.held_changes(
         rows["id"].to_numpy(), rows["lane"].to_numpy(), round(following.LANE_HOLD / dt)
     )
+    through = np.isin(lane_from, LANES) & np.isin(lane_to, LANES)
+    row, lane_from, lane_to = row[through], lane_from[through], lane_to[through]
     return pd.DataFrame(
         {
             "time": rows["time"].to_numpy()[row],

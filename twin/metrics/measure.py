@@ -19,6 +19,7 @@ from twin.data.store import TrajectoryStore
 from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
 from twin.metrics.collisions import collision_section
 from twin.metrics.handover import handover_section
+from twin.metrics.merges import merge_section
 from twin.metrics.recorded_changes import recorded_lane_changes
 
 RUN_FORMAT = "i24-twin-run"
@@ -71,6 +72,9 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             lane_flow_fidelity.simulated_changes(visible, cfg.dt),
             lane_flow_fidelity.recorded_changes_in_window(recorded_changes, windows, sim.t0),
             windows,
+        ),
+        "merges": merge_section(
+            visible, lengths, [r.x_end for r in sim.world.road.ramps if r.road == cfg.road]
         ),
         "handover": handover_section(
             vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt, sim.limits

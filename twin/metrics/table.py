@@ -25,6 +25,7 @@ WITH_HANDOVER = "runs with a hand-over to the recording"
 WITH_GHOST_SPAWN = "runs with a spawn from the ghost cells"
 WITH_SPAWN = "runs with a spawn"
 WITH_RELAXING = "runs with a vehicle relaxing in the ghost cells"
+WITH_RAMP = "runs on a road with an on-ramp"
 
 
 @dataclass(frozen=True)
@@ -179,6 +180,17 @@ METRICS: tuple[Metric, ...] = (
            ("counts", "ghosts_held"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
+    Metric("ramp_vehicles", "count", "simulated vehicles seen on an on-ramp's acceleration "
+           "lane (lane -5) in the visible window", ("merges", "ramp_vehicles"), summary="sum",
+           produced_by=WITH_RAMP),
+    Metric("merges", "count", "of those, the ones that merged into lane -4",
+           ("merges", "merged"), summary="sum", produced_by=WITH_RAMP),
+    Metric("merges_before_taper_end", "count", "merges done with the vehicle's front short "
+           "of the end of the acceleration lane's taper", ("merges", "before_taper_end"),
+           summary="sum", produced_by=WITH_RAMP),
+    Metric("merges_waiting", "count", "ramp vehicles that never merged and stood on the "
+           "acceleration lane at their last row, waiting for a gap", ("merges", "waiting"),
+           summary="sum", produced_by=WITH_RAMP),
     Metric("vehicles_off_road", "count", "vehicles that left the road",
            ("physics", "vehicles_off_road"), summary="sum"),
     Metric("ended_early", "count", "1 where the episode ended before its length (the ego "

@@ -20,8 +20,9 @@ from collections import namedtuple
 
 import numpy as np
 
-from twin.core.i24 import LANE_WIDTH, N_LANES, SEGMENT_LENGTH
+from twin.core.i24 import SEGMENT_LENGTH
 from twin.core.jit import kernel
+from twin.core.ramps import lane_of_y as lane_of
 from twin.physics.energy import RAV4_2019, FuelModel
 from twin.physics.vehicle import (
     AIR_DENSITY,
@@ -103,15 +104,6 @@ def fuel_rate(c, v, a, g):
         + c[6] * a * v**2 + c[7] * push + c[8] * push * v + c[9] * g + c[10] * g * v
     )  # fmt: skip
     return max(f, c[11] if v <= c[12] else 0.0)
-
-
-@kernel(inline=True)
-def lane_of(y):
-    """The lane (-1..-4) of road-frame ``y`` [m], 0 outside the four lanes."""
-    band = y / LANE_WIDTH + 1e-9
-    if not band >= 1.0 or band >= N_LANES + 1.0:
-        return 0
-    return -int(band)
 
 
 @kernel(inline=True)

@@ -89,7 +89,8 @@ class VehicleStates:
         road: (n,) road frame: the carriageway, +1 eastbound, -1 westbound.
         x: (n,) [m] road frame, of the back centre (as the data's x).
         y: (n,) [m] road frame, from the median centre line.
-        lane: (n,) lane id, -1 to -4 (0 off the lanes).
+        lane: (n,) lane id, -1 to -4, -5 on an on-ramp's acceleration lane (0 off the
+            lanes).
         wheel_spin: (n, 4) [rad/s].
         load: (n, 4) [N] wheel loads.
         contact: (n, 4) bool, the wheel touches the road.

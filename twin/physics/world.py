@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.ramps import RAMP_LANE
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
@@ -323,8 +322,7 @@ class PhysicsWorld(ActiveVehicles):
             road=coords.road,
             x=coords.x - 0.5 * self._params.length,
             y=coords.y,
-            # the through lanes (VehicleStates' lanes): an acceleration lane is none
-            lane=np.where(coords.lane == RAMP_LANE, np.int8(0), coords.lane),
+            lane=coords.lane,
             wheel_spin=self._spin.copy(),
             load=self._load.copy(),
             contact=self._contact.copy(),

@@ -669,10 +669,23 @@ def summary_lines(result: EvalResult) -> str:
             f"{m['lane_changes_simulated']['sum']:g} vs {m['lane_changes_recorded']['sum']:g} "
             f"recorded ({'-' if ratio is None else f'{ratio:.2f}'}); collisions "
             f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
+            + _merge_words(m)
             + _flow_words(entry.get("lane_flows"))
             + _seam_words(m)
         )
     return "\n".join(lines)
+
+
+def _merge_words(m: dict) -> str:
+    """The on-ramp's merges over the episodes, where there were any: how many ramp
+    vehicles merged before the taper's end, of those whose outcome was seen (merged or
+    waiting for a gap; :mod:`twin.metrics.merges`)."""
+    if "ramp_vehicles" not in m or not m["ramp_vehicles"]["sum"]:
+        return ""
+    seen = m["merges"]["sum"] + m["merges_waiting"]["sum"]
+    return (f"; merges before the taper's end {m['merges_before_taper_end']['sum']:g} of "
+            f"{seen:g} (ramp vehicles {m['ramp_vehicles']['sum']:g}, waiting "
+            f"{m['merges_waiting']['sum']:g})")  # fmt: skip
 
 
 def _seam_words(m: dict) -> str:

@@ -70,3 +70,14 @@ def test_the_landmarks_of_a_ramp_that_ends_before_it_starts_are_refused():
     assert (
         ramps.ramps_from_landmarks({"y_on_start": ("eb", 62.86), "y_on_end": ("eb", 63.07)}) == ()
     )
+
+
+def test_the_kernels_lane_of_y_knows_lane_5_and_agrees_with_lane_of_on_the_four():
+    y = np.array([0.5, 1.0, 2.0, 3.0, 4.0, 4.99, 5.0, 5.5, 5.999, 6.0, 7.0]) * LANE_WIDTH
+    got = [ramps.lane_of_y(v) for v in y]
+    assert got == [0, -1, -2, -3, -4, -4, -5, -5, -5, 0, 0]
+    four = y < 5.0 * LANE_WIDTH
+    assert np.array_equal(np.array(got)[four], i24.lane_of(y[four]))
+    assert ramps.lane_of_y(float("nan")) == 0
+    # 60 ft, lane -5's inner edge given in feet, belongs to it despite the round-off
+    assert ramps.lane_of_y(60.0 * i24.FT) == -5

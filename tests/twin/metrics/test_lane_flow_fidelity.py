@@ -30,6 +30,7 @@ def test_simulated_changes_are_held_ones_at_the_place_of_the_new_lane():
         (1, 100.0, 10.0, [-2] * 20 + [-3] * 20),  # a change at step 20: x = 120 m
         (2, 300.0, 10.0, [-2] * 20 + [-3] * 3 + [-2] * 20),  # flicker on a line: none
         (3, 500.0, 10.0, [-4] * 15 + [-3] * 15 + [-2] * 15),  # two changes
+        (4, 700.0, 10.0, [-5] * 20 + [-4] * 20),  # a merge from an on-ramp: none
     )
     changes = lff.simulated_changes(log, DT)
     assert changes[["lane_from", "lane_to"]].values.tolist() == [[-2, -3], [-4, -3], [-3, -2]]

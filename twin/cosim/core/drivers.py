@@ -145,7 +145,7 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
             else:
                 drivers.cf[b, i, beh.dist_columns[d]] = value
     if beh.speed_source == 1:
-        k = -lane - 1
+        k = min(-lane - 1, 3)  # an on-ramp's driver: lane -4's
         z = _z(seed, SPEED_STREAM, key, np.int64(0))
         desired = max(beh.lane_speed_mean[k] + beh.lane_speed_sd[k] * z, 1.0)
     return desired
@@ -181,6 +181,21 @@ def first_target(b, i, core, seed, x):
                 break
         slots.plan_next[b, i], slots.plan_end[b, i] = first, e
     next_target(b, i, core, seed, drivers.lane[b, i], x, time_from, time_to)
+
+
+@kernel
+def merge_target(b, i, core, x):
+    """Slot ``i``, spawned at back x [m] on an on-ramp's acceleration lane (lane -5),
+    must merge left: wanted from the ramp's gore, by where its taper begins (its lane
+    ends at the taper's end, :func:`twin.traffic.kernels.longitudinal.lane_end_gap`).
+    ``CoreSettings.merges`` rows: (gore, taper start, end) [m]."""
+    drivers, merges = core.traffic.drivers, core.settings.merges
+    for k in range(merges.shape[0]):
+        if x <= merges[k, 2]:
+            drivers.strategic[b, i] = 1  # LEFT
+            drivers.strategic_from[b, i] = merges[k, 0]
+            drivers.strategic_by[b, i] = merges[k, 1]
+            return
 
 
 @kernel

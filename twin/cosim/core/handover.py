@@ -14,6 +14,8 @@ import numpy as np
 
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
+from twin.core.ramps import RAMP_LANE
+from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core import drivers as behaviour
 from twin.cosim.core import relax
 from twin.cosim.core.layout import (
@@ -27,7 +29,7 @@ from twin.cosim.core.layout import (
     WAITING,
 )
 from twin.cosim.core.room import CROWD_DECEL, spawn_room
-from twin.data.recording import lane_of, window
+from twin.data.recording import window
 from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import clear_target
@@ -309,16 +311,22 @@ def _crowds_sorted(b, core, m, x, y, speed, length, width):
 @kernel(inline=True)
 def _body_near(b, core, j, x, y, speed, length, width, c, rest, decel):
     """Whether body ``j`` is closer than :func:`spawn_room` to a vehicle at back x, y
-    (:func:`_near`), in its lane or, changing lanes, in its new one."""
+    (:func:`_near`), in its lane or, changing lanes, in its new one or, from an on-ramp's
+    acceleration lane, in the one it leaves (which its drivers still follow it in)."""
     bo, dr = core.bodies, core.traffic.drivers
     bv = max(bo.speed[b, j], 0.0)
     bx, blength, bwidth = bo.x[b, j], bo.length[b, j], bo.width[b, j]
     if not _clear_of(c, rest, decel, x, y, speed, length, width, bx, bo.y[b, j], bv, blength,
                      bwidth):  # fmt: skip
         return True
-    return dr.lane_from[b, j] != dr.lane[b, j] and not _clear_of(
-        c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane[b, j]), bv, blength,
-        bwidth,
+    if dr.lane_from[b, j] == dr.lane[b, j]:
+        return False
+    if not _clear_of(c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane[b, j]),
+                     bv, blength, bwidth):  # fmt: skip
+        return True
+    return dr.lane_from[b, j] == RAMP_LANE and not _clear_of(
+        c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane_from[b, j]), bv,
+        blength, bwidth,
     )  # fmt: skip
 
 
@@ -365,11 +373,13 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
         if desired_speed > 0.0:
             sl.base_speed[b, i] = desired_speed
             dr.cf[b, i, 0] = desired_speed
-    elif behaviour.is_av(seed, tid, cs.av_share):
+    elif lane != RAMP_LANE and behaviour.is_av(seed, tid, cs.av_share):
         dr.ctrl[b, i] = cs.av_controller
         sl.av[b, i] = True
     if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
         behaviour.first_target(b, i, core, seed, x)
+    if dr.ctrl[b, i] == traffic.DRIVER and lane == RAMP_LANE:
+        behaviour.merge_target(b, i, core, x)
     table = core.table
     h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h >= 0:
@@ -421,7 +431,7 @@ def spawn_recorded(b, core, k, retry):
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
     lane = lane_of(y)
-    if not (-N_LANES <= lane <= -1) or speed > MAX_SPEED:
+    if not (RAMP_LANE <= lane <= -1) or speed > MAX_SPEED:
         ep.skipped_invalid[b] += 1
         return False
     h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
@@ -591,14 +601,27 @@ def _yields(b, core, k, t, m):
     simulated vehicle there, relaxing (:mod:`twin.cosim.core.relax`): spawned at its
     recorded state where it can stop behind every body braking at :data:`YIELD_DECEL`,
     it follows the body ahead and is handed back to its recording once on it with room
-    ahead. Counted in ``Episodes.yielded``. ``m``: the bodies in ``slots.by_back[b]``."""
+    ahead. Counted in ``Episodes.yielded``. ``m``: the bodies in ``slots.by_back[b]``.
+
+    A recorded vehicle on an on-ramp's acceleration lane (lane -5) becomes one too where,
+    in lane -4 beside it, it would be that close to a body: its merge is then the
+    traffic core's (gap acceptance, lane -4 making room), not a recorded cut-in in front
+    of a body that does not know of it; it is handed back once merged and on its
+    recording (:func:`twin.cosim.core.relax.settled`)."""
     sn, rec = core.snap, core.rec
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
     length, width = rec.length[r], rec.width[r]
-    if speed > MAX_SPEED or not _crowds_sorted(b, core, m, x, y, speed, length, width):
+    if speed > MAX_SPEED:
         return False
     cs = core.settings
+    crowds = _crowds_sorted(b, core, m, x, y, speed, length, width)
+    if not crowds and lane_of(y) == RAMP_LANE:
+        crowds = _near(b, core, x, centre_y(np.int64(-N_LANES)), speed, length, width,
+                       cs.clearance, cs.clearance, YIELD_DECEL, np.int64(-1),
+                       np.bool_(False))  # fmt: skip
+    if not crowds:
+        return False
     if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance, YIELD_DECEL,
              np.int64(-1), np.bool_(False)):  # fmt: skip
         return False  # too close to stop behind it: it stays a ghost (a contact with a ghost)
@@ -633,8 +656,8 @@ def lead_speeds(b, core):
         if not valid[b, i]:
             continue
         params[b, i, 0] = base[b, i]
-        if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i]:
-            continue
+        if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i] or lanes[b, i] < -N_LANES:
+            continue  # (an on-ramp's vehicle has the lane's end ahead, not a ghost)
         k = -lanes[b, i] - 1
         lead = leads[b, k]
         if lead < 0 or x[b, i] > x[b, lead] or (x[b, i] == x[b, lead] and ids[b, i] < ids[b, lead]):

@@ -42,9 +42,11 @@ slowest speed are measured in every run (``twin.metrics.handover``).
 
 import math
 
+from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
+from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core.room import CROWD_DECEL, spawn_room
-from twin.data.recording import lane_of, replay
+from twin.data.recording import replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
 
@@ -63,7 +65,8 @@ def begin(b, core, i):
     sl, dr = core.slots, core.traffic.drivers
     sl.relaxing[b, i] = True
     dr.next_decision[b, i] = math.inf  # no discretionary change while it relaxes
-    clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
+    if dr.lane[b, i] >= -N_LANES:  # on an on-ramp's lane it must still merge, urgently
+        clear_target(dr.strategic, dr.strategic_from, dr.strategic_by, b, i)
     sl.tgt_on[b, i] = False
 
 
@@ -117,6 +120,7 @@ def settled(b, core, i):
         and abs(bo.y[b, i] - sl.rec_y[b, i]) <= HAND_BACK_Y
         and dr.lane_from[b, i] == dr.lane[b, i]
         and lane_of(sl.rec_y[b, i]) == dr.lane[b, i]
+        and dr.lane[b, i] >= -N_LANES  # on an on-ramp's lane it merges first
     )
 
 
@@ -156,7 +160,11 @@ def track(b, core):
         if not (bo.valid[b, i] and sl.relaxing[b, i]):
             continue
         if lanes_from[b, i] != lanes[b, i] and not sl.changing[b, i]:
-            core.traffic.counters.lane_changes[b] -= 1  # toward its recording's lane
+            # toward its recording's lane: not the visible traffic's
+            if lanes_from[b, i] < -N_LANES:
+                core.traffic.counters.merges[b] -= 1
+            else:
+                core.traffic.counters.lane_changes[b] -= 1
         if not sl.rec_on[b, i]:
             continue
         law = (

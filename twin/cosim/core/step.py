@@ -62,7 +62,7 @@ CoreSettings = namedtuple(
     "CoreSettings",
     "dt limit_lo limit_hi w_visible w_ghost vel_default ghost_smoothing clearance "
     "clearance_at_rest spawn_decel av_share av_controller ego_controller lead_chases_ghost "
-    "targets kinematic profile fuel relax",
+    "targets kinematic profile fuel relax merges",
 )
 
 
@@ -106,7 +106,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
         ep.lead_speed[b, k] = math.nan
     c = t.counters
     c.lane_changes[b], c.emergency_steps[b] = 0, 0
-    c.safety_overrides[b], c.refused_requests[b] = 0, 0
+    c.safety_overrides[b], c.refused_requests[b], c.merges[b] = 0, 0, 0
     ego = spawn(b, core, ego_r, ego_x, ego_y, ego_speed, cs.vel_default, cs.ego_controller)
     ep.ego[b] = ego
     ep.ego_id[b] = bo.id[b, ego]

@@ -42,7 +42,7 @@ TrafficSettings = namedtuple(
     "model max_accel_column dt decision_interval decision_steps lane_change_low "
     "lane_change_high emergency_decel emergency_margin reaction_time brake_limit "
     "lateral_gain path_preview max_lateral_accel cooperate_from cooperative_decel urgent_path "
-    "hov_openings keep_out obstacle_cf "
+    "hov_openings keep_out lane_ends obstacle_cf "
     "action_speed action_gain action_low action_high "
     "fs_desired fs_dx0 fs_decel fs_gain fs_max_accel fs_max_decel "
     "acc_desired acc_time_gap acc_min_gap acc_k1 acc_k2 acc_cruise_gain acc_max_accel "
@@ -51,7 +51,7 @@ TrafficSettings = namedtuple(
 
 
 def settings(
-    config, obstacle_cf, *, keep_out=(), controller=None, action="accel",
+    config, obstacle_cf, *, keep_out=(), lane_ends=(), controller=None, action="accel",
     action_range=(-3.0, 1.5), action_gain=1.0,
 ) -> TrafficSettings:  # fmt: skip
     """The kernels' settings of a :class:`~twin.traffic.config.TrafficConfig`.
@@ -60,6 +60,8 @@ def settings(
         obstacle_cf: (N_PARAMS,) the mean driver's parameter row (obstacles are judged
             as if they drove like one).
         keep_out: (lane, x0, x1) zones with no discretionary change into the lane.
+        lane_ends: (lane, x) [m]: the lane ends at road-frame x (an on-ramp's
+            acceleration lane where its taper ends), a standing obstacle to its drivers.
         controller: the baselines' :class:`~twin.traffic.baselines.ControllerSettings`
             (default parameters where None).
         action: ``accel`` or ``speed``: what an ACTION vehicle's action is (a speed is
@@ -91,6 +93,7 @@ def settings(
         urgent_path=float(config.urgent_path),
         hov_openings=np.array(config.hov_openings, dtype=np.float64).reshape(-1, 2),
         keep_out=zones.reshape(-1, 3),
+        lane_ends=np.array(lane_ends, dtype=np.float64).reshape(-1, 2),
         obstacle_cf=np.asarray(obstacle_cf, dtype=np.float64),
         action_speed=action == "speed",
         action_gain=float(action_gain),

@@ -95,7 +95,9 @@ def clear_target(strategic, x_from, x_by, b, i):
 def change_lanes(b, time, seed, t):
     """One decision round of episode ``b`` at its clock ``time`` [s]: start the changes
     MOBIL chooses for the drivers due and the changes asked for where safe. Returns how
-    many started."""
+    many started between the through lanes; a merge from an on-ramp's acceleration lane
+    (lane -5 to -4) is counted in ``counters.merges`` instead, as the recording's lane
+    changes leave merges out."""
     vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
     valid, y = vehicles.valid, vehicles.y
     lane_to, lane_from, ctrl = drivers.lane, drivers.lane_from, drivers.ctrl
@@ -126,7 +128,10 @@ def change_lanes(b, time, seed, t):
         _start(b, seed, t, i, choice, centre, y[b, i], urge >= 0.0)
         if choice == strategic[b, i]:
             clear_target(strategic, x_from, x_by, b, i)
-        started += 1
+        if drivers.lane_from[b, i] < -N_LANES:
+            t.counters.merges[b] += 1
+        else:
+            started += 1
     return started
 
 

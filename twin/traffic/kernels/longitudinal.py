@@ -22,6 +22,12 @@ alongside it, when that one is more than half a length past its back), and the d
 behind that one drops back for it, each braking no harder than ``cooperative_decel``
 (:func:`cooperate`). An urgent change takes a shorter path than a discretionary one
 (``urgent_path``), so that a driver can get across a crawling queue as real drivers do.
+
+**Lanes that end** (``lane_ends``: an on-ramp's acceleration lane, lane -5, where its
+taper ends) are a standing obstacle to the drivers in them: a driver who has not
+merged by then slows and waits there (:func:`lane_end_gap`), as a real one does, and
+merges from there when lane -4 gives it a gap (its change's path may then run a few
+metres past the end: the pavement's shoulder).
 """
 
 import math
@@ -102,7 +108,16 @@ def follow(b, t):
         gap = math.inf
         if leader >= 0:
             gap = sx[b, leader] - sx[b, o] - slength[b, o]
+        v_lead = sspeed[b, leader] if leader >= 0 else speed
+        lead_decel = max(-saccel[b, leader], 0.0) if leader >= 0 else 0.0
         entry_lane = -group[b, e] - 1
+        # the lane's end, nearer than its leader, is a standing obstacle to a driver in
+        # it; no longer to one changing out of it (from a stop at the end, a driver
+        # noses into the next lane past where the taper closes)
+        if lane_from[b, o] == lane_to[b, o]:
+            end = lane_end_gap(settings.lane_ends, entry_lane, sx[b, o], slength[b, o])
+            if end < gap:
+                gap, v_lead, lead_decel = end, 0.0, 0.0
         # a slow vehicle past the middle of its lane change no longer follows the
         # leader of the lane it leaves: it finishes the change rather than stopping
         # across the line behind a queue it is leaving
@@ -112,15 +127,26 @@ def follow(b, t):
             and body_lane[b, o] == lane_to[b, o]
             and speed < MIN_SPEED_PATH
         ):
-            gap, leader = math.inf, o
-        v_lead = sspeed[b, leader] if leader >= 0 else speed
+            gap, v_lead, lead_decel = math.inf, speed, 0.0
         accel = cf(model, params, obstacle, b, n, o, speed, v_lead, gap)
         if accel < cf_accel[b, o]:
             cf_accel[b, o] = accel
-        lead_decel = max(-saccel[b, leader], 0.0) if leader >= 0 else 0.0
         need = required_decel(gap, speed, v_lead, lead_decel, margin, reaction)
         if need > need_of[b, o]:
             need_of[b, o] = need
+
+
+@kernel(inline=True)
+def lane_end_gap(ends, lane, x, length):
+    """[m] from the front of a vehicle of ``length`` at back ``x`` in ``lane`` to the
+    nearest end of that lane not behind its back (rows (lane, x) of ``ends``:
+    :class:`~twin.traffic.kernels.decide.TrafficSettings`' ``lane_ends``); inf where
+    none."""
+    gap = math.inf
+    for k in range(ends.shape[0]):
+        if ends[k, 0] == lane and ends[k, 1] >= x:
+            gap = min(gap, ends[k, 1] - x - length)
+    return gap
 
 
 @kernel(inline=True)

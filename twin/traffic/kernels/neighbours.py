@@ -1,10 +1,11 @@
 """Who is ahead of whom in each lane: one sort per step of an episode's lane entries,
-keyed (lane, x), and binary searches in it.
+keyed (lane, x), and binary searches in it. Lane -5 (an on-ramp's acceleration
+lane, :mod:`twin.core.ramps`) is a lane as the others are.
 
 A vehicle occupies every lane it is in: the lane it drives to, during a lane change
 the lane it leaves, and the lane its body is in; an obstacle its lane. Each occupied
-lane is an entry; entries are sorted by ``group * LANE_KEY + x`` with ``group`` 0..3
-for lanes -1..-4, and the leader of an entry is the next entry of its group.
+lane is an entry; entries are sorted by ``group * LANE_KEY + x`` with ``group`` 0..4
+for lanes -1..-5, and the leader of an entry is the next entry of its group.
 
 Owners number the vehicles' slots ``0..N-1`` and the obstacles ``N + g``; the step's
 values of both (x, length, speed, last command) are gathered in the scratch's ``sx``,
@@ -18,12 +19,12 @@ come sorted by x, are merged in.
 from twin.core.jit import kernel
 
 LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x
-N_GROUPS = 4
+N_GROUPS = 5  # lanes -1..-4 and an on-ramp's acceleration lane, -5
 
 
 @kernel(inline=True)
 def group_of(lane):
-    """The entry group (0..3) of lane -1..-4; -1 for anything else."""
+    """The entry group (0..4) of lane -1..-5; -1 for anything else."""
     if -N_GROUPS <= lane <= -1:
         return -lane - 1
     return -1

@@ -44,7 +44,9 @@ Scratch = namedtuple(
     "entry_count entry_owner entry_group entry_key order_count order_owner order_lane "
     "marks sx slength sspeed saccel cf_accel need emergency command steer path_y",
 )
-Counters = namedtuple("Counters", "lane_changes emergency_steps safety_overrides refused_requests")
+Counters = namedtuple(
+    "Counters", "lane_changes emergency_steps safety_overrides refused_requests merges"
+)
 Traffic = namedtuple("Traffic", "vehicles obstacles drivers scratch settings counters actions")
 
 #: ``Drivers.ctrl``: who decides a vehicle's acceleration.

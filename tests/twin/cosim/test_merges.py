@@ -1,0 +1,121 @@
+"""On-ramp merges in the cosimulation: recorded vehicles on the westbound Old Hickory
+Blvd on-ramp's acceleration lane (lane -5) are replayed there, spawned there once
+visible, and merge into lane -4 before the lane's taper ends, with lane -4's drivers
+making room; one that finds no gap waits at the lane's end."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.twin.cosim.scenes import T0, make_store, vehicle
+from twin.core import i24
+from twin.core.ramps import RAMP_LANE, segment_ramps
+from twin.cosim.config import CosimConfig
+from twin.cosim.cosimulator import Cosimulator
+from twin.data.empirical import EmpiricalTraffic
+from twin.data.recording import load_recording, replay
+from twin.metrics.merges import merge_section
+
+RAMP = next(r for r in segment_ramps() if r.road == i24.Road.WESTBOUND)
+EGO_X = 120.0  # [m] the visible window (150 m either side) holds the ramp's end
+
+
+def ramp_vehicle(n: int, x: float, speed: float, merge_x: float, seconds: float = 40.0):
+    """A westbound document: at T0 its back is at ``x`` [m] on the acceleration lane,
+    at constant ``speed``; its recording moves to lane -4 at ``merge_x``."""
+    doc = vehicle(n, RAMP_LANE, x, speed, seconds=seconds)
+    x_m = (i24.SEGMENT_END_MM * i24.FEET_PER_MILE - np.asarray(doc["x_position"])) * i24.FT
+    lane_4 = 4.5 * i24.LANE_WIDTH_FT  # lane -4's centre [ft]
+    doc["y_position"] = np.where(x_m < merge_x, doc["y_position"], lane_4).tolist()
+    return doc
+
+
+def _run(built_map, tmp_path, docs, t_max=30.0, lane=-2, speed=12.0):
+    """A kinematic run of ``docs`` with the ego in ``lane`` at EGO_X at ``speed``."""
+    store = make_store(tmp_path, [*docs, vehicle(999, lane, EGO_X, speed, seconds=60.0)])
+    config = CosimConfig(road="westbound", lane=lane, x=EGO_X, time=T0, t_max=t_max,
+                         world="kinematic")  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        rows = sim.log.vehicles()
+        lengths = store.trajectory_arrays["length"]
+        return sim, store, rows, merge_section(rows, lengths, [RAMP.x_end]), lengths
+
+
+def test_the_recording_replays_the_ramp_samples(tmp_path):
+    doc = ramp_vehicle(1, 0.0, 15.0, merge_x=100.0)
+    store = make_store(tmp_path, [doc])
+    rec = load_recording(store, "westbound")
+    present, x, y, _ = replay(rec, np.int64(0), T0 + 2.0)  # on the ramp: replayed there
+    assert present and x == pytest.approx(30.0, abs=0.1)
+    assert y == pytest.approx(5.5 * i24.LANE_WIDTH, abs=1e-3)
+    # the trajectory table's first time is the four lanes' (its first lane -4 sample)
+    assert rec.t_first[0] < store.trajectory_arrays["t_first"][0] - 5.0
+
+
+def test_ramp_vehicles_merge_before_the_taper_ends_and_lane_4_makes_room(built_map, tmp_path):
+    docs = [vehicle(100 + k, -4, -250.0 + 18.0 * k, 12.0, seconds=60.0) for k in range(30)]
+    docs += [ramp_vehicle(1 + k, -30.0 + 22.0 * k, 12.0, merge_x=110.0) for k in range(4)]
+    sim, store, rows, merges, lengths = _run(built_map, tmp_path, docs)
+    # every recorded ramp vehicle was simulated on the ramp and merged in time (one at
+    # the window's rear edge is spawned and handed back a few times before it stays)
+    ramp_tids = [store.tid_of(f"{1 + k:024x}") for k in range(4)]
+    on_ramp = rows[rows["lane"] == RAMP_LANE]
+    assert set(on_ramp["tid"]) == set(ramp_tids)
+    merged = rows[rows["tid"].isin(ramp_tids) & (rows["lane"] == -4)]
+    assert set(merged["tid"]) == set(ramp_tids)
+    assert merges["merged"] == merges["before_taper_end"] == 4
+    assert merges["waiting"] == 0 and merges["completed_share"] == 1.0
+    # counted apart from the lane changes (not the one begun while relaxing toward its
+    # recording at the window's rear edge: the recording's)
+    assert sim.manager.merges == 3
+    assert not sim.counters.collisions
+    # nobody drives on the acceleration lane past its end
+    front = on_ramp["x"].to_numpy() + lengths[on_ramp["tid"].to_numpy()]
+    assert front.max() <= RAMP.x_end
+
+
+def test_a_ramp_vehicle_with_no_gap_waits_on_its_lane(built_map, tmp_path):
+    # lane -4 stands bumper to bumper beside the whole ramp: the ramp vehicle, urgent past
+    # the taper's start, settles beside the queue and waits there for a gap
+    docs = [vehicle(100 + k, -4, -300.0 + 7.0 * k, 0.0, seconds=60.0) for k in range(90)]
+    docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
+    sim, store, rows, merges, lengths = _run(
+        built_map, tmp_path, docs, t_max=25.0, lane=-1, speed=0.0
+    )
+    assert merges == {
+        "ramp_vehicles": 1, "merged": 0, "before_taper_end": 0, "waiting": 1,
+        "unfinished": 0, "completed_share": 0.0,
+    }  # fmt: skip
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+    assert (own["lane"] == RAMP_LANE).all()
+    front = own["x"].to_numpy() + lengths[own["tid"].to_numpy()]
+    assert front.max() <= RAMP.x_end
+    assert own["speed"].iloc[-1] < 0.1
+    assert not sim.counters.collisions
+
+
+def test_the_merges_section_counts_outcomes():
+    end = 144.8
+    frame = {"id": [], "tid": [], "time": [], "x": [], "lane": [], "speed": []}
+
+    def add(i, lanes, xs, speeds):
+        for k, (lane, x, v) in enumerate(zip(lanes, xs, speeds, strict=True)):
+            for name, value in zip(frame, (i, i, 0.1 * k, x, lane, v), strict=True):
+                frame[name].append(value)
+
+    add(0, [-5, -5, -4], [100.0, 110.0, 120.0], [10.0] * 3)  # merged in time
+    add(1, [-5, -5, -4], [130.0, 138.0, 141.0], [10.0] * 3)  # its front 145 m: too late
+    add(2, [-5, -5], [100.0, 106.0], [2.0, 0.0])  # standing on the ramp
+    add(3, [-5, -5], [20.0, 30.0], [10.0, 10.0])  # on its way when the run ended
+    add(4, [-3, -3], [20.0, 30.0], [10.0, 10.0])  # never on the ramp
+
+    section = merge_section(pd.DataFrame(frame), np.full(5, 4.0), [end])
+    assert section == {
+        "ramp_vehicles": 4, "merged": 2, "before_taper_end": 1, "waiting": 1,
+        "unfinished": 1, "completed_share": pytest.approx(1 / 3, abs=1e-6),
+    }  # fmt: skip
+    assert merge_section(pd.DataFrame(frame), np.full(5, 4.0), []) is None
+    with pytest.raises(ValueError, match="tid"):
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(5, 4.0), [end])

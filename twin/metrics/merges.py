@@ -1,0 +1,74 @@
+"""The on-ramp merges of a run, measured: the ``merges`` section of ``metrics.json``.
+
+A simulated vehicle on an on-ramp's acceleration lane (lane -5, :mod:`twin.core.ramps`)
+must merge into lane -4 before the lane's taper ends; one that cannot slows and waits
+at the end (:mod:`twin.traffic.kernels.longitudinal`). From the run's log, per vehicle
+seen in lane -5 inside the visible window:
+
+* ``merged``: its first row in a through lane after lane -5; ``before_taper_end`` of
+  them where its front was short of the taper's end then (the ramp under it: the one
+  whose end is the first at or beyond its back);
+* ``waiting``: it never merged and stands (below ``STANDING`` m/s) on lane -5 at its
+  last row: waiting for a gap, at the lane's end or beside a standing queue;
+* ``unfinished``: it left the visible window or the episode ended while it was on its
+  way, before the end: its outcome is not seen.
+
+``completed_share`` is ``before_taper_end / (merged + waiting)``, the share of the
+merges whose outcome is seen that were done in time (None where none is seen).
+"""
+
+import numpy as np
+import pandas as pd
+
+from twin.core.i24 import N_LANES
+from twin.core.ramps import RAMP_LANE
+
+STANDING = 1.0  # [m/s] a ramp vehicle slower than this waits for a gap
+
+
+def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | None:
+    """The ``merges`` section (module doc) of a run's log ``vehicles`` (columns ``id``,
+    ``tid``, ``time``, ``x`` (back), ``lane``, ``speed``; ``lengths`` [m] by store tid)
+    on a road whose on-ramps' acceleration lanes end at ``ends`` [m]; None where the
+    road has none.
+
+    Raises:
+        ValueError: ``vehicles`` lacks a column this needs (named).
+    """
+    ends = np.sort(np.asarray(ends, dtype=np.float64))
+    if ends.size == 0:
+        return None
+    missing = [c for c in ("id", "tid", "time", "x", "lane", "speed") if c not in vehicles]
+    if missing:
+        raise ValueError(f"the merges need the log's columns {missing}")
+    lane = vehicles["lane"].to_numpy()
+    on_ramp_ids = np.unique(vehicles["id"].to_numpy()[lane == RAMP_LANE])
+    rows = vehicles[vehicles["id"].isin(on_ramp_ids)].sort_values(["id", "time"], kind="stable")
+    merged = before_end = waiting = unfinished = 0
+    for _, own in rows.groupby("id", sort=True):
+        lanes = own["lane"].to_numpy()
+        x = own["x"].to_numpy(dtype=np.float64)
+        front = x + np.asarray(lengths, dtype=np.float64)[own["tid"].to_numpy()]
+        first_ramp = int(np.argmax(lanes == RAMP_LANE))
+        through = (lanes[first_ramp:] <= -1) & (lanes[first_ramp:] >= -N_LANES)
+        end = ends[min(int(np.searchsorted(ends, x[first_ramp])), ends.size - 1)]
+        if through.any():
+            k = first_ramp + int(np.argmax(through))
+            merged += 1
+            before_end += bool(front[k] <= end)
+            continue
+        last = np.flatnonzero(lanes == RAMP_LANE)[-1]
+        speed = own["speed"].to_numpy(dtype=np.float64)[last]
+        if speed < STANDING:
+            waiting += 1
+        else:
+            unfinished += 1
+    seen = merged + waiting
+    return {
+        "ramp_vehicles": int(on_ramp_ids.size),
+        "merged": merged,
+        "before_taper_end": before_end,
+        "waiting": waiting,
+        "unfinished": unfinished,
+        "completed_share": round(before_end / seen, 6) if seen else None,
+    }
