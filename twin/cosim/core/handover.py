@@ -459,18 +459,23 @@ def spawn_recorded(b, core, k, retry):
 def snapshot(b, core, t):
     """The recorded vehicles in the windows' span at unix ``t`` [s], sorted by x, and
     (where vehicles relax) :data:`REAR_MARGIN` behind it and behind the rearmost
-    relaxing body (``Episodes.lookback``, the span's rear end)."""
+    relaxing body (``Episodes.lookback``, the span's rear end), and ahead of the front
+    ghost window as far as :data:`REAR_MARGIN` beyond the frontmost relaxing body's
+    front: a relaxing body near the windows' front end sees the recording ahead of it
+    (drawn as ghosts, :func:`enter_and_reload`) instead of a recorded queue appearing
+    in front of it."""
     sn, ep, bo = core.snap, core.episodes, core.bodies
-    rear = ep.windows[b, 0]
-    if core.settings.relax:  # and behind the rearmost relaxing body
+    rear, front = ep.windows[b, 0], ep.windows[b, 3]
+    if core.settings.relax:  # and behind the rearmost relaxing body, ahead of the frontmost
         rear -= REAR_MARGIN
         for i in range(bo.top[b]):
             if bo.valid[b, i] and core.slots.relaxing[b, i]:
                 rear = min(rear, bo.x[b, i] - REAR_MARGIN)
+                front = max(front, bo.x[b, i] + bo.length[b, i] + REAR_MARGIN)
     rear = max(rear, core.settings.limit_lo)  # no body is spawned beyond the map's end
+    front = max(min(front, core.settings.limit_hi), ep.windows[b, 3])
     ep.lookback[b] = rear
-    count = window(core.rec, t, rear, ep.windows[b, 3], sn.r[b], sn.x[b], sn.y[b],
-                   sn.speed[b])  # fmt: skip
+    count = window(core.rec, t, rear, front, sn.r[b], sn.x[b], sn.y[b], sn.speed[b])
     if count < 0:
         ep.overflow[b] |= SNAPSHOT_FULL
         count = sn.r.shape[1]
@@ -514,7 +519,7 @@ def enter_and_reload(b, core):
     a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))  # before a: the rear margin
     v0 = _bound(sx[b], n, ep.windows[b, 1], np.bool_(False))
     v1 = _bound(sx[b], n, ep.windows[b, 2], np.bool_(True))
-    d = _bound(sx[b], n, ep.windows[b, 3], np.bool_(True))
+    d = n  # to the front ghost window's end, or beyond it ahead of a relaxing body
     spawned = 0
     for k in range(v0, v1):
         r = sr[b, k]
