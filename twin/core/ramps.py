@@ -37,6 +37,16 @@ OPENING = 30.0
 LANDMARKS = "ramp_and_landmark_layer.csv"
 
 
+def lanes_of_y(y_m: np.ndarray) -> np.ndarray:
+    """:func:`lane_of_y` of an array (int8): the lane of each road-frame y [m] by its
+    band, lane -5 included (the lane both worlds report for their bodies)."""
+    y_m = np.asarray(y_m, dtype=np.float64)
+    lane = lane_of(y_m)
+    band = y_m / LANE_WIDTH + 1e-9
+    lane[(band >= -RAMP_LANE) & (band < -RAMP_LANE + 1.0)] = RAMP_LANE
+    return lane
+
+
 @kernel(inline=True)
 def lane_of_y(y):
     """The lane (-1..-5) of road-frame ``y`` [m], one value, for the compiled kernels; 0

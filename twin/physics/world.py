@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapgen.build import MapBundle
+from twin.core.ramps import lanes_of_y
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
@@ -322,7 +323,9 @@ class PhysicsWorld(ActiveVehicles):
             road=coords.road,
             x=coords.x - 0.5 * self._params.length,
             y=coords.y,
-            lane=coords.lane,
+            # by its band, as the kinematic world does: a body on an acceleration lane's
+            # taper, narrower than the band, is still on lane -5 (not off the road)
+            lane=lanes_of_y(coords.y),
             wheel_spin=self._spin.copy(),
             load=self._load.copy(),
             contact=self._contact.copy(),

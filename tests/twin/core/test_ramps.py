@@ -79,5 +79,7 @@ def test_the_kernels_lane_of_y_knows_lane_5_and_agrees_with_lane_of_on_the_four(
     four = y < 5.0 * LANE_WIDTH
     assert np.array_equal(np.array(got)[four], i24.lane_of(y[four]))
     assert ramps.lane_of_y(float("nan")) == 0
+    # the worlds' array form is the same
+    assert ramps.lanes_of_y(np.r_[y, np.nan]).tolist() == [*got, 0]
     # 60 ft, lane -5's inner edge given in feet, belongs to it despite the round-off
     assert ramps.lane_of_y(60.0 * i24.FT) == -5
