@@ -37,13 +37,53 @@ OPENING = 30.0
 LANDMARKS = "ramp_and_landmark_layer.csv"
 
 
-def lanes_of_y(y_m: np.ndarray) -> np.ndarray:
-    """:func:`lane_of_y` of an array (int8): the lane of each road-frame y [m] by its
-    band, lane -5 included (the lane both worlds report for their bodies)."""
-    y_m = np.asarray(y_m, dtype=np.float64)
-    lane = lane_of(y_m)
-    band = y_m / LANE_WIDTH + 1e-9
-    lane[(band >= -RAMP_LANE) & (band < -RAMP_LANE + 1.0)] = RAMP_LANE
+#: [m] a body in lane -5's band is on the acceleration lane this far beyond the lane's
+#: ends too (a merge begun at the lane's end runs a few metres past it); elsewhere that
+#: band is the shoulder, off the lanes (:func:`on_ramp`)
+SPAN_MARGIN = 10.0
+
+
+def ramp_spans(road, ramps: tuple["Ramp", ...] | None = None) -> np.ndarray:
+    """(k, 2) [m] x from where each on-ramp's pavement opens to where its taper ends,
+    on carriageway ``road`` (the segment's ramps unless ``ramps`` are given), by x."""
+    road = Road.parse(road)
+    ramps = segment_ramps() if ramps is None else ramps
+    rows = sorted((r.x_start - OPENING, r.x_end) for r in ramps if r.road == road)
+    return np.array(rows, dtype=np.float64).reshape(-1, 2)
+
+
+@kernel(inline=True)
+def on_ramp(spans, x):
+    """Whether road-frame ``x`` [m] lies on an on-ramp's acceleration lane's span, within
+    SPAN_MARGIN of its ends: ``spans``' rows begin with the span's start and end with
+    its end (:func:`ramp_spans`, or the cosimulation's ``CoreSettings.merges``)."""
+    last = spans.shape[1] - 1
+    for k in range(spans.shape[0]):
+        if spans[k, 0] - SPAN_MARGIN <= x <= spans[k, last] + SPAN_MARGIN:
+            return True
+    return False
+
+
+def body_lanes(road: np.ndarray, x: np.ndarray, y: np.ndarray, ramps) -> np.ndarray:
+    """(n,) int8 the lane of bodies on carriageways ``road`` (+1 / -1 each) at road-frame
+    ``x``, ``y`` [m], as both worlds report it: by ``y``'s band (:func:`lane_of_y`), lane
+    -5's band on an on-ramp's span (:func:`on_ramp`, ``ramps`` the map's), else 0 (the
+    shoulder)."""
+    y = np.asarray(y, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    lane = lane_of(y)
+    band = y / LANE_WIDTH + 1e-9
+    ramp_band = (band >= -RAMP_LANE) & (band < -RAMP_LANE + 1.0)
+    if not ramp_band.any():
+        return lane
+    road = np.broadcast_to(np.asarray(road), y.shape)
+    for r in (Road.EASTBOUND, Road.WESTBOUND):
+        spans = ramp_spans(r, ramps)
+        here = ramp_band & (road == r.direction)
+        inside = np.zeros(y.shape, bool)
+        for x0, x1 in spans:
+            inside |= (x >= x0 - SPAN_MARGIN) & (x <= x1 + SPAN_MARGIN)
+        lane[here & inside] = RAMP_LANE
     return lane
 
 
@@ -54,8 +94,9 @@ def lane_of_y(y):
 
     Lane -5's band counts wherever ``y`` lies in it, without asking whether a ramp is
     there: the recording holds samples in it only on an acceleration lane (the ingest
-    keeps no other, :func:`lane_at`), and the simulated vehicles drive in it only from
-    one."""
+    keeps no other, :func:`lane_at`). A body's lane is this one where it is on a ramp's
+    span (:func:`on_ramp`), else 0: the cosimulation's step sets the shoulder's (see
+    :func:`body_lanes` for the worlds')."""
     band = y / LANE_WIDTH + 1e-9
     if not band >= 1.0 or band >= -RAMP_LANE + 1.0:
         return 0

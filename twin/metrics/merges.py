@@ -3,7 +3,8 @@
 A simulated vehicle on an on-ramp's acceleration lane (lane -5, :mod:`twin.core.ramps`)
 must merge into lane -4 before the lane's taper ends; one that cannot slows and waits
 at the end (:mod:`twin.traffic.kernels.longitudinal`). From the run's log, per vehicle
-seen in lane -5 inside the visible window:
+seen in lane -5 inside the visible window (a recorded vehicle, by its store ``tid``,
+however many times it was spawned):
 
 * ``merged``: its first row in a through lane after lane -5; ``before_taper_end`` of
   them where its front was short of the taper's end then (the ramp under it: the one
@@ -27,10 +28,10 @@ STANDING = 1.0  # [m/s] a ramp vehicle slower than this waits for a gap
 
 
 def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | None:
-    """The ``merges`` section (module doc) of a run's log ``vehicles`` (columns ``id``,
-    ``tid``, ``time``, ``x`` (back), ``lane``, ``speed``; ``lengths`` [m] by store tid)
-    on a road whose on-ramps' acceleration lanes end at ``ends`` [m]; None where the
-    road has none.
+    """The ``merges`` section (module doc) of a run's log ``vehicles`` (columns ``tid``,
+    ``time``, ``x`` (back), ``lane``, ``speed``; ``lengths`` [m] by store tid) on a road
+    whose on-ramps' acceleration lanes end at ``ends`` [m]; None where the road has
+    none.
 
     Raises:
         ValueError: ``vehicles`` lacks a column this needs (named).
@@ -38,14 +39,14 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
     ends = np.sort(np.asarray(ends, dtype=np.float64))
     if ends.size == 0:
         return None
-    missing = [c for c in ("id", "tid", "time", "x", "lane", "speed") if c not in vehicles]
+    missing = [c for c in ("tid", "time", "x", "lane", "speed") if c not in vehicles]
     if missing:
         raise ValueError(f"the merges need the log's columns {missing}")
     lane = vehicles["lane"].to_numpy()
-    on_ramp_ids = np.unique(vehicles["id"].to_numpy()[lane == RAMP_LANE])
-    rows = vehicles[vehicles["id"].isin(on_ramp_ids)].sort_values(["id", "time"], kind="stable")
+    on_ramp = np.unique(vehicles["tid"].to_numpy()[lane == RAMP_LANE])
+    rows = vehicles[vehicles["tid"].isin(on_ramp)].sort_values(["tid", "time"], kind="stable")
     merged = before_end = waiting = unfinished = 0
-    for _, own in rows.groupby("id", sort=True):
+    for _, own in rows.groupby("tid", sort=True):
         lanes = own["lane"].to_numpy()
         x = own["x"].to_numpy(dtype=np.float64)
         front = x + np.asarray(lengths, dtype=np.float64)[own["tid"].to_numpy()]
@@ -65,7 +66,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
             unfinished += 1
     seen = merged + waiting
     return {
-        "ramp_vehicles": int(on_ramp_ids.size),
+        "ramp_vehicles": int(on_ramp.size),
         "merged": merged,
         "before_taper_end": before_end,
         "waiting": waiting,

@@ -31,7 +31,7 @@ import itertools
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.i24 import lane_of
+from twin.core.ramps import body_lanes
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics import kernels
 from twin.physics.states import (
@@ -237,7 +237,7 @@ class KinematicWorld(ActiveVehicles):
             road=self._road.copy(),
             x=get("x").copy(),
             y=get("y").copy(),
-            lane=lane_of(get("y")),
+            lane=body_lanes(self._road, centre, get("y"), self.road.ramps),
             wheel_spin=(speed / p.wheel_radius)[:, None].repeat(4, axis=1),
             load=load,
             contact=np.ones((n, 4), dtype=bool),

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mapgen.build import MapBundle
-from twin.core.ramps import lanes_of_y
+from twin.core.ramps import body_lanes
 from twin.core.vehicle_classes import vehicle_classes
 from twin.physics.bullet import pybullet as p
 from twin.physics.map_bodies import load_map_bodies
@@ -325,7 +325,7 @@ class PhysicsWorld(ActiveVehicles):
             y=coords.y,
             # by its band, as the kinematic world does: a body on an acceleration lane's
             # taper, narrower than the band, is still on lane -5 (not off the road)
-            lane=lanes_of_y(coords.y),
+            lane=body_lanes(coords.road, coords.x, coords.y, self.road.ramps),
             wheel_spin=self._spin.copy(),
             load=self._load.copy(),
             contact=self._contact.copy(),

@@ -79,7 +79,21 @@ def test_the_kernels_lane_of_y_knows_lane_5_and_agrees_with_lane_of_on_the_four(
     four = y < 5.0 * LANE_WIDTH
     assert np.array_equal(np.array(got)[four], i24.lane_of(y[four]))
     assert ramps.lane_of_y(float("nan")) == 0
-    # the worlds' array form is the same
-    assert ramps.lanes_of_y(np.r_[y, np.nan]).tolist() == [*got, 0]
     # 60 ft, lane -5's inner edge given in feet, belongs to it despite the round-off
     assert ramps.lane_of_y(60.0 * i24.FT) == -5
+
+
+def test_a_body_in_lane_5s_band_is_on_the_ramp_only_along_its_span():
+    west = next(r for r in ramps.segment_ramps() if r.road == Road.WESTBOUND)
+    east = next(r for r in ramps.segment_ramps() if r.road == Road.EASTBOUND)
+    y = np.full(4, 5.5 * LANE_WIDTH)
+    x = np.array([west.x_end - 50.0, west.x_end + ramps.SPAN_MARGIN - 1.0, west.x_end + 50.0,
+                  west.x_end - 50.0])  # fmt: skip
+    road = np.array([-1, -1, -1, 1])  # the last on the eastbound carriageway there
+    on_east = east.x_start - ramps.OPENING - ramps.SPAN_MARGIN <= x[3] <= east.x_end
+    lanes = ramps.body_lanes(road, x, y, ramps.segment_ramps()).tolist()
+    assert lanes == [-5, -5, 0, -5 if on_east else 0]  # past the end: the shoulder
+    assert ramps.body_lanes(road, x, np.full(4, 2.5 * LANE_WIDTH), ()).tolist() == [-2] * 4
+    spans = ramps.ramp_spans("westbound")
+    assert spans.tolist() == [[west.x_start - ramps.OPENING, west.x_end]]
+    assert ramps.on_ramp(spans, west.x_end + 5.0) and not ramps.on_ramp(spans, west.x_end + 11.0)

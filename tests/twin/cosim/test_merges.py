@@ -3,11 +3,14 @@ Blvd on-ramp's acceleration lane (lane -5) are replayed there, spawned there onc
 visible, and merge into lane -4 before the lane's taper ends, with lane -4's drivers
 making room; one that finds no gap waits at the lane's end."""
 
+import shutil
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from tests.twin.cosim.scenes import T0, make_store, vehicle
+from twin.calibration.calibrate import CALIBRATION, FITS
 from twin.core import i24
 from twin.core.ramps import RAMP_LANE, segment_ramps
 from twin.cosim.config import CosimConfig
@@ -119,3 +122,28 @@ def test_the_merges_section_counts_outcomes():
     assert merge_section(pd.DataFrame(frame), np.full(5, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
         merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(5, 4.0), [end])
+
+
+def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
+    built_map, tmp_path, calibrated_wave_store
+):
+    # its recording merges at x = 60 m and moves on to lane -3 at x = 200 m; the
+    # recorded behaviour (no MOBIL) makes that change from its own plan once merged
+    doc = ramp_vehicle(1, 0.0, 12.0, merge_x=60.0)
+    x_m = (i24.SEGMENT_END_MM * i24.FEET_PER_MILE - np.asarray(doc["x_position"])) * i24.FT
+    doc["y_position"] = np.where(x_m < 200.0, doc["y_position"], 3.5 * i24.LANE_WIDTH_FT)
+    doc["y_position"] = doc["y_position"].tolist()
+    behind = vehicle(998, -1, -300.0, 12.0, seconds=60.0)  # the data reach the ramp
+    store = make_store(tmp_path, [doc, behind, vehicle(999, -2, EGO_X, 12.0, seconds=60.0)])
+    for name in (CALIBRATION, FITS):  # any calibration of the road: recorded needs one
+        shutil.copy(calibrated_wave_store.path / name, store.path / name)
+    config = CosimConfig(road="westbound", lane=-2, x=EGO_X, time=T0, t_max=25.0,
+                         world="kinematic", behaviour="recorded")  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        rows = sim.log.vehicles()
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+    lanes = own["lane"].to_numpy()
+    assert lanes[0] == RAMP_LANE
+    assert (lanes == -4).any() and lanes[-1] == -3

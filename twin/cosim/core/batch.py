@@ -24,7 +24,7 @@ import numpy as np
 
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
-from twin.core.ramps import RAMP_LANE
+from twin.core.ramps import OPENING, RAMP_LANE
 from twin.cosim.core import drivers as behaviour_kernels
 from twin.cosim.core import layout, step
 from twin.cosim.windows import ScenarioError, road_limits
@@ -137,7 +137,7 @@ class Shared:
             merges=merges(bundle.road, road),
         )  # fmt: skip
         zones = [(z["lane"], z["x0"], z["x1"]) for z in beh.keep_out]
-        ends = [(RAMP_LANE, end) for _, _, end in cs.merges]
+        ends = [(RAMP_LANE, end) for *_, end in cs.merges]
         ts = traffic_settings(config.traffic, mean, keep_out=zones, lane_ends=ends,
                               controller=config.controller, action=action)  # fmt: skip
         return cls(config, store, bundle, traffic, rec, params, beh, arrays, cs, ts, limits)
@@ -176,11 +176,15 @@ _TABLES: dict = {}
 
 
 def merges(road_model, road) -> np.ndarray:
-    """(k, 3) [m] the on-ramps of ``road`` in the map's ``road_model``, by x: each
-    acceleration lane's gore, the start of its taper and its end
+    """(k, 4) [m] the on-ramps of ``road`` in the map's ``road_model``, by x: where each
+    acceleration lane's pavement opens, its gore, the start of its taper and its end
     (:data:`~twin.cosim.core.step.CoreSettings`' ``merges``)."""
-    rows = sorted((r.x_start, r.x_taper, r.x_end) for r in road_model.ramps if r.road == road)
-    return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    rows = sorted(
+        (r.x_start - OPENING, r.x_start, r.x_taper, r.x_end)
+        for r in road_model.ramps
+        if r.road == road
+    )
+    return np.array(rows, dtype=np.float64).reshape(-1, 4)
 
 
 def vehicle_table(rec) -> np.ndarray:

@@ -187,15 +187,18 @@ def first_target(b, i, core, seed, x):
 def merge_target(b, i, core, x):
     """Slot ``i``, spawned at back x [m] on an on-ramp's acceleration lane (lane -5),
     must merge left: wanted from the ramp's gore, by where its taper begins (its lane
-    ends at the taper's end, :func:`twin.traffic.kernels.longitudinal.lane_end_gap`).
-    ``CoreSettings.merges`` rows: (gore, taper start, end) [m]."""
+    ends at the taper's end, :func:`twin.traffic.kernels.longitudinal.lane_end_gap`);
+    past every ramp's end (none is), at once. ``CoreSettings.merges`` rows: (opening,
+    gore, taper start, end) [m]."""
     drivers, merges = core.traffic.drivers, core.settings.merges
+    x_from, x_by = x, x
     for k in range(merges.shape[0]):
-        if x <= merges[k, 2]:
-            drivers.strategic[b, i] = 1  # LEFT
-            drivers.strategic_from[b, i] = merges[k, 0]
-            drivers.strategic_by[b, i] = merges[k, 1]
-            return
+        if x <= merges[k, 3]:
+            x_from, x_by = merges[k, 1], merges[k, 2]
+            break
+    drivers.strategic[b, i] = 1  # LEFT
+    drivers.strategic_from[b, i] = x_from
+    drivers.strategic_by[b, i] = x_by
 
 
 @kernel
@@ -231,6 +234,9 @@ def next_target(b, i, core, seed, lane, x, time_from, time_to):
     """Draw (or read from the recording) slot ``i``'s next target from ``lane`` at back
     x [m], and set it where the rules allow the change."""
     beh, slots, drivers = core.beh, core.slots, core.traffic.drivers
+    if lane < -4:  # on an on-ramp's lane its target is the merge (merge_target); the
+        slots.tgt_lane[b, i] = lane  # next is drawn, or read, in lane -4
+        return
     if beh.mode == RECORDED:
         direction, x_from, x_by = _recorded(b, i, core, lane, x, time_from, time_to)
     else:

@@ -519,6 +519,7 @@ def enter_and_reload(b, core):
     a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))  # before a: the rear margin
     v0 = _bound(sx[b], n, ep.windows[b, 1], np.bool_(False))
     v1 = _bound(sx[b], n, ep.windows[b, 2], np.bool_(True))
+    g1 = _bound(sx[b], n, ep.windows[b, 3], np.bool_(True))  # up to the windows' end
     d = n  # to the front ghost window's end, or beyond it ahead of a relaxing body
     spawned = 0
     for k in range(v0, v1):
@@ -564,7 +565,7 @@ def enter_and_reload(b, core):
         lane = lane_of(sy[b, k])
         if lane == 0 or f & SIMULATED:
             continue
-        if relaxing and _yields(b, core, k, t, m):
+        if relaxing and k < g1 and _yields(b, core, k, t, m):
             # simulated now, relaxing behind the body it would run into
             m = _sort_bodies(b, core)
             continue

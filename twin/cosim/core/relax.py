@@ -15,8 +15,8 @@ closes the distance to its recorded trajectory within physical limits:
   a crash a user sees); its speed never goes below zero (the world's brakes hold it);
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
-  discretionary change, no strategic target; such a change is not counted among the
-  visible traffic's lane changes);
+  discretionary change, no strategic target but an on-ramp's merge, which it keeps;
+  such a change is not counted among the visible traffic's lane changes or merges);
 * it is handed to its recording (a ghost again) once it is within
   :data:`HAND_BACK_X` and :data:`HAND_BACK_SPEED` of it, in its lane and within
   :data:`HAND_BACK_Y` across, with the recording in a ghost cell, and its speed a step

@@ -30,6 +30,7 @@ import math
 from collections import namedtuple
 
 from twin.core.jit import kernel
+from twin.core.ramps import RAMP_LANE, on_ramp
 from twin.cosim.core import relax
 from twin.cosim.core.drivers import update_targets
 from twin.cosim.core.handover import (
@@ -217,7 +218,8 @@ def contacts(b, core):
     ep.step[b] += 1
     step = ep.step[b]
     _checks(b, bo, sl.just_spawned, sl.spawn_speed, sl.off_road, core.traffic.drivers.accel,
-            ep.spawn_errors, ep.spawn_error_count, ep.off_road, cs.dt)  # fmt: skip
+            ep.spawn_errors, ep.spawn_error_count, ep.off_road, cs.dt,
+            cs.merges)  # fmt: skip
     if cs.kinematic:
         count = overlaps(b, bo, sl.order, sl.listed, core.pairs)
         if count < 0:
@@ -274,14 +276,15 @@ PHASES = ("desired_speeds", "decisions", "move", "contacts", "leave", "read_wind
 
 @kernel
 def _checks(b, bo, just_spawned, spawn_speed, off_road, accel, errors, error_count, off_count,
-            dt):  # fmt: skip
+            dt, spans):  # fmt: skip
     """The speed error of the vehicles spawned before the step, one step after their
     impulse (|v - max(v_spawn + a dt, 0)| / max(v_spawn, 1 m/s), ``a`` the driver's
     command up to what the powertrain gives at the spawn speed: a driver wanting more
     on a free road than the engine has is no inexact spawn, while braking harder than
     the tyres hold is; a braking vehicle slower than HOLD_SPEED may also be held at
-    rest, as the physics world's static friction holds it); the vehicles off the four
-    lanes, each counted once."""
+    rest, as the physics world's static friction holds it); the vehicles off the lanes,
+    each counted once: lane 0, or in lane -5's band off the on-ramps' ``spans``
+    (``CoreSettings.merges``: the shoulder, whose lane is then 0)."""
     valid, speed, lane = bo.valid, bo.speed, bo.lane
     for i in range(bo.top[b]):
         if not valid[b, i]:
@@ -298,6 +301,8 @@ def _checks(b, bo, just_spawned, spawn_speed, off_road, accel, errors, error_cou
                 errors[b, k] = error / max(v0, 1.0)
             error_count[b] = k + 1
             just_spawned[b, i] = False
+        if lane[b, i] == RAMP_LANE and not on_ramp(spans, bo.x[b, i] + 0.5 * bo.length[b, i]):
+            lane[b, i] = 0
         if lane[b, i] == 0 and not off_road[b, i]:
             off_road[b, i] = True
             off_count[b] += 1
