@@ -27,7 +27,7 @@ def _error(speed: float, command: float, achieved: float) -> float:
     just, spawn_speed = np.ones((1, 1), bool), np.full((1, 1), speed)
     errors, count = np.zeros((1, 4)), np.zeros(1, np.int64)
     _checks(0, bo, just, spawn_speed, np.zeros((1, 1), bool), np.full((1, 1), command),
-            errors, count, np.zeros(1, np.int64), DT)  # fmt: skip
+            errors, count, np.zeros(1, np.int64), DT, np.zeros((0, 4)))  # fmt: skip
     assert count[0] == 1 and not just[0, 0]
     return errors[0, 0]
 
@@ -53,3 +53,14 @@ def test_the_limit_is_what_the_kinematic_world_gives_at_full_throttle():
     profile = kernels.Profile(1, np.array([-1e4, 1e4]), np.zeros(2), np.zeros(2), 2e4)
     kernels.integrate(0, bo, accel, zeros, zeros, zeros, profile, DT)
     assert bo.speed[0, 0] == pytest.approx(30.0 + limit * DT, rel=1e-12)
+
+
+def test_lane_5s_band_off_an_on_ramp_is_the_shoulder_off_the_road():
+    spans = np.array([[-100.0, -70.0, 50.0, 145.0]])  # opening, gore, taper, end
+    for x, lane, off in ((100.0, -5, 0), (400.0, 0, 1)):
+        bo = _car(20.0)
+        bo.lane[0, 0], bo.x[0, 0] = -5, x
+        off_road, off_count = np.zeros((1, 1), bool), np.zeros(1, np.int64)
+        _checks(0, bo, np.zeros((1, 1), bool), np.zeros((1, 1)), off_road, np.zeros((1, 1)),
+                np.zeros((1, 4)), np.zeros(1, np.int64), off_count, DT, spans)  # fmt: skip
+        assert (bo.lane[0, 0], off_count[0]) == (lane, off)
