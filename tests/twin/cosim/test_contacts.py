@@ -164,3 +164,20 @@ def test_a_recorded_queue_ahead_of_a_body_is_drawn_for_it_to_brake_for(cosim):
     assert tid_of(sim, 3) in set(ghosts[ghosts["time"] == 0.0]["tid"])  # drawn at once
     assert int(sim.state.episodes.held[0]) == 0
     assert sim.counters.contacts == 0  # the body braked for it (or went round it)
+
+
+def test_a_crawling_recording_yields_to_a_standing_body_in_time(cosim):
+    # a queue standing behind the (held) ego down to the visible window's rear edge,
+    # its recordings crawling on at 1.5 m/s, and in the ghost cell behind it a recorded
+    # vehicle crawling into its last body: it becomes a body behind it while it can
+    # still stop there (the yield's room at rest is the crowding test's; at the whole
+    # clearance a crawling vehicle crowding a body was always too close: a contact)
+    queue = [vehicle(2 + k, -2, EGO_X - 6.6 * (k + 1), 1.5, seconds=60.0) for k in range(23)]
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 0.0, seconds=60.0), *queue,
+         vehicle(99, -2, EGO_X - 185.0, 1.5, seconds=60.0)],
+        world="kinematic", t_max=35.0,
+    )  # fmt: skip
+    sim.run()
+    assert int(sim.state.episodes.yielded[0]) >= 1
+    assert sim.counters.contacts == 0

@@ -628,9 +628,13 @@ def _yields(b, core, k, t, m):
                        np.bool_(False))  # fmt: skip
     if not crowds:
         return False
-    if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance, YIELD_DECEL,
-             np.int64(-1), np.bool_(False)):  # fmt: skip
-        return False  # too close to stop behind it: it stays a ghost (a contact with a ghost)
+    # too close to stop behind it: it stays a ghost (a contact with a ghost); the room is
+    # the crowding test's at a harder braking, so that a vehicle crowding a body is, for
+    # a while, still far enough back to yield (at the whole clearance at any speed, a
+    # crawling recording crowds a standing body only once already too close to it)
+    if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
+             YIELD_DECEL, np.int64(-1), np.bool_(False)):  # fmt: skip
+        return False
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:
         core.episodes.skipped_full[b] += 1
