@@ -11,7 +11,7 @@ else in it (the recorded data are never touched)::
                                   errors, desired speeds per lane, lane-change rates,
                                   the lane-change flows by lane pair, position and time
                                   (discretionary and strategic) and the fitted MOBIL
-                                  threshold
+                                  threshold, and where each on-ramp's vehicles merge
       calibration_fits.parquet    one row per fitted follower: its parameters, errors,
                                   at-bound flags and whether the fit was accepted
       lane_flows_ROAD.png         the lane-change flows by position and lane pair
@@ -43,6 +43,7 @@ from twin.calibration.lane_flows import (
     keep_out,
     lane_change_flows,
 )
+from twin.calibration.merge_positions import describe_merges, merge_section
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
@@ -213,6 +214,7 @@ def _calibrate_road(store, road, window, settings, model, progress):
         "lane_changes": lane_change_rates(changes),
         "lane_flows": flows,
         "mobil": mobil,
+        "merges": merge_section(store.samples(road, t0, t1, ramps=True), road),
     }
     return section, fits
 
@@ -443,4 +445,5 @@ def describe_calibration(doc: dict | None) -> str:
         if mobil.get("note"):
             lines.append(f"      MOBIL threshold {mobil['note']}")
         lines += describe_flows(section.get("lane_flows", {}))
+        lines += describe_merges(section.get("merges", []))
     return "\n".join(lines)

@@ -115,6 +115,7 @@ class Behaviour:
         self.planned: PlannedChanges | None = None
         self.strategic_flows: dict | None = None
         self.keep_out: list = []  # lanes kept out of (calibrated): lane_flows.keep_out
+        self.merges: list | None = None  # where the on-ramps' vehicles merge (merge_positions)
         self.calibrated_at: str | None = None  # when the calibration driven by was made
         if self.name == "paper":
             return
@@ -153,6 +154,7 @@ class Behaviour:
         if self.name == "calibrated" and flows and flows.get("identified"):
             self.strategic_flows = flows
             self.keep_out = list(flows.get("keep_out", []))
+        self.merges = section.get("merges")
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])
         if self.name == "recorded":

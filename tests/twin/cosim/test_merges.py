@@ -3,6 +3,7 @@ Blvd on-ramp's acceleration lane (lane -5) are replayed there, spawned there onc
 visible, and merge into lane -4 before the lane's taper ends, with lane -4's drivers
 making room; one that finds no gap waits at the lane's end."""
 
+import json
 import shutil
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 from tests.twin.cosim.scenes import T0, make_store, vehicle
 from twin.calibration.calibrate import CALIBRATION, FITS
+from twin.calibration.merge_positions import QUANTILES
 from twin.core import i24
 from twin.core.ramps import RAMP_LANE, segment_ramps
 from twin.cosim.config import CosimConfig
@@ -147,3 +149,41 @@ def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
     lanes = own["lane"].to_numpy()
     assert lanes[0] == RAMP_LANE
     assert (lanes == -4).any() and lanes[-1] == -3
+
+
+@pytest.mark.parametrize(
+    ("behaviour", "earliest", "latest"),
+    [
+        ("recorded", -35.0, 100.0),  # its own recording merges at x = 120 m
+        ("calibrated", -35.0, 100.0),  # the ramp's recorded merges are all at 120 m
+        ("paper", -110.0, -60.0),  # none known: wanted from 150 m before the taper's start
+    ],
+)
+def test_a_ramp_driver_merges_where_the_recording_says(
+    built_map, tmp_path, calibrated_wave_store, behaviour, earliest, latest
+):
+    # lane -4 is empty: the driver changes as soon as it wants to, MERGE_LEAD metres
+    # before its merge place
+    doc = ramp_vehicle(1, -100.0, 12.0, merge_x=120.0)
+    behind = vehicle(998, -1, -400.0, 12.0, seconds=60.0)  # the data reach the ramp
+    store = make_store(tmp_path, [doc, behind, vehicle(999, -2, 0.0, 12.0, seconds=60.0)])
+    for name in (CALIBRATION, FITS):
+        shutil.copy(calibrated_wave_store.path / name, store.path / name)
+    calibration = json.loads((store.path / CALIBRATION).read_text())
+    calibration["roads"]["westbound"]["merges"] = [{
+        "ramp": RAMP.name, "gore_m": RAMP.x_start, "end_m": RAMP.x_end, "merged": 40,
+        "x_quantiles": [120.0] * QUANTILES,
+    }]  # fmt: skip
+    (store.path / CALIBRATION).write_text(json.dumps(calibration))
+    config = CosimConfig(road="westbound", lane=-2, x=0.0, time=T0, t_max=15.0,
+                         world="kinematic", behaviour=behaviour)  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        rows = sim.log.vehicles()
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+    assert own["lane"].iloc[0] == RAMP_LANE
+    merged = own[own["lane"] == -4]
+    assert len(merged), "it never merged"
+    assert earliest <= merged["x"].iloc[0] <= latest
+    assert sim.manager.merges == 1 and not sim.counters.collisions

@@ -229,8 +229,23 @@ def recorded_plan(store, road, rec) -> dict:
             "time": changes.time[keep][order].astype(np.float64),
             "lane_from": changes.lane_from[keep][order].astype(np.int64),
             "lane_to": changes.lane_to[keep][order].astype(np.int64),
+            "merge_x": _merge_places(store, road, t0, t1, local, rec.tid.size),
         }
     return _PLANS[key]
+
+
+def _merge_places(store, road, t0, t1, local, trajectories) -> np.ndarray:
+    """(R,) [m] each recorded trajectory's merge place from an on-ramp (back x at its
+    first lane -4 sample; :func:`twin.calibration.merge_positions.recorded_merges`), nan
+    where it has none."""
+    from twin.calibration.merge_positions import recorded_merges
+
+    tid, x, _ = recorded_merges(store.samples(road, t0, t1, ramps=True))
+    out = np.full(trajectories, np.nan)
+    inside = tid < local.size
+    r = local[tid[inside]]
+    out[r[r >= 0]] = x[inside][r >= 0]
+    return out
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,10 @@ from collections import namedtuple
 
 import numpy as np
 
+from twin.calibration.merge_positions import MERGE_LEAD, merge_table
 from twin.core.i24 import HOV_LANE, LANE_WIDTH
 from twin.core.jit import kernel, normal, uniform
+from twin.core.ramps import SPAN_MARGIN
 from twin.traffic.drivers import CLIP_SD
 from twin.traffic.kernels.lane_change import FIRST_DECISION_STREAM, clear_target
 from twin.traffic.kernels.models import GIPPS
@@ -32,6 +34,7 @@ BEHAVIOUR_STREAM = np.int64(0x42)
 SPEED_STREAM = np.int64(0x53)
 AV_STREAM = np.int64(0x41565F)
 STRATEGIC_STREAM = np.int64(0x737472)
+MERGE_STREAM = np.int64(0x6D7267)
 PAPER, CALIBRATED, RECORDED = 0, 1, 2
 RECORDED_SPAN = 100.0  # [m] a recorded change's urgency grows over this distance
 PLANNED_LATE = 100.0  # [m] a recorded change not started this far past its place is dropped
@@ -45,7 +48,7 @@ BehaviourArrays = namedtuple(
     "politeness threshold safe_decel keep_right dist_on dist_have dist_mean dist_matrix "
     "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
     "lane_speed_sd fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes "
-    "plan_start plan_x plan_time plan_from plan_to hov_openings",
+    "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x",
 )
 
 
@@ -184,21 +187,57 @@ def first_target(b, i, core, seed, x):
 
 
 @kernel
-def merge_target(b, i, core, x):
+def merge_target(b, i, core, seed, x):
     """Slot ``i``, spawned at back x [m] on an on-ramp's acceleration lane (lane -5),
-    must merge left: wanted from the ramp's gore, by where its taper begins (its lane
-    ends at the taper's end, :func:`twin.traffic.kernels.longitudinal.lane_end_gap`);
-    past every ramp's end (none is), at once. ``CoreSettings.merges`` rows: (opening,
-    gore, taper start, end) [m]."""
-    drivers, merges = core.traffic.drivers, core.settings.merges
-    x_from, x_by = x, x
+    must merge left by its merge place: the recording's (``recorded``: its own, where
+    its recording merges there; else a quantile of the ramp's recorded merges drawn for
+    the vehicle, ``BehaviourArrays.merge_q``; without them, the taper's start), kept
+    between the ramp's gore and its end; it wants the merge from MERGE_LEAD metres
+    before (not before the gore; :mod:`twin.calibration.merge_positions`). Its lane
+    ends at the taper's end (:func:`twin.traffic.kernels.longitudinal.lane_end_gap`);
+    past every ramp's end (none is), it wants it at once. ``CoreSettings.merges`` rows:
+    (opening, gore, taper start, end) [m]; places compare with its centre."""
+    drivers, merges, beh, slots = core.traffic.drivers, core.settings.merges, core.beh, core.slots
+    half = 0.5 * core.bodies.length[b, i]
+    x_from, x_by = x + half, x + half
     for k in range(merges.shape[0]):
-        if x <= merges[k, 3]:
-            x_from, x_by = merges[k, 1], merges[k, 2]
-            break
+        if x > merges[k, 3]:
+            continue
+        gore, taper, end = merges[k, 1], merges[k, 2], merges[k, 3]
+        place = taper
+        own = beh.merge_x[slots.r[b, i]] if beh.mode == RECORDED else math.nan
+        row = _merge_row(beh.merge_q, end)
+        if gore - SPAN_MARGIN <= own <= end + SPAN_MARGIN:
+            place = own + half
+        elif row >= 0:
+            u = uniform(seed, MERGE_STREAM, slots.tid[b, i], 0)
+            place = _quantile(beh.merge_q, row, u) + half
+        x_by = min(max(place, gore), end)
+        x_from = max(x_by - MERGE_LEAD, gore)
+        break
     drivers.strategic[b, i] = 1  # LEFT
     drivers.strategic_from[b, i] = x_from
     drivers.strategic_by[b, i] = x_by
+
+
+@kernel(inline=True)
+def _merge_row(table, end):
+    """The row of ``merge_q`` of the ramp whose taper ends at ``end`` [m], or -1."""
+    for k in range(table.shape[0]):
+        if abs(table[k, 0] - end) < 1.0:
+            return k
+    return -1
+
+
+@kernel(inline=True)
+def _quantile(table, row, u):
+    """The place at quantile ``u`` in [0, 1) of ``merge_q`` row ``row`` (linear between
+    its quantiles)."""
+    q = table.shape[1] - 1
+    pos = u * (q - 1)
+    j = min(int(pos), q - 2)
+    w = pos - j
+    return (1.0 - w) * table[row, 1 + j] + w * table[row, 2 + j]
 
 
 @kernel
@@ -414,6 +453,7 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         flow_lanes=lanes, plan_start=plan["start"], plan_x=plan["x"], plan_time=plan["time"],
         plan_from=plan["lane_from"], plan_to=plan["lane_to"],
         hov_openings=np.array(traffic_config.hov_openings, np.float64).reshape(-1, 2),
+        merge_q=merge_table(behaviour.merges), merge_x=plan["merge_x"],
     )  # fmt: skip
 
 
@@ -425,6 +465,7 @@ def empty_plan(trajectories: int) -> dict:
         "time": np.zeros(0),
         "lane_from": np.zeros(0, np.int64),
         "lane_to": np.zeros(0, np.int64),
+        "merge_x": np.full(trajectories, np.nan),
     }
 
 

@@ -379,7 +379,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
         behaviour.first_target(b, i, core, seed, x)
     if dr.ctrl[b, i] == traffic.DRIVER and lane == RAMP_LANE:
-        behaviour.merge_target(b, i, core, x)
+        behaviour.merge_target(b, i, core, seed, x)
     table = core.table
     h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h >= 0:

@@ -1,0 +1,111 @@
+"""Where the recording's ramp vehicles merge: for each on-ramp of a road, the places
+(road-frame x of the vehicle's back) where the recorded vehicles on its acceleration
+lane (lane -5) first lie in lane -4, as quantiles (``calibration.json``'s ``merges``).
+
+The traffic core's ramp drivers merge where these say (a quantile drawn per vehicle,
+or, ``recorded``, the vehicle's own merge): they want the merge from
+:data:`MERGE_LEAD` metres before that place and must have made it by there
+(:func:`twin.cosim.core.drivers.merge_target`). Without them a driver would want it
+from the gore, so that, on a long acceleration lane in a queue, lane -4 would make
+room for every ramp vehicle beside it for a kilometre where the recording's drivers
+merge near the taper.
+"""
+
+import numpy as np
+
+from twin.calibration.following import CalibrationDataError
+from twin.core.i24 import Road
+from twin.core.ramps import OPENING, RAMP_LANE, SPAN_MARGIN, Ramp, segment_ramps
+
+QUANTILES = 21  # 0, 5, ..., 100 %
+MIN_MERGES = 10  # fewer merges on a ramp leave it to the default place (the taper's start)
+MERGE_LEAD = 150.0  # [m] before its merge place a ramp driver starts to want the merge
+
+
+def recorded_merges(samples: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The merges in ``samples`` (a store's samples with the ramps', sorted by (tid, t):
+    :meth:`~twin.data.store.TrajectoryStore.samples` with ``ramps=True``): per
+    trajectory whose lane -5 samples are followed by one in lane -4, its last such
+    step's (tid, x [m] back, t [s]) at the lane -4 sample.
+    """
+    tid, lane = np.asarray(samples["tid"]), np.asarray(samples["lane"])
+    step = np.nonzero((lane[:-1] == RAMP_LANE) & (lane[1:] == -4) & (tid[:-1] == tid[1:]))[0] + 1
+    if step.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    tids = tid[step]
+    last = np.r_[tids[1:] != tids[:-1], True]  # samples sorted by tid: the last per tid
+    k = step[last]
+    return (
+        tid[k].astype(np.int64),
+        np.asarray(samples["x"])[k].astype(np.float64),
+        np.asarray(samples["t"])[k].astype(np.float64),
+    )
+
+
+def ramp_of(x: np.ndarray, ramps: tuple[Ramp, ...]) -> np.ndarray:
+    """Index into ``ramps`` (sorted by x, one road's) of the ramp whose lane, with its
+    opening and :data:`~twin.core.ramps.SPAN_MARGIN`, holds each merge place ``x``;
+    -1 where none does."""
+    which = np.full(np.shape(x), -1, np.int64)
+    for k, ramp in enumerate(ramps):
+        inside = (x >= ramp.x_start - OPENING - SPAN_MARGIN) & (x <= ramp.x_end + SPAN_MARGIN)
+        which[inside & (which < 0)] = k
+    return which
+
+
+def road_ramps(road: Road | str) -> tuple[Ramp, ...]:
+    """The segment's on-ramps joining ``road``, by x."""
+    road = Road.parse(road)
+    return tuple(sorted((r for r in segment_ramps() if r.road == road), key=lambda r: r.x_end))
+
+
+def merge_section(samples: dict, road: Road | str) -> list[dict]:
+    """``calibration.json``'s ``merges`` of ``road``: per on-ramp (by x) its name, gore
+    and taper's end [m], how many recorded vehicles merged from it, and, with at least
+    :data:`MIN_MERGES`, the :data:`QUANTILES` quantiles of where (``x_quantiles``, back
+    x [m]; ``None`` otherwise)."""
+    ramps = road_ramps(road)
+    _, x, _ = recorded_merges(samples)
+    which = ramp_of(x, ramps)
+    out = []
+    for k, ramp in enumerate(ramps):
+        xs = x[which == k]
+        q = np.quantile(xs, np.linspace(0.0, 1.0, QUANTILES)) if xs.size >= MIN_MERGES else None
+        out.append({
+            "ramp": ramp.name,
+            "gore_m": round(float(ramp.x_start), 3),
+            "end_m": round(float(ramp.x_end), 3),
+            "merged": int(xs.size),
+            "x_quantiles": None if q is None else [round(float(v), 3) for v in q],
+        })  # fmt: skip
+    return out
+
+
+def merge_table(section: list[dict] | None) -> np.ndarray:
+    """(k, 1 + QUANTILES) [m] of a road's ``merges`` section for the core: per ramp with
+    quantiles, its taper's end then its quantiles (:func:`merge_section`); (0, 1 +
+    QUANTILES) where there are none."""
+    rows = [[r["end_m"], *r["x_quantiles"]] for r in section or () if r.get("x_quantiles")]
+    for row in rows:
+        if len(row) != 1 + QUANTILES or not np.all(np.isfinite(row)):
+            raise CalibrationDataError(
+                f"calibration.json: a merges entry needs {QUANTILES} finite x_quantiles, got "
+                f"{row[1:]!r} (calibrate again)"
+            )
+    return np.array(rows, np.float64).reshape(-1, 1 + QUANTILES)
+
+
+def describe_merges(section: list[dict]) -> list[str]:
+    """Lines for ``twin calibrate``'s summary of a road's ``merges``."""
+    lines = []
+    for r in section:
+        q = r.get("x_quantiles")
+        where = (
+            f"median x {q[QUANTILES // 2]:.0f} m (10 to 90 %: {q[2]:.0f} to {q[-3]:.0f} m)"
+            if q else f"too few to place (need {MIN_MERGES}): merges by the taper's start"
+        )  # fmt: skip
+        lines.append(
+            f"    on-ramp {r['ramp']}: {r['merged']} merges, {where}; taper ends at "
+            f"x {r['end_m']:.0f} m"
+        )
+    return lines
