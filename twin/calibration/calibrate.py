@@ -35,7 +35,12 @@ from twin.calibration import following
 from twin.calibration.car_following import FitSettings, fit_followers
 from twin.calibration.distributions import desired_speeds, group_distributions
 from twin.calibration.following import CalibrationDataError
-from twin.calibration.lane_changes import fit_threshold, lane_change_rates, recorded_incentives
+from twin.calibration.lane_changes import (
+    drawn_drivers,
+    fit_threshold,
+    lane_change_rates,
+    recorded_incentives,
+)
 from twin.calibration.lane_flows import (
     describe_flows,
     explained_by_mobil,
@@ -77,6 +82,11 @@ class CalibrationSettings:
             bias); the threshold is fitted.
         decision_every: [s] how often the recorded scenes are judged by MOBIL (the
             traffic manager's mean decision interval).
+        threshold_drivers: who MOBIL's threshold is fitted with: ``median``, one median
+            calibrated driver for every recorded vehicle; ``drawn``, one driver per
+            vehicle drawn from the calibrated distribution, as the twin draws its own
+            (:func:`~twin.calibration.lane_changes.drawn_drivers`; a road whose car
+            following was not calibrated keeps ``median``).
     """
 
     min_run: float = 20.0
@@ -85,6 +95,17 @@ class CalibrationSettings:
     min_fits: int = 10
     mobil: MOBILParams = field(default_factory=MOBILParams)
     decision_every: float = 1.0
+    threshold_drivers: str = "median"
+
+    def __post_init__(self):
+        if self.threshold_drivers not in THRESHOLD_DRIVERS:
+            raise ValueError(
+                f"threshold_drivers must be one of {THRESHOLD_DRIVERS}, got "
+                f"{self.threshold_drivers!r}"
+            )
+
+
+THRESHOLD_DRIVERS = ("median", "drawn")
 
 
 def calibrate(
@@ -191,8 +212,15 @@ def _calibrate_road(store, road, window, settings, model, progress):
         )
     driver = _median_driver(model, distributions.get("all"))
     changes = following.lane_changes(grid)
+    # threshold_drivers "drawn": the threshold is fitted with drivers drawn as the
+    # calibrated twin draws them (lane_changes.drawn_drivers); a road whose car following
+    # was not calibrated keeps the paper's drivers in the twin, and one driver here
+    drawn = None
+    wanted = settings.threshold_drivers == "drawn"
+    if wanted and "not_calibrated" not in car and "all" in distributions:
+        drawn = drawn_drivers(grid.tid, distributions["all"], model)
     incentives = recorded_incentives(
-        grid, model, driver, settings.mobil, every=settings.decision_every
+        grid, model, driver, settings.mobil, every=settings.decision_every, drivers=drawn
     )
     mobil, flows = _lane_change_flows(grid, changes, incentives, settings)
     mobil.update(

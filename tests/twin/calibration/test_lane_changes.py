@@ -28,3 +28,41 @@ def test_the_mobil_threshold_matches_the_recorded_count_and_stops_above_resisted
     where = incentives.x < 200.0
     assert incentives.changes(0.3, where) == 2
     assert fit_threshold(incentives, 0, where=where)["threshold"] == pytest.approx(0.9, abs=1e-3)
+
+
+def test_drawn_drivers_judge_the_recorded_scenes_each_as_its_own(calibrated_wave_store):
+    from twin.calibration import following
+    from twin.calibration.calibrate import (
+        CalibrationSettings,
+        _median_driver,
+        read_calibration,
+    )
+    from twin.calibration.distributions import ParameterDistribution
+    from twin.calibration.lane_changes import drawn_drivers, recorded_incentives
+    from twin.traffic.mobil import MOBILParams
+    from twin.traffic.models import car_following_model
+
+    model = car_following_model("idm")
+    doc = read_calibration(calibrated_wave_store)
+    dist = ParameterDistribution.from_dict(
+        doc["roads"]["westbound"]["car_following"]["distributions"]["all"]
+    )
+    grid = following.load_grid(calibrated_wave_store, "westbound")
+    tids, drawn = drawn_drivers(grid.tid, dist, model)
+    assert np.array_equal(tids, np.unique(grid.tid))
+    again = drawn_drivers(grid.tid[::-1], dist, model)[1]  # one fixed draw per vehicle
+    assert all(np.array_equal(getattr(drawn, p.name), getattr(again, p.name)) for p in model.fitted)
+    assert np.std(drawn.time_headway) > 0.0
+    # every vehicle given the median driver: the same incentives as one shared driver
+    median = _median_driver(model, dist)
+    same = model.make(**{p.name: np.full(tids.size, getattr(median, p.name)) for p in model.fitted})
+    one = recorded_incentives(grid, model, median, MOBILParams(), every=2.0)
+    each = recorded_incentives(grid, model, median, MOBILParams(), every=2.0, drivers=(tids, same))
+    assert np.allclose(one.gain, each.gain) and np.array_equal(one.possible, each.possible)
+    # drawn drivers judge differently
+    spread = recorded_incentives(
+        grid, model, median, MOBILParams(), every=2.0, drivers=(tids, drawn)
+    )
+    assert not np.allclose(one.gain, spread.gain)
+    with pytest.raises(ValueError, match="threshold_drivers"):
+        CalibrationSettings(threshold_drivers="mean")
