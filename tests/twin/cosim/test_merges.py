@@ -152,19 +152,24 @@ def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
 
 
 @pytest.mark.parametrize(
-    ("behaviour", "earliest", "latest"),
+    ("behaviour", "own", "recorded_place", "earliest", "latest"),
     [
-        ("recorded", -35.0, 100.0),  # its own recording merges at x = 120 m
-        ("calibrated", -35.0, 100.0),  # the ramp's recorded merges are all at 120 m
-        ("paper", -110.0, -60.0),  # none known: wanted from 150 m before the taper's start
+        ("recorded", 120.0, -140.0, -40.0, 100.0),  # its own recording merges at 120 m
+        ("calibrated", 120.0, -140.0, -140.0, -95.0),  # the ramp's recorded merges at -140
+        ("paper", 120.0, -140.0, -90.0, -40.0),  # none known: from 150 m before the taper
+        # its recording leaves the ramp only past its end (no place of its own there);
+        # the ramp's merge place lies 860 m behind it when it is spawned: its target does
+        # not expire (recorded drivers have no MOBIL to merge them)
+        ("recorded", 250.0, -1000.0, -140.0, -95.0),
     ],
 )
 def test_a_ramp_driver_merges_where_the_recording_says(
-    built_map, tmp_path, calibrated_wave_store, behaviour, earliest, latest
+    built_map, tmp_path, calibrated_wave_store, behaviour, own, recorded_place, earliest, latest
 ):
     # lane -4 is empty: the driver changes as soon as it wants to, MERGE_LEAD metres
-    # before its merge place
-    doc = ramp_vehicle(1, -100.0, 12.0, merge_x=120.0)
+    # before its merge place (spawned at x = -140 m, where it wants it at once if its
+    # place is there)
+    doc = ramp_vehicle(1, -140.0, 12.0, merge_x=own)
     behind = vehicle(998, -1, -400.0, 12.0, seconds=60.0)  # the data reach the ramp
     store = make_store(tmp_path, [doc, behind, vehicle(999, -2, 0.0, 12.0, seconds=60.0)])
     for name in (CALIBRATION, FITS):
@@ -172,18 +177,18 @@ def test_a_ramp_driver_merges_where_the_recording_says(
     calibration = json.loads((store.path / CALIBRATION).read_text())
     calibration["roads"]["westbound"]["merges"] = [{
         "ramp": RAMP.name, "gore_m": RAMP.x_start, "end_m": RAMP.x_end, "merged": 40,
-        "x_quantiles": [120.0] * QUANTILES,
+        "x_quantiles": [recorded_place] * QUANTILES,
     }]  # fmt: skip
     (store.path / CALIBRATION).write_text(json.dumps(calibration))
-    config = CosimConfig(road="westbound", lane=-2, x=0.0, time=T0, t_max=15.0,
+    config = CosimConfig(road="westbound", lane=-2, x=0.0, time=T0, t_max=20.0,
                          world="kinematic", behaviour=behaviour)  # fmt: skip
     with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
         sim.reset()
         sim.run()
         rows = sim.log.vehicles()
-    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
-    assert own["lane"].iloc[0] == RAMP_LANE
-    merged = own[own["lane"] == -4]
+    own_rows = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+    assert own_rows["lane"].iloc[0] == RAMP_LANE
+    merged = own_rows[own_rows["lane"] == -4]
     assert len(merged), "it never merged"
     assert earliest <= merged["x"].iloc[0] <= latest
     assert sim.manager.merges == 1 and not sim.counters.collisions

@@ -71,13 +71,16 @@ def kept_out(zones, lane, x):
 @kernel
 def expire(b, t):
     """Clear the strategic targets of drivers more than GIVE_UP past their
-    ``strategic_by``."""
+    ``strategic_by``; not an on-ramp driver's merge (its lane ends: it waits at the end
+    until it has merged, however far before the end its merge was due)."""
     valid, x, length = t.vehicles.valid, t.vehicles.x, t.vehicles.length
     strategic, x_from, x_by = t.drivers.strategic, t.drivers.strategic_from, t.drivers.strategic_by
+    lane = t.drivers.lane
     for i in range(t.vehicles.top[b]):
         if (
             valid[b, i]
             and strategic[b, i] != 0
+            and lane[b, i] >= -N_LANES
             and x[b, i] + 0.5 * length[b, i] > x_by[b, i] + (GIVE_UP)
         ):
             clear_target(strategic, x_from, x_by, b, i)
