@@ -1,14 +1,15 @@
 """Where the recording's ramp vehicles merge: for each on-ramp of a road, the places
 (road-frame x of the vehicle's back) where the recorded vehicles on its acceleration
-lane (lane -5) first lie in lane -4, as quantiles (``calibration.json``'s ``merges``).
+lane (lane -5) crossed into lane -4 (the last time, where a track wobbles), as
+quantiles (``calibration.json``'s ``merges``).
 
 The traffic core's ramp drivers merge where these say (a quantile drawn per vehicle,
 or, ``recorded``, the vehicle's own merge): they want the merge from
 :data:`MERGE_LEAD` metres before that place and must have made it by there
-(:func:`twin.cosim.core.drivers.merge_target`). Without them a driver would want it
-from the gore, so that, on a long acceleration lane in a queue, lane -4 would make
-room for every ramp vehicle beside it for a kilometre where the recording's drivers
-merge near the taper.
+(:func:`twin.cosim.core.drivers.merge_target`); without them, by the taper's start.
+Wanted from the gore instead (as before these), on a long acceleration lane in a queue
+lane -4 made room for every ramp vehicle beside it for a kilometre, where the
+recording's drivers merge near the taper.
 """
 
 import numpy as np
@@ -84,28 +85,53 @@ def merge_section(samples: dict, road: Road | str) -> list[dict]:
 def merge_table(section: list[dict] | None) -> np.ndarray:
     """(k, 1 + QUANTILES) [m] of a road's ``merges`` section for the core: per ramp with
     quantiles, its taper's end then its quantiles (:func:`merge_section`); (0, 1 +
-    QUANTILES) where there are none."""
-    rows = [[r["end_m"], *r["x_quantiles"]] for r in section or () if r.get("x_quantiles")]
-    for row in rows:
-        if len(row) != 1 + QUANTILES or not np.all(np.isfinite(row)):
+    QUANTILES) where there are none. A taper's end that matches no ramp of the map
+    (the core matches them within a metre) is not used.
+
+    Raises:
+        CalibrationDataError: the section is not as :func:`merge_section` writes it.
+    """
+    if section is None:
+        section = []
+    if not isinstance(section, list):
+        raise CalibrationDataError(
+            f"calibration.json: merges must be a list of on-ramps, got {type(section).__name__} "
+            "(calibrate again)"
+        )
+    rows = []
+    for entry in section:
+        q = entry.get("x_quantiles") if isinstance(entry, dict) else None
+        if isinstance(entry, dict) and q is None:
+            continue  # too few merges to place
+        try:
+            row = np.array([entry["end_m"], *q], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            row = None
+        if row is None or row.size != 1 + QUANTILES or not np.all(np.isfinite(row)):
             raise CalibrationDataError(
-                f"calibration.json: a merges entry needs {QUANTILES} finite x_quantiles, got "
-                f"{row[1:]!r} (calibrate again)"
+                f"calibration.json: a merges entry needs end_m and {QUANTILES} finite "
+                f"x_quantiles (or null), got {entry!r:.200} (calibrate again)"
             )
+        rows.append(row)
     return np.array(rows, np.float64).reshape(-1, 1 + QUANTILES)
 
 
 def describe_merges(section: list[dict]) -> list[str]:
-    """Lines for ``twin calibrate``'s summary of a road's ``merges``."""
+    """Lines for ``twin calibrate``'s and ``twin data info``'s summary of a road's
+    ``merges`` (an entry not as :func:`merge_section` writes it is said to be so)."""
     lines = []
-    for r in section:
-        q = r.get("x_quantiles")
-        where = (
-            f"median x {q[QUANTILES // 2]:.0f} m (10 to 90 %: {q[2]:.0f} to {q[-3]:.0f} m)"
-            if q else f"too few to place (need {MIN_MERGES}): merges by the taper's start"
-        )  # fmt: skip
-        lines.append(
-            f"    on-ramp {r['ramp']}: {r['merged']} merges, {where}; taper ends at "
-            f"x {r['end_m']:.0f} m"
-        )
+    for r in section if isinstance(section, list) else [section]:
+        q = r.get("x_quantiles") if isinstance(r, dict) else None
+        try:
+            where = (
+                f"median x {q[QUANTILES // 2]:.0f} m (10 to 90 %: {q[2]:.0f} to {q[-3]:.0f} m)"
+                if q is not None
+                else f"too few to place (need {MIN_MERGES}): merges by the taper's start"
+            )
+            lines.append(
+                f"    on-ramp {r['ramp']}: {r['merged']} merges, {where}; taper ends at "
+                f"x {r['end_m']:.0f} m"
+            )
+        except (KeyError, TypeError, IndexError, ValueError):
+            lines.append(f"    on-ramp merges: malformed entry {r!r:.120} (calibrate again)")
     return lines

@@ -28,7 +28,7 @@ def samples(tracks):
     return {name: np.asarray(v) for name, v in out.items()}
 
 
-def test_a_merge_is_the_first_lane_4_sample_after_the_ramp():
+def test_a_merge_is_the_lane_4_sample_after_the_ramp_the_last_time():
     s = samples({
         1: [(0.0, RAMP_LANE), (10.0, RAMP_LANE), (20.0, -4), (30.0, -4)],
         2: [(0.0, -4), (10.0, -3)],  # never on the ramp
@@ -76,3 +76,20 @@ def test_a_malformed_merges_entry_is_named():
     bad["x_quantiles"] = [float("nan")] * QUANTILES
     with pytest.raises(CalibrationDataError, match="finite"):
         merge_table([bad])
+
+
+@pytest.mark.parametrize(
+    "section",
+    [
+        {"ramp": "wb"},  # not a list
+        [{"ramp": "wb", "merged": 20, "x_quantiles": [1.0] * QUANTILES}],  # no end_m
+        [{"ramp": "wb", "end_m": 100.0, "merged": 20, "x_quantiles": 5.0}],
+        [{"ramp": "wb", "end_m": 100.0, "merged": 20, "x_quantiles": [None] * QUANTILES}],
+        [{"ramp": "wb", "end_m": "far", "merged": 20, "x_quantiles": [1.0] * QUANTILES}],
+        ["wb"],  # an entry not a dict
+    ],
+)
+def test_every_malformed_merges_section_is_a_clear_error(section):
+    with pytest.raises(CalibrationDataError, match=r"calibration\.json: .*merges"):
+        merge_table(section)
+    assert all("on-ramp" in line for line in describe_merges(section))  # no traceback

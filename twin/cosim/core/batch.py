@@ -236,8 +236,8 @@ def recorded_plan(store, road, rec) -> dict:
 
 def _merge_places(store, road, t0, t1, local, trajectories) -> np.ndarray:
     """(R,) [m] each recorded trajectory's merge place from an on-ramp (back x at its
-    first lane -4 sample; :func:`twin.calibration.merge_positions.recorded_merges`), nan
-    where it has none."""
+    lane -4 sample after its last lane -5 one;
+    :func:`twin.calibration.merge_positions.recorded_merges`), nan where it has none."""
     from twin.calibration.merge_positions import recorded_merges
 
     tid, x, _ = recorded_merges(store.samples(road, t0, t1, ramps=True))
