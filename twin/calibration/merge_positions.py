@@ -16,7 +16,7 @@ import numpy as np
 
 from twin.calibration.following import CalibrationDataError
 from twin.core.i24 import Road
-from twin.core.ramps import OPENING, RAMP_LANE, SPAN_MARGIN, Ramp, segment_ramps
+from twin.core.ramps import RAMP_LANE, SPAN_MARGIN, Ramp, ramp_spans, segment_ramps
 
 QUANTILES = 21  # 0, 5, ..., 100 %
 MIN_MERGES = 10  # fewer merges on a ramp leave it to the default place (the taper's start)
@@ -43,21 +43,21 @@ def recorded_merges(samples: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     )
 
 
-def ramp_of(x: np.ndarray, ramps: tuple[Ramp, ...]) -> np.ndarray:
-    """Index into ``ramps`` (sorted by x, one road's) of the ramp whose lane, with its
-    opening and :data:`~twin.core.ramps.SPAN_MARGIN`, holds each merge place ``x``;
-    -1 where none does."""
+def ramp_of(x: np.ndarray, spans: np.ndarray) -> np.ndarray:
+    """Index into ``spans`` (:func:`~twin.core.ramps.ramp_spans`, one road's, by x) of the
+    ramp whose lane holds each merge place ``x``, within SPAN_MARGIN of its ends as
+    :func:`~twin.core.ramps.on_ramp` judges; -1 where none does."""
     which = np.full(np.shape(x), -1, np.int64)
-    for k, ramp in enumerate(ramps):
-        inside = (x >= ramp.x_start - OPENING - SPAN_MARGIN) & (x <= ramp.x_end + SPAN_MARGIN)
+    for k in range(spans.shape[0]):
+        inside = (x >= spans[k, 0] - SPAN_MARGIN) & (x <= spans[k, -1] + SPAN_MARGIN)
         which[inside & (which < 0)] = k
     return which
 
 
 def road_ramps(road: Road | str) -> tuple[Ramp, ...]:
     """The segment's on-ramps joining ``road``, by x."""
-    road = Road.parse(road)
-    return tuple(sorted((r for r in segment_ramps() if r.road == road), key=lambda r: r.x_end))
+    road = Road.parse(road)  # in ramp_spans' order
+    return tuple(sorted((r for r in segment_ramps() if r.road == road), key=lambda r: r.x_start))
 
 
 def merge_section(samples: dict, road: Road | str) -> list[dict]:
@@ -67,7 +67,7 @@ def merge_section(samples: dict, road: Road | str) -> list[dict]:
     x [m]; ``None`` otherwise)."""
     ramps = road_ramps(road)
     _, x, _ = recorded_merges(samples)
-    which = ramp_of(x, ramps)
+    which = ramp_of(x, ramp_spans(road, ramps))
     out = []
     for k, ramp in enumerate(ramps):
         xs = x[which == k]
