@@ -33,7 +33,11 @@ import pyarrow.parquet as pq
 from twin import __version__
 from twin.calibration import following
 from twin.calibration.car_following import FitSettings, fit_followers
-from twin.calibration.distributions import desired_speeds, group_distributions
+from twin.calibration.distributions import (
+    ParameterDistribution,
+    desired_speeds,
+    group_distributions,
+)
 from twin.calibration.following import CalibrationDataError
 from twin.calibration.lane_changes import (
     drawn_drivers,
@@ -117,17 +121,25 @@ def calibrate(
     *,
     model: CarFollowingModel = IDM,
     progress: bool = False,
+    following: dict | None = None,
 ) -> tuple[dict, dict]:
     """Calibrate ``roads`` (default: all the store's) on the recording between
     ``t_from`` and ``t_until`` (unix seconds; default: all of it), the drivers'
     car following as ``model``.
 
+    ``following``: another calibration document (of ``model``) whose drivers' car
+    following a road takes where its own window has too few accepted fits (a window
+    with no waves to fit them on: the same drivers on another morning). The lane
+    changes, their flows, the threshold (with those drivers), desired speeds and merges
+    are still fitted on this window; the road's ``car_following`` says ``taken_from``.
+
     Returns:
         (the calibration document, {road: FollowerFits}).
 
     Raises:
-        CalibrationDataError: a road named in ``roads`` has too few accepted fits, or
-            (when ``roads`` is None) no road has enough; the window holds no data.
+        CalibrationDataError: a road named in ``roads`` has too few accepted fits (and
+            ``following`` none for it), or (when ``roads`` is None) no road has enough;
+            the window holds no data; ``following`` is of another model.
         StoreError: the store lacks a road named.
     """
     named = roads is not None
@@ -147,9 +159,19 @@ def calibrate(
         "settings": _settings_dict(settings),
         "roads": {},
     }
+    if following is not None:
+        other = following.get("car_following_model", "idm")
+        if other != model.name:
+            raise CalibrationDataError(
+                f"the calibration to take car following from fitted {other}, this one "
+                f"{model.name} (--model {other})"
+            )
     all_fits, problems = {}, []
     for road in roads:
-        section, fits = _calibrate_road(store, road, (t_from, t_until), settings, model, progress)
+        taken = _taken_following(following, road)
+        section, fits = _calibrate_road(
+            store, road, (t_from, t_until), settings, model, progress, taken
+        )
         doc["roads"][road.value] = section
         all_fits[road.value] = fits
         reason = section["car_following"].get("not_calibrated")
@@ -167,7 +189,22 @@ def calibrate(
     return doc, all_fits
 
 
-def _calibrate_road(store, road, window, settings, model, progress):
+def _taken_following(following: dict | None, road: Road) -> dict | None:
+    """``following``'s calibrated car following of ``road``, or None."""
+    if following is None:
+        return None
+    road_section = following.get("roads", {}).get(road.value, {})
+    section = road_section.get("car_following")
+    if not isinstance(section, dict) or section.get("not_calibrated"):
+        return None
+    if not isinstance(section.get("distributions"), dict) or "all" not in section["distributions"]:
+        raise CalibrationDataError(
+            f"the calibration to take car following from has no distributions of {road.value}"
+        )
+    return {**section, "window": road_section.get("window")}
+
+
+def _calibrate_road(store, road, window, settings, model, progress, taken=None):
     grid = following.load_grid(store, road, *window)
     runs = following.following_runs(
         grid, min_duration=settings.min_run, max_duration=settings.max_run
@@ -205,11 +242,30 @@ def _calibrate_road(store, road, window, settings, model, progress):
         "distributions": {name: d.to_dict() for name, d in distributions.items()},
     }
     if accepted < settings.min_fits:
-        car["not_calibrated"] = (
+        reason = (
             f"{accepted} accepted fits (need {settings.min_fits}): {car['followers']} "
             f"followers, {fits.uninformative} of them never crossed a wave (stopped and "
             f"moved), {car['rejected_poor']} poor fits, {car['rejected_at_bound']} at a bound"
         )
+        if taken is None:
+            car["not_calibrated"] = reason
+        else:  # another calibration's drivers (calibrate's ``following``)
+            car["distributions"] = taken["distributions"]
+            car["taken_from"] = {
+                "why": reason,
+                "window": taken.get("window"),
+                "accepted": taken.get("accepted"),
+            }
+            try:
+                distributions = {
+                    name: ParameterDistribution.from_dict(d)
+                    for name, d in taken["distributions"].items()
+                }
+            except (KeyError, TypeError, ValueError) as error:
+                raise CalibrationDataError(
+                    f"the calibration to take car following from has malformed "
+                    f"distributions of {road.value}: {error!r}"
+                ) from None
     driver = _median_driver(model, distributions.get("all"))
     changes = following.lane_changes(grid)
     # threshold_drivers "drawn": the threshold is fitted with drivers drawn as the
@@ -386,6 +442,18 @@ def read_calibration(store: TrajectoryStore) -> dict | None:
     path = store.path / CALIBRATION
     if not path.is_file():
         return None
+    return read_calibration_file(path)
+
+
+def read_calibration_file(path: Path) -> dict:
+    """The calibration document at ``path``.
+
+    Raises:
+        StoreError: the file is missing, not valid JSON, of another format or version.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise StoreError(f"{path}: no such calibration file")
     try:
         doc = json.loads(path.read_text())
     except ValueError as error:
@@ -437,8 +505,16 @@ def describe_calibration(doc: dict | None) -> str:
             f"  {road}: {window['from_local']} to {window['until_local'][11:]}, "
             f"{section['trajectories']:,} trajectories"
         )
+        taken = car.get("taken_from")
         if car.get("not_calibrated"):
             lines.append(f"    car following: not calibrated ({car['not_calibrated']})")
+        elif taken:
+            other = taken.get("window") or {}
+            lines.append(
+                f"    car following: taken from another calibration ({other.get('from_local')} "
+                f"to {str(other.get('until_local'))[11:]}, {taken.get('accepted')} accepted "
+                f"fits) because this window has {taken['why']}"
+            )
         else:
             lines.append(
                 f"    car following: {car['accepted']} accepted of {car['fitted']} fitted "
@@ -446,6 +522,7 @@ def describe_calibration(doc: dict | None) -> str:
                 f"{car['uninformative']} followers never crossed a wave); spacing NRMSE "
                 f"median {car['nrmse']['median']:.3f}"
             )
+        if not car.get("not_calibrated"):
             for group, d in car["distributions"].items():
                 median = ", ".join(
                     f"{p.symbol} {d['median'][p.name]:.2f} {p.unit}" for p in model.fitted

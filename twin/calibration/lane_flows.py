@@ -12,13 +12,23 @@ go one way more than chance allows: the excess of one direction over the other b
 is the strategic flow of that bin. Divided by the vehicles passing the bin in the lane
 left, it is the probability that a vehicle there leaves that lane for that reason,
 which the calibrated behaviour reproduces.
+
+The probability is also conditioned on the traffic state the vehicles were in
+(:data:`STATE_NAMES`: the speed of the lane left, its mean in the ``CELL`` around the
+vehicle, parted at :data:`STATE_SPEEDS`): a bin's strategic changes are shared among
+the states in proportion to its unexplained changes in each, and divided by the
+vehicles that passed it in that state, pulled towards the pooled probability by
+:data:`PRIOR_PASSAGES` (a state few vehicles saw in a bin keeps near the pooled
+figure). Drivers in a queue leave a lane that ends at other places than free-flowing
+ones; a morning whose episodes run in another state than its calibration window then
+draws the targets of its own state, not the window's average.
 """
 
 import math
 
 import numpy as np
 
-from twin.calibration.following import GridTraffic, LaneChanges, distance_driven
+from twin.calibration.following import GridTraffic, LaneChanges, distance_driven, lane_speeds
 from twin.calibration.lane_changes import Incentives
 from twin.core.i24 import LANES
 
@@ -34,6 +44,13 @@ LOOKAHEAD = 1609.0
 #: a lane is one to keep out of where at least this share of its vehicles must leave it
 #: (strategically) within LOOKAHEAD
 KEEP_OUT_SHARE = 0.5
+#: [m/s] the lane speeds that part the traffic states a strategic flow is conditioned
+#: on (module doc): a queue below the first, congested traffic up to the second, free
+#: flow above
+STATE_SPEEDS = (5.0, 15.0)
+STATE_NAMES = ("queue", "congested", "free")
+#: [vehicles] what the pooled probability weighs against a state's own passages in a bin
+PRIOR_PASSAGES = 20.0
 
 
 def pair_name(lane_from: int, lane_to: int) -> str:
@@ -72,11 +89,20 @@ def explained_by_mobil(
     return out
 
 
-def passages(grid: GridTraffic, x_edges: np.ndarray) -> np.ndarray:
+def traffic_state(lane_speed) -> np.ndarray:
+    """Index into :data:`STATE_NAMES` of each lane speed [m/s] (an empty lane, NaN, is
+    free)."""
+    v = np.nan_to_num(np.asarray(lane_speed, dtype=np.float64), nan=np.inf)
+    return np.searchsorted(np.asarray(STATE_SPEEDS), v, side="right")
+
+
+def passages(grid: GridTraffic, x_edges: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
     """(4 lanes, bins) vehicles passing each position bin in each lane (vehicle-km
-    driven there over the bin's length)."""
+    driven there over the bin's length); ``rows``: (n,) bool, only those rows."""
     distance = distance_driven(grid)
     on = grid.lane != 0
+    if rows is not None:
+        on &= rows
     at = np.searchsorted(x_edges, grid.x[on], side="right") - 1
     inside = (at >= 0) & (at < x_edges.size - 1)
     out = np.zeros((len(LANES), x_edges.size - 1))
@@ -132,6 +158,15 @@ def lane_change_flows(
         np.searchsorted(t_edges, changes.time - t0, side="right") - 1, 0, max(t_edges.size - 2, 0)
     )
     passing = passages(grid, x_edges)
+    # the traffic state of each row (its own lane's speed) and of each change (the lane left)
+    own_lane = np.maximum(-grid.lane.astype(np.int64) - 1, 0)[:, None]
+    row_state = (
+        traffic_state(np.take_along_axis(lane_speeds(grid), own_lane, 1)[:, 0])
+        if len(grid)
+        else np.zeros(0, np.int64)
+    )
+    passing_by_state = [passages(grid, x_edges, row_state == s) for s in range(len(STATE_NAMES))]
+    change_state = traffic_state(changes.speed_from)
     pairs, strategic = {}, {}
     position = by_position(changes, x_edges)
     for name, counts in position["pairs"].items():
@@ -157,7 +192,11 @@ def lane_change_flows(
                 "count": int(excess.sum()),
                 "by_position": excess.tolist(),
                 "probability": np.round(np.minimum(p, 1.0), 4).tolist(),
-            }
+                "probability_by_state": _by_state(
+                    excess, mine, np.minimum(p, 1.0), at_x, rows & ~explained, change_state,
+                    [passing_s[lane_index] for passing_s in passing_by_state],
+                ),
+            }  # fmt: skip
     total = len(changes)
     n_strategic = sum(s["count"] for s in strategic.values())
     identified = n_strategic >= min_strategic
@@ -184,8 +223,32 @@ def lane_change_flows(
         "pairs": pairs,
         "net_out": {lane: v.tolist() for lane, v in position["net_out"].items()},
         "passing": {str(lane): np.round(passing[k], 2).tolist() for k, lane in enumerate(LANES)},
+        "states": {
+            "names": list(STATE_NAMES),
+            "speeds": list(STATE_SPEEDS),
+            "prior_passages": PRIOR_PASSAGES,
+            "passing": {
+                name: {str(lane): np.round(ps[k], 2).tolist() for k, lane in enumerate(LANES)}
+                for name, ps in zip(STATE_NAMES, passing_by_state, strict=True)
+            },
+        },
         "strategic": strategic if identified else {},
     }
+
+
+def _by_state(excess, mine, pooled, at_x, rows, change_state, passing) -> dict:
+    """``{state: (bins,) probability}`` of one strategic pair (module doc): the bins'
+    strategic changes ``excess`` shared among the states as the pair's unexplained
+    changes ``rows`` (``mine`` of them per bin) are, over the state's ``passing``
+    vehicles, pulled towards the ``pooled`` probability by :data:`PRIOR_PASSAGES`."""
+    n_bins = excess.size
+    out = {}
+    for s, name in enumerate(STATE_NAMES):
+        mine_s = np.bincount(at_x[rows & (change_state == s)], minlength=n_bins)
+        share = np.divide(mine_s, mine, out=np.zeros(n_bins), where=mine > 0)
+        p = (excess * share + PRIOR_PASSAGES * pooled) / (passing[s] + PRIOR_PASSAGES)
+        out[name] = np.round(np.minimum(p, 1.0), 4).tolist()
+    return out
 
 
 def keep_out(flows: dict, lookahead: float = LOOKAHEAD, share: float = KEEP_OUT_SHARE) -> list:

@@ -53,6 +53,15 @@ def register(commands) -> None:
         "the recording, drawn 0.9 times; on the synthesiser's on-ramp morning median 1.05 "
         "times, drawn 0.41)",
     )
+    p.add_argument(
+        "--following-from",
+        metavar="CALIBRATION_JSON",
+        default=None,
+        help="where this window has too few accepted car-following fits (no waves to fit "
+        "them on), take the drivers' car following from this calibration (the same "
+        "drivers on another morning, fitted with the same --model); the lane changes, "
+        "their flows, the threshold, desired speeds and merges are still fitted here",
+    )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
 
@@ -76,8 +85,20 @@ def _calibrate(args) -> int:
     from twin.calibration.calibrate import CalibrationSettings
 
     settings = CalibrationSettings(threshold_drivers=args.threshold_drivers)
+    following = None
+    if args.following_from is not None:
+        from twin.calibration.calibrate import read_calibration_file
+
+        following = read_calibration_file(args.following_from)
     doc, fits = calibrate(
-        store, roads, t_from, t_until, settings, model=model, progress=not args.quiet
+        store,
+        roads,
+        t_from,
+        t_until,
+        settings,
+        model=model,
+        progress=not args.quiet,
+        following=following,
     )
     path = write_calibration(store, doc, fits)
     pictures = draw_lane_flows(store, doc)

@@ -80,6 +80,37 @@ def test_a_store_without_enough_following_is_a_clear_error(tmp_path, light_resul
     assert not (tmp_path / "light" / CALIBRATION).exists()
 
 
+def test_a_window_without_waves_takes_its_car_following_from_another_calibration(
+    tmp_path, light_result, calibrated_wave_store, capsys
+):
+    day = synth.write_i24_json(light_result, tmp_path / "light.json")
+    ingest([day], tmp_path / "light", progress=False)
+    other = read_calibration(calibrated_wave_store)
+    other["roads"] = {"eastbound": other["roads"]["westbound"]}  # the light day's road
+    path = tmp_path / "other.json"
+    path.write_text(json.dumps(other))
+    light = str(tmp_path / "light")
+    assert main(["calibrate", light, "--quiet", "--following-from", str(path)]) == 0
+    assert "car following: taken from another calibration" in capsys.readouterr().out
+    section = read_calibration(TrajectoryStore(tmp_path / "light"))["roads"]["eastbound"]
+    car, theirs = section["car_following"], other["roads"]["eastbound"]
+    assert "not_calibrated" not in car and car["accepted"] == 0  # its own fits: none
+    assert car["distributions"] == theirs["car_following"]["distributions"]
+    assert "never crossed a wave" in car["taken_from"]["why"]
+    assert car["taken_from"]["window"] == theirs["window"]
+    # the lane changes and the threshold are still this window's
+    assert section["window"] != theirs["window"]
+    assert section["mobil"]["threshold"] >= 0 and "lane_flows" in section
+    capsys.readouterr()
+    # another model's drivers, a missing file, a file of something else: named
+    assert main(["calibrate", light, "--following-from", str(path), "--model", "gipps"]) == 2
+    assert "fitted idm, this one gipps" in capsys.readouterr().err
+    assert main(["calibrate", light, "--following-from", str(tmp_path / "none.json")]) == 2
+    assert "no such calibration file" in capsys.readouterr().err
+    assert main(["calibrate", light, "--following-from", str(day)]) == 2
+    assert "not an i24-twin calibration" in capsys.readouterr().err
+
+
 def test_a_damaged_calibration_is_named_not_used(store):
     (store.path / CALIBRATION).write_text("{not json")
     with pytest.raises(StoreError, match="not valid JSON"):

@@ -1,6 +1,7 @@
 """Lane-change flows of a recording: by lane pair and position, discretionary and strategic."""
 
 import numpy as np
+import pytest
 
 from twin.calibration.following import GridTraffic, lane_changes
 from twin.calibration.lane_changes import Incentives
@@ -14,12 +15,14 @@ from twin.core.i24 import Road, lane_center
 DT = 0.1
 
 
-def _grid(tracks):
+def _grid(tracks, speeds=None):
     """A recording on the grid: each track (first step, lane before, change x or None,
-    lane after) driven at 20 m/s from x = 0 to 1000 m."""
-    cols = {name: [] for name in ("tid", "k", "x", "lane")}
+    lane after) driven at 20 m/s (or its ``speeds``) from x = 0 to 1000 m."""
+    cols = {name: [] for name in ("tid", "k", "x", "lane", "speed")}
     for tid, (k0, lane, x_change, lane_after) in enumerate(tracks):
-        x = np.arange(0.0, 1000.0, 20.0 * DT)
+        v = 20.0 if speeds is None else speeds[tid]
+        x = np.arange(0.0, 1000.0, v * DT)
+        cols["speed"].append(np.full(x.size, v))
         lanes = np.full(x.size, lane, dtype=np.int8)
         if x_change is not None:
             lanes[x >= x_change] = lane_after
@@ -31,7 +34,7 @@ def _grid(tracks):
     n = c["tid"].size
     return GridTraffic(
         road=Road.WESTBOUND, dt=DT, t0=1.0e9, tid=c["tid"], k=c["k"], x=c["x"],
-        speed=np.full(n, 20.0), y=lane_center(c["lane"]), lane=c["lane"],
+        speed=c["speed"], y=lane_center(c["lane"]), lane=c["lane"],
         length=np.full(n, 4.5), vehicle_class=np.zeros(n, dtype=np.int8),
         leader=np.full(n, -1), gap=np.full(n, np.inf),
     )  # fmt: skip
@@ -79,6 +82,42 @@ def test_a_directional_unexplained_flow_is_found_where_and_between_which_lanes_i
     assert sum(flows["pairs"]["-3>-2"]["by_time"]) == 80
     lines = describe_flows(flows)
     assert "strategic" in lines[0] and "-3>-2" in lines[1] and "600 to 700 m" in lines[1]
+
+
+def test_the_strategic_probability_is_conditioned_on_the_traffic_state():
+    # lane -3 ends for 40 of 100 free-flowing vehicles and, later, for 10 of 100 in a
+    # queue, all between 600 and 700 m
+    rng = np.random.default_rng(1)
+    tracks, speeds = [], []
+    for i in range(200):
+        queue = i >= 100
+        k0 = 15 * i + (3000 if queue else 0)  # the queue after the free flow has gone
+        leaves = (i - 100 if queue else i) < (10 if queue else 40)
+        tracks.append((k0, -3, rng.uniform(600.0, 700.0) if leaves else None, -2))
+        speeds.append(3.0 if queue else 20.0)
+    grid = _grid(tracks, speeds)
+    changes = lane_changes(grid)
+    assert len(changes) == 50
+    flows = lane_change_flows(changes, grid, np.zeros(len(changes), dtype=bool))
+    assert flows["states"]["names"] == ["queue", "congested", "free"]
+    bin_600 = flows["x_edges"].index(600.0)
+    passing = {s: flows["states"]["passing"][s]["-3"][bin_600] for s in ("queue", "free")}
+    # those that leave inside the bin pass half of it
+    assert passing["queue"] == pytest.approx(95, abs=2)
+    assert passing["free"] == pytest.approx(80, abs=2)
+    flow = flows["strategic"]["-3>-2"]
+    pooled = flow["probability"][bin_600]
+    by_state = {s: p[bin_600] for s, p in flow["probability_by_state"].items()}
+    assert 0.2 < pooled < 0.3
+    # each state's own share, pulled towards the pooled one by PRIOR_PASSAGES vehicles
+    prior = flows["states"]["prior_passages"]
+    for state, left in (("free", 40), ("queue", 10)):
+        expected = (left + prior * pooled) / (passing[state] + prior)
+        assert by_state[state] == pytest.approx(expected, abs=0.02), state
+    assert by_state["queue"] < 0.17 < pooled < by_state["free"]
+    assert by_state["congested"] == pooled  # seen by no one: the pooled figure
+    # outside the flow's bins no state leaves
+    assert all(p[bin_600 - 1] == 0.0 for p in flow["probability_by_state"].values())
 
 
 def test_changes_mobil_explains_or_too_few_to_tell_leave_mobil_alone():

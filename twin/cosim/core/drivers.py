@@ -18,6 +18,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from twin.calibration.following import CELL, CalibrationDataError
 from twin.calibration.merge_positions import MERGE_LEAD, merge_table
 from twin.core.i24 import HOV_LANE, LANE_WIDTH
 from twin.core.jit import kernel, normal, uniform
@@ -39,6 +40,9 @@ PAPER, CALIBRATED, RECORDED = 0, 1, 2
 RECORDED_SPAN = 100.0  # [m] a recorded change's urgency grows over this distance
 PLANNED_LATE = 100.0  # [m] a recorded change not started this far past its place is dropped
 BIN_EVENTS = 65536  # events of one strategic draw: one per position bin
+#: [m] the stretch of a lane whose mean speed is the traffic state a strategic target is
+#: drawn in: the calibration's
+STATE_CELL = CELL
 
 BehaviourArrays = namedtuple(
     "BehaviourArrays",
@@ -47,7 +51,7 @@ BehaviourArrays = namedtuple(
     "v0_scale time_headway_scale max_accel_scale hov_share decision_interval auto "
     "politeness threshold safe_decel keep_right dist_on dist_have dist_mean dist_matrix "
     "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
-    "lane_speed_sd fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes "
+    "lane_speed_sd fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes flow_states "
     "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x",
 )
 
@@ -298,28 +302,55 @@ def next_target(b, i, core, seed, lane, x, time_from, time_to):
 @kernel(inline=True)
 def _draw(b, i, core, seed, lane, x):
     """(direction, x_from, x_by) drawn from the flows for slot ``i`` in ``lane`` at back
-    x, or (0, nan, nan)."""
+    x, in the traffic state around it, or (0, nan, nan)."""
     beh, slots = core.beh, core.slots
     slots.tgt_draws[b, i] += 1
     if not beh.flows_on:
         return 0, math.nan, math.nan
-    return draw_target(seed, slots.tid[b, i], slots.tgt_draws[b, i], lane, x, beh.flow_edges,
-                       beh.flow_left, beh.flow_right, beh.flow_lanes)  # fmt: skip
+    speed = lane_speed(b, core.traffic, lane, x) if beh.flow_states.size else math.inf
+    return draw_target(seed, slots.tid[b, i], slots.tgt_draws[b, i], lane, x, speed,
+                       beh.flow_edges, beh.flow_left, beh.flow_right, beh.flow_lanes,
+                       beh.flow_states)  # fmt: skip
+
+
+@kernel(inline=True)
+def lane_speed(b, traffic, lane, x):
+    """[m/s] the mean speed of ``lane`` within half a :data:`STATE_CELL` of back x [m],
+    over the simulated vehicles and the recording's ghosts there (the traffic state a
+    strategic target is drawn in; inf where the lane is empty, as free as it gets)."""
+    vehicles, ghosts = traffic.vehicles, traffic.obstacles
+    half = 0.5 * STATE_CELL
+    total, n = 0.0, 0
+    for j in range(vehicles.top[b]):
+        here = vehicles.lane[b, j] == lane and abs(vehicles.x[b, j] - x) <= half
+        if vehicles.valid[b, j] and here:
+            total += vehicles.speed[b, j]
+            n += 1
+    for j in range(ghosts.count[b]):
+        if ghosts.lane[b, j] == lane and abs(ghosts.x[b, j] - x) <= half:
+            total += ghosts.speed[b, j]
+            n += 1
+    return total / n if n > 0 else math.inf
 
 
 @kernel
-def draw_target(seed, key, draws, lane, x, edges, left, right, lanes):
+def draw_target(seed, key, draws, lane, x, speed, edges, left, right, lanes, states):
     """A strategic target drawn from the recording's flows (the ``calibrated``
-    behaviour): the vehicle of record ``key`` in ``lane`` at back x [m] passes the
-    position bins (``edges``) ahead of it and, in each, leaves its lane left or right
-    with the flows' probabilities (``left``, ``right``: (4, bins), per lane -1..-4;
-    ``lanes`` (4,) bool where the lane has flows); its target is the first bin drawn,
-    wanted from half a bin before it to the bin's end. ``draws``: how many targets it
-    has drawn, this one included (a vehicle draws again in the lane it changed to).
+    behaviour): the vehicle of record ``key`` in ``lane`` at back x [m], whose lane
+    moves at ``speed`` [m/s] around it, passes the position bins (``edges``) ahead of it
+    and, in each, leaves its lane left or right with the flows' probabilities in that
+    traffic state (``left``, ``right``: (states, 4, bins), per lane -1..-4; the state is
+    the number of ``states`` speeds [m/s] at or below ``speed``; ``lanes`` (4,) bool
+    where the lane has flows); its target is the first bin drawn, wanted from half a bin
+    before it to the bin's end. ``draws``: how many targets it has drawn, this one
+    included (a vehicle draws again in the lane it changed to).
     Returns (direction, x_from, x_by), or (0, nan, nan)."""
     k = -lane - 1
     if not 0 <= k < lanes.size or not lanes[k]:
         return 0, math.nan, math.nan
+    s = 0
+    while s < states.size and states[s] <= speed:
+        s += 1
     bins = edges.size - 1
     first = 0  # the bins starting ahead of x
     while first <= bins and edges[first] <= x:
@@ -327,23 +358,36 @@ def draw_target(seed, key, draws, lane, x, edges, left, right, lanes):
     half = 0.5 * (edges[1] - edges[0])
     for j in range(first, bins):
         u = uniform(seed, STRATEGIC_STREAM, key, draws * BIN_EVENTS + j)
-        if u < left[k, j] + right[k, j]:
-            return (1 if u < left[k, j] else -1), edges[j] - half, edges[j + 1]
+        p_left, p_right = left[s, k, j], right[s, k, j]
+        if u < p_left + p_right:
+            return (1 if u < p_left else -1), edges[j] - half, edges[j + 1]
     return 0, math.nan, math.nan
 
 
 def flow_arrays(flows: dict | None) -> tuple:
-    """(edges, left, right, lanes) of the recording's strategic flows
-    (``calibration.json``'s ``lane_flows``) for :func:`draw_target`."""
+    """(edges, left, right, lanes, states) of the recording's strategic flows
+    (``calibration.json``'s ``lane_flows``) for :func:`draw_target`: per traffic state
+    where the calibration has them (``probability_by_state``), else one state."""
     if flows is None:
-        return np.zeros(2), np.zeros((4, 1)), np.zeros((4, 1)), np.zeros(4, bool)
+        return np.zeros(2), np.zeros((1, 4, 1)), np.zeros((1, 4, 1)), np.zeros(4, bool), np.zeros(0)
     edges = np.asarray(flows["x_edges"], dtype=np.float64)
-    left, right = np.zeros((4, edges.size - 1)), np.zeros((4, edges.size - 1))
+    conditioned = "states" in flows and all(
+        "probability_by_state" in s for s in flows["strategic"].values()
+    )
+    names = flows["states"]["names"] if conditioned else [None]
+    states = np.asarray(flows["states"]["speeds"] if conditioned else [], dtype=np.float64)
+    if states.size != len(names) - 1 or np.any(np.diff(states) <= 0):
+        raise CalibrationDataError(
+            "calibration: lane_flows.states needs one speed fewer than names, increasing"
+        )
+    shape = (len(names), 4, edges.size - 1)
+    left, right = np.zeros(shape), np.zeros(shape)
     lanes = np.zeros(4, bool)
-    for lane, (pl, pr) in flow_probabilities(flows, edges.size - 1).items():
-        left[-lane - 1], right[-lane - 1] = pl, pr
-        lanes[-lane - 1] = True
-    return edges, left, right, lanes
+    for s, name in enumerate(names):
+        for lane, (pl, pr) in flow_probabilities(flows, edges.size - 1, name).items():
+            left[s, -lane - 1], right[s, -lane - 1] = pl, pr
+            lanes[-lane - 1] = True
+    return edges, left, right, lanes, states
 
 
 @kernel(inline=True)
@@ -421,7 +465,7 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         fits[r[ok]] = table.loc[tids[inside][ok], list(fitted)].to_numpy()
         fit_ok[r[ok]] = True
     flows = behaviour.strategic_flows
-    edges, left, right, lanes = flow_arrays(flows)
+    edges, left, right, lanes, states = flow_arrays(flows)
     plan = plan if plan is not None else empty_plan(recording.tid.size)
     return BehaviourArrays(
         mode=mode,
@@ -450,8 +494,8 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         desired_dim=fitted.index("desired_speed"), speed_source=source,
         lane_speed_mean=lane_mean, lane_speed_sd=lane_sd, fits=fits, fit_ok=fit_ok,
         flows_on=flows is not None, flow_edges=edges, flow_left=left, flow_right=right,
-        flow_lanes=lanes, plan_start=plan["start"], plan_x=plan["x"], plan_time=plan["time"],
-        plan_from=plan["lane_from"], plan_to=plan["lane_to"],
+        flow_lanes=lanes, flow_states=states, plan_start=plan["start"], plan_x=plan["x"],
+        plan_time=plan["time"], plan_from=plan["lane_from"], plan_to=plan["lane_to"],
         hov_openings=np.array(traffic_config.hov_openings, np.float64).reshape(-1, 2),
         merge_q=merge_table(behaviour.merges), merge_x=plan["merge_x"],
     )  # fmt: skip
@@ -469,13 +513,20 @@ def empty_plan(trajectories: int) -> dict:
     }
 
 
-def flow_probabilities(flows: dict, n_bins: int) -> dict:
+def flow_probabilities(flows: dict, n_bins: int, state: str | None = None) -> dict:
     """{lane: (p_left, p_right)}, (bins,) each: the probability that a vehicle passing a
-    bin in the lane leaves it that way for a strategic reason."""
+    bin in the lane leaves it that way for a strategic reason (in traffic ``state``, one
+    of the flows' ``states`` names; None: pooled over the states)."""
     out = {}
     for name, s in flows["strategic"].items():
         a, b = (int(v) for v in name.split(">"))
-        p = np.asarray(s["probability"], dtype=np.float64)
+        p = s["probability"] if state is None else s["probability_by_state"][state]
+        p = np.asarray(p, dtype=np.float64)
+        if p.shape != (n_bins,):
+            raise CalibrationDataError(
+                f"calibration: lane_flows.strategic[{name!r}] has {p.size} probabilities for "
+                f"{n_bins} position bins"
+            )
         left, right = out.setdefault(a, (np.zeros(n_bins), np.zeros(n_bins)))
         (left if b > a else right)[:] += p
     for left, right in out.values():  # never more than certainty between the two
