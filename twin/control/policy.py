@@ -32,6 +32,7 @@ from twin.control.env import ACCEL_RANGE, CONTROL_DT, SPEED_GAIN, SPEED_RANGE, a
 from twin.core.atomic import atomic_file
 from twin.core.errors import TwinError
 from twin.traffic.controller_api import EgoCommand, Observation
+from twin.traffic.controller_api import leader as leader_of
 
 FORMAT = "i24-twin-linear-speed-policy"
 VERSION = 1
@@ -145,8 +146,7 @@ def policy_features(
         mean_speed: [m/s] the ego's mean speed over the last :data:`MEMORY` seconds.
         lane_index: the ego's lane's index in the lanes (0 for -1 ... 3 for -4).
     """
-    k = obs.lanes.lanes.index(obs.lane)
-    gap, leader = float(obs.lanes.leader_gap[k]), float(obs.lanes.leader_speed[k])
+    gap, leader = leader_of(obs)
     if not math.isfinite(gap):
         leader, time_gap = obs.speed, TIME_GAP_CAP
     else:

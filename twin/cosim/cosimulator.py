@@ -406,8 +406,8 @@ class Cosimulator:
         relaxing = self.state.slots.relaxing[0]  # a relaxing vehicle tracks its recording
         by_slot = {s: c for s, c in zip(slots.tolist(), self._controllers.values(), strict=True)
                    if not relaxing[s]}  # fmt: skip
-        traffic = kinds.Traffic(st.vehicles, st.obstacles, st.drivers, st.scratch, None,
-                                st.counters, st.actions)  # fmt: skip
+        traffic = kinds.Traffic(st.vehicles, st.obstacles, st.drivers, st.scratch,
+                                self.shared.traffic_settings, st.counters, st.actions)  # fmt: skip
         overrides, refused = apply_controllers(
             by_slot, traffic, 0, st.bodies.id, st.ghosts.y, self.direction, self.sim_time,
             self._may_change,

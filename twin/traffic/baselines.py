@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
+from twin.traffic.controller_api import EgoCommand, Observation, controller_factory, leader
 
 #: The baselines by their command-line names (``twin.controllers:NAME``).
 BASELINES = ("human", "follower_stopper", "pi_saturation", "acc")
@@ -131,7 +131,7 @@ class FollowerStopper:
         self.params = params
 
     def __call__(self, obs: Observation) -> EgoCommand:
-        gap, leader_speed = _leader(obs)
+        gap, leader_speed = leader(obs)
         desired = self.params.desired_speed or obs.desired_speed
         v_cmd = follower_stopper_speed(gap, obs.speed, leader_speed, desired, self.params)
         return EgoCommand(accel=self.params.loop.accel(v_cmd, obs.speed))
@@ -209,7 +209,7 @@ class PISaturation:
         while self._speeds[0][0] < obs.time - p.window:
             self._sum -= self._speeds.popleft()[1]
         mean = self._sum / len(self._speeds)
-        gap, leader_speed = _leader(obs)
+        gap, leader_speed = leader(obs)
         last = obs.speed if self._command is None else self._command
         self._command = max(pi_saturation_speed(gap, obs.speed, leader_speed, mean, last, p), 0.0)
         return EgoCommand(accel=p.loop.accel(self._command, obs.speed))
@@ -266,7 +266,7 @@ class ACC:
         self.params = params
 
     def __call__(self, obs: Observation) -> EgoCommand:
-        gap, leader_speed = _leader(obs)
+        gap, leader_speed = leader(obs)
         desired = self.params.desired_speed or obs.desired_speed
         return EgoCommand(accel=acc_accel(gap, obs.speed, leader_speed, desired, self.params))
 
@@ -351,11 +351,3 @@ def _guarded(controller, config):
     the traffic manager reads (see :class:`ControllerSettings`)."""
     controller.emergency_braking = config.controller.emergency_braking
     return controller
-
-
-def _leader(obs: Observation) -> tuple[float, float]:
-    """Gap [m] to the leader in the ego's lane (``inf`` where none) and its speed."""
-    k = obs.lanes.lanes.index(obs.lane)
-    gap = float(obs.lanes.leader_gap[k])
-    speed = float(obs.lanes.leader_speed[k])
-    return (gap, speed) if math.isfinite(gap) else (math.inf, math.nan)

@@ -10,6 +10,7 @@ from twin.core.errors import ControllerError
 from twin.core.i24 import LANES
 from twin.physics.vehicle import GRAVITY
 from twin.traffic.controller_api import NEIGHBOUR_RANGE, LaneView, Observation, parse_command
+from twin.traffic.kernels.decide import driver_limit
 from twin.traffic.kernels.neighbours import LANE_KEY
 
 
@@ -102,7 +103,14 @@ def apply_controllers(controllers: dict, t, b: int, ids, obstacle_y, road: int, 
         vid = int(ids[b, i])
         name = getattr(controller, "__name__", type(controller).__name__)
         who = f"the controller {name} of vehicle {vid} at t = {time:.2f} s"
-        default = float(sc.command[b, i])
+        # what the driver would do, as its vehicle would apply it (finite: the raw
+        # command is -inf where the room to the leader is used up)
+        default = float(
+            driver_limit(
+                sc.command[b, i], sc.emergency[b, i], float(veh.mu[b, i]) * GRAVITY,
+                t.settings.brake_limit, dr.cf[b, i, t.settings.max_accel_column],
+            )
+        )  # fmt: skip
         try:
             answer = controller(observation(t, b, i, ids, obstacle_y, road, default, time))
         except Exception as error:

@@ -138,6 +138,21 @@ def load_controller(spec: str, config=None) -> EgoController | None:
     return controller
 
 
+def leader(obs: Observation) -> tuple[float, float]:
+    """The gap [m] to the leader in the ego's lane and its speed [m/s], safe to compute
+    with: ``(inf, nan)`` where there is none; a gap that is NaN is taken as 0 (touching)
+    and the speed of a leader that is there but not finite as 0 (standing), the
+    cautious readings. A gap may be negative (overlapping bodies): a state to handle."""
+    k = obs.lanes.lanes.index(obs.lane)
+    gap = float(obs.lanes.leader_gap[k])
+    speed = float(obs.lanes.leader_speed[k])
+    if math.isnan(gap):
+        gap = 0.0
+    if gap == math.inf:
+        return math.inf, math.nan
+    return max(gap, -1.0e6), speed if math.isfinite(speed) else 0.0
+
+
 def lane_change_direction(direction: int | str) -> int:
     """``LEFT``, ``RIGHT`` or 0 from +1 / -1 / 0 or ``'left'`` / ``'right'`` / ``'none'``.
 

@@ -162,6 +162,16 @@ def _emergency(b, top, valid, need, cf_accel, emergency, command, threshold, ste
             steps[b] += 1
 
 
+@kernel(inline=True)
+def driver_limit(command, emergency, tyre, brake_limit, max_accel):
+    """[m/s^2] a driver's ``command`` as its vehicle applies it: braking within the
+    driver's ``brake_limit`` share of the tyres' grip ``tyre`` [m/s^2] (all of it in an
+    ``emergency``, where the command may be -inf: no room left), accelerating within
+    ``max_accel``. Always finite."""
+    low = -tyre if emergency else -brake_limit * tyre
+    return min(max(command, low), max_accel)
+
+
 @kernel
 def limit(b, t):
     """Each vehicle's command [m/s^2] (``drivers.accel``): its controller's answer
@@ -185,8 +195,9 @@ def limit(b, t):
         kind = ctrl[b, i] % state.GUARDED
         tyre = mu[b, i] * GRAVITY
         if kind == state.DRIVER:
-            low = -tyre if emergency[b, i] else -brake_limit * tyre
-            accel_out[b, i] = min(max(command[b, i], low), params[b, i, column])
+            accel_out[b, i] = driver_limit(
+                command[b, i], emergency[b, i], tyre, brake_limit, params[b, i, column]
+            )
             continue
         if kind == state.PYTHON:  # its controller answers outside; the driver's for now
             accel_out[b, i] = min(max(command[b, i], -tyre), tyre)
