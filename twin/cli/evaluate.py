@@ -26,7 +26,9 @@ def register(commands) -> None:
         description="Draw episodes from the recorded traffic (congested and free cells), run "
         "each with every behaviour asked for, measure each run as 'twin run' does, and write "
         "episodes.parquet, summary.json, summary.md and fidelity.png. Finished episodes are "
-        "kept: rerun the same command to resume.",
+        "kept: rerun the same command to resume. An episode that fails (a controller's "
+        "non-finite command, a bug) is recorded as failed with its error and the 'twin run' "
+        "that repeats it, the others run, and the exit status is 1; a rerun retries it.",
     )
     add_eval_options(p)
     add_world(p)
@@ -78,7 +80,9 @@ def add_eval_options(p) -> None:
 
 
 def _eval(args) -> int:
-    from twin.runners.evaluation import evaluate, summary_lines
+    import sys
+
+    from twin.runners.evaluation import evaluate, failure_lines, summary_lines
 
     store = open_data(args.data, progress=not args.quiet)
     config = eval_config(args, store)
@@ -95,6 +99,10 @@ def _eval(args) -> int:
         progress=not args.quiet,
     )
     print(summary_lines(result))
+    failed = failure_lines(result.summary)
+    if failed:
+        print("\n".join(failed), file=sys.stderr)
+        return 1
     return 0
 
 

@@ -30,6 +30,7 @@ from twin.runners.evaluation import (
     EvaluationError,
     evaluate,
     folder_line,
+    ran_rows,
 )
 
 REFERENCE = "human"
@@ -95,7 +96,7 @@ def mean_with_ci(values: np.ndarray, seed: int = 0) -> dict:
 def paired_vs_human(frame, config) -> dict:
     """Per controller other than ``human`` (and per behaviour): the paired changes of
     :data:`PAIRED` (see the module doc); empty without a ``human`` arm."""
-    ran = frame[frame["skipped"].isna()] if "skipped" in frame else frame
+    ran = ran_rows(frame)
     out = {}
     for behaviour in config.behaviours:
         rows = ran[ran["behaviour"] == behaviour]
@@ -178,7 +179,7 @@ def plot_traces(frame, config, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ran = frame[frame["skipped"].isna()] if "skipped" in frame else frame
+    ran = ran_rows(frame)
     human = ran[ran["controller"] == REFERENCE]
     amplitude = human["wave_amplitude_behind_mps"].to_numpy(float)
     if human.empty or not np.isfinite(amplitude).any():

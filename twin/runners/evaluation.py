@@ -32,7 +32,7 @@ import numpy as np
 from twin import __version__
 from twin.calibration.calibrate import read_calibration
 from twin.core.atomic import atomic_file, remove_stale
-from twin.core.errors import TwinError
+from twin.core.errors import StoreError, TwinError
 from twin.core.i24 import Road
 from twin.core.locks import output_lock
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour
@@ -57,6 +57,7 @@ FORMAT = "i24-twin-eval"
 VERSION = 1
 IDENTITY = "eval.json"
 RESULTS = "results"
+FAILED = "failed"  # the settings of failed episodes, for the twin run that repeats one
 CONGESTED_TRAVEL = 13.4  # [m/s] room is kept ahead of an episode's ego for this speed
 
 #: Baseline controllers named without their module (``--controller human,acc``).
@@ -237,6 +238,8 @@ def evaluate(
             def save(k: int, rows: list[dict]) -> None:
                 _, chunk, arm, _ = jobs[k]
                 for spec, row in zip(chunk, rows, strict=True):
+                    if row.get("failed"):
+                        row["repeat"] = _repeat_command(out, config, spec, arm, store)
                     with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
                         tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
                 bar.update(len(rows))
@@ -287,13 +290,45 @@ def _jobs(config: EvalConfig, specs, out: Path, location, workers: int) -> list[
     :data:`BATCH`, and enough chunks to keep the workers busy), else one per job."""
     jobs = []
     for arm in config.arms:
-        todo = [s for s in specs if not _result_path(out, s.index, arm[0]).is_file()]
+        todo = [s for s in specs if not _done(_result_path(out, s.index, arm[0]))]
         size = BATCH if _batched(config, arm) else 1
         if size > 1:
             size = max(1, min(size, -(-len(todo) // max(workers, 1))))
         for k in range(0, len(todo), size):
             jobs.append((config, todo[k : k + size], arm, location))
     return jobs
+
+
+def _done(path: Path) -> bool:
+    """An episode's result is in (a failed one runs again when the evaluation resumes)."""
+    if not path.is_file():
+        return False
+    try:
+        return not json.loads(path.read_text()).get("failed")
+    except (ValueError, AttributeError):
+        return True  # damaged: assemble names it
+
+
+def _repeat_command(out: Path, config: EvalConfig, spec: EpisodeSpec, arm: tuple, store) -> str:
+    """Write the failed episode's resolved settings beside its result
+    (``failed/NNNNNN-ARM.toml``) and return the ``twin run`` that repeats it."""
+    from twin.cosim.config import to_toml
+
+    cosim, _ = _episode(config, spec, arm)
+    path = out / FAILED / f"{spec.index:06d}-{arm[0]}.toml"
+    path.parent.mkdir(exist_ok=True)
+    with atomic_file(path) as tmp:
+        tmp.write_text(to_toml(cosim))
+    return f"twin run --data {store.path} --config {path}"
+
+
+def ran_rows(frame):
+    """The rows of ``frame`` (``episodes.parquet``) whose episode ran: not skipped (no
+    room for the ego) and not failed."""
+    ran = frame["skipped"].isna() if "skipped" in frame else np.ones(len(frame), bool)
+    if "failed" in frame:
+        ran &= frame["failed"].isna()
+    return frame[ran]
 
 
 def _batched(config: EvalConfig, arm: tuple) -> bool:
@@ -333,8 +368,23 @@ def _run_chunk(config: EvalConfig, chunk: list, arm: tuple, location) -> list[di
     the ego's and its followers' speeds each second (for the pictures); in the batched
     core together where it can (:func:`_batched`), else one by one."""
     if _batched(config, arm):
-        return _run_batch(config, chunk, arm, location)
-    return [_run_one(config, spec, arm, location) for spec in chunk]
+        try:
+            return _run_batch(config, chunk, arm, location)
+        except Exception:  # which episode failed: each alone, each recorded
+            pass
+    return [_failsafe(config, spec, arm, location) for spec in chunk]
+
+
+def _failsafe(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
+    """:func:`_run_one`, or the episode's row marked ``failed`` with the error (a
+    controller's non-finite command, a bug): one episode does not end a sweep."""
+    try:
+        return _run_one(config, spec, arm, location)
+    except StoreError:
+        raise  # the data are gone or damaged: every episode would fail the same way
+    except Exception as error:
+        _, row = _episode(config, spec, arm)
+        return {**row, "skipped": None, "failed": f"{type(error).__name__}: {error}"}
 
 
 def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:
@@ -547,8 +597,19 @@ def summarise(frame, config: EvalConfig) -> dict:
     }
     for label, _, _ in config.arms:
         rows = frame[frame["arm"] == label]
-        ran = rows[rows["skipped"].isna()] if "skipped" in rows else rows
-        entry = {"episodes_run": len(ran), "episodes_skipped": len(rows) - len(ran), "metrics": {}}
+        ran = ran_rows(rows)
+        failed = rows[rows["failed"].notna()] if "failed" in rows else rows.iloc[:0]
+        entry = {
+            "episodes_run": len(ran),
+            "episodes_skipped": len(rows) - len(ran) - len(failed),
+            "metrics": {},
+        }
+        if len(failed):
+            entry["episodes_failed"] = len(failed)
+            entry["failures"] = [
+                {"episode": int(r.episode), "error": r.failed, "repeat": r.repeat}
+                for r in failed.itertuples()
+            ]
         for name, kind in SUMMARISED.items():
             values = ran[name].to_numpy(dtype=np.float64)
             values = values[np.isfinite(values)]
@@ -609,6 +670,13 @@ def markdown(summary: dict) -> str:
         + " | ".join(f"{e['episodes_run']} ({e['episodes_skipped']})" for e in runs)
         + " |"
     )
+    failures = [(b, f) for b in behaviours for f in summary[key][b].get("failures", [])]
+    if failures:
+        lines += ["", f"## Failed episodes ({len(failures)}): not in the figures above", ""]
+        lines += [
+            f"- episode {f['episode']} ({b}): {f['error']}; repeat: `{f['repeat']}`"
+            for b, f in failures
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -653,6 +721,23 @@ def folder_line(result: EvalResult) -> str:
         f"evaluation folder: {result.folder} (ran {result.runs_done_now} now, "
         f"{result.total_s:.0f} s)"
     )
+
+
+def failure_lines(summary: dict) -> list[str]:
+    """Lines naming each failed episode run, its error and the ``twin run`` that
+    repeats it (none when every episode ran or was skipped)."""
+    key = "controllers" if "controllers" in summary else "behaviours"
+    failures = [(arm, f) for arm, e in summary[key].items() for f in e.get("failures", [])]
+    if not failures:
+        return []
+    lines = [
+        f"{len(failures)} episode run{'s' if len(failures) > 1 else ''} failed (recorded as "
+        "failed, not in the figures; the others ran; rerunning the command retries them):"
+    ]
+    for arm, f in failures:
+        lines.append(f"  episode {f['episode']} ({arm}): {f['error']}")
+        lines.append(f"    repeat: {f['repeat']}")
+    return lines
 
 
 def summary_lines(result: EvalResult) -> str:

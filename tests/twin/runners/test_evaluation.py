@@ -10,6 +10,7 @@ import pytest
 from twin.cli import main
 from twin.data.store import TrajectoryStore
 from twin.runners.evaluation import EvalConfig, EvaluationError, evaluate
+from twin.traffic.controller_api import controller_factory
 
 
 @pytest.fixture
@@ -137,3 +138,54 @@ def test_kinematic_episodes_run_in_batches_and_are_counted_one_by_one(
     rows_one = pd.read_parquet(tmp_path / "one" / "episodes.parquet")[columns]
     rows_two = pd.read_parquet(tmp_path / "two" / "episodes.parquet")[columns]
     pd.testing.assert_frame_equal(rows_one, rows_two)
+
+
+_MADE: list[int] = []  # the episodes' controllers made in this process, in order
+
+
+@controller_factory
+def fails_in_its_second_episode(config):
+    """A controller whose second episode (in this process) answers NaN."""
+    _MADE.append(config.seed)
+    broken = len(_MADE) == 2
+
+    def controller(obs):
+        return float("nan") if broken and obs.time > 2.0 else obs.default_accel
+
+    return controller
+
+
+def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_map, tmp_path):
+    from twin.runners.evaluation import failure_lines
+
+    name = f"{__name__}:fails_in_its_second_episode"
+    config = _config(episodes=3, behaviours=("calibrated",), controllers=(name,))
+    out = tmp_path / "eval"
+    _MADE.clear()
+    result = evaluate(calibrated, out, config, workers=1, bundle=built_map, progress=False)
+    frame = pd.read_parquet(out / "episodes.parquet")
+    assert result.runs_done_now == 3 and len(frame) == 3
+    failed = frame[frame["failed"].notna()]
+    assert failed["episode"].tolist() == [1]  # the second; the first and third ran
+    assert "returned accel nan" in failed["failed"].iloc[0]
+    ran = frame[frame["failed"].isna()]
+    assert ran["ego_speed_rmse_mps"].notna().all() and failed["ego_speed_rmse_mps"].isna().all()
+    entry = result.summary["controllers"]["fails_in_its_second_episode"]
+    assert entry["episodes_run"] == 2 and entry["episodes_failed"] == 1
+    assert entry["episodes_skipped"] == 0
+    assert entry["metrics"]["ego_speed_rmse_mps"]["count"] == 2
+    # the command that repeats it: twin run with the episode's settings
+    repeat = entry["failures"][0]["repeat"]
+    toml = out / "failed" / "000001-fails_in_its_second_episode.toml"
+    assert repeat == f"twin run --data {calibrated.path} --config {toml}"
+    assert f"ego_controller = \"{name}\"" in toml.read_text()
+    lines = failure_lines(result.summary)
+    assert "1 episode run failed" in lines[0] and "returned accel nan" in lines[1]
+    assert "Failed episodes (1)" in (out / "summary.md").read_text()
+    # resumed: the failed episode runs again (here it no longer fails), the rest are kept
+    _MADE.clear()
+    again = evaluate(calibrated, out, config, workers=1, bundle=built_map, progress=False)
+    assert again.runs_done_now == 1
+    assert "failed" not in pd.read_parquet(out / "episodes.parquet") or not failure_lines(
+        again.summary
+    )
