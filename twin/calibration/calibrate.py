@@ -48,9 +48,11 @@ from twin.calibration.lane_changes import (
 from twin.calibration.lane_flows import (
     describe_flows,
     explained_by_mobil,
+    grid_edges,
     in_keep_out,
     keep_out,
     lane_change_flows,
+    traffic_states,
 )
 from twin.calibration.merge_positions import describe_merges, merge_section
 from twin.core.atomic import atomic_file
@@ -314,7 +316,9 @@ def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]
     every = max(1, round(settings.decision_every / grid.dt)) * grid.dt
     mobil = fit_threshold(incentives, len(changes))
     explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
-    flows = lane_change_flows(changes, grid, explained)
+    # the traffic states of the passages and the changes: once, no refit moves them
+    states = traffic_states(grid, changes, grid_edges(grid))
+    flows = lane_change_flows(changes, grid, explained, states=states)
     excluded, previous = 0, None
     # the strategic bins depend on what MOBIL explains: refit until they are stable
     for _ in range(FLOW_ROUNDS):
@@ -333,7 +337,7 @@ def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]
         excluded = int(np.count_nonzero(~away_changes))
         mobil = fit_threshold(incentives, int(np.count_nonzero(away_changes)), where=away_decisions)
         explained = explained_by_mobil(changes, incentives, mobil["threshold"], grid.t0, every)
-        flows = lane_change_flows(changes, grid, explained)
+        flows = lane_change_flows(changes, grid, explained, states=states)
     if excluded > 0:
         mobil["strategic_bins_changes"] = excluded
         mobil["strategic_final"] = flows["strategic_count"]

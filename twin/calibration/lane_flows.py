@@ -96,6 +96,28 @@ def traffic_state(lane_speed) -> np.ndarray:
     return np.searchsorted(np.asarray(STATE_SPEEDS), v, side="right")
 
 
+def traffic_states(grid: GridTraffic, changes: LaneChanges, x_edges: np.ndarray) -> tuple:
+    """(passing, change_state): the vehicles passing each position bin in each lane per
+    traffic state (a list, one (4 lanes, bins) array per :data:`STATE_NAMES`), each row
+    in the state of its own lane; and (c,) the state of each change, its lane's speed on
+    the vehicle's last row before it crossed (the vehicle itself counted, as in the
+    passages and in the twin's draw)."""
+    if not len(grid):
+        empty = np.zeros((len(LANES), x_edges.size - 1))
+        return [empty.copy() for _ in STATE_NAMES], np.zeros(len(changes), np.int64)
+    speeds = lane_speeds(grid)
+    own_lane = np.maximum(-grid.lane.astype(np.int64) - 1, 0)
+    row_state = traffic_state(speeds[np.arange(len(grid)), own_lane])
+    passing = [passages(grid, x_edges, row_state == s) for s in range(len(STATE_NAMES))]
+    span = int(grid.k.max()) + 2
+    key = grid.tid.astype(np.int64) * span + grid.k
+    step = np.round((changes.time - grid.t0) / grid.dt).astype(np.int64)
+    row = np.searchsorted(key, changes.tid.astype(np.int64) * span + step)
+    before = np.clip(row - 1, 0, len(grid) - 1)  # a change is never a track's first row
+    left = np.maximum(-changes.lane_from.astype(np.int64) - 1, 0)
+    return passing, traffic_state(speeds[before, left])
+
+
 def passages(grid: GridTraffic, x_edges: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
     """(4 lanes, bins) vehicles passing each position bin in each lane (vehicle-km
     driven there over the bin's length); ``rows``: (n,) bool, only those rows."""
@@ -108,6 +130,11 @@ def passages(grid: GridTraffic, x_edges: np.ndarray, rows: np.ndarray | None = N
     out = np.zeros((len(LANES), x_edges.size - 1))
     np.add.at(out, (-grid.lane[on][inside].astype(np.int64) - 1, at[inside]), distance[on][inside])
     return out / np.diff(x_edges)
+
+
+def grid_edges(grid: GridTraffic) -> np.ndarray:
+    """[m] :func:`flow_edges` covering ``grid``'s positions."""
+    return flow_edges(float(grid.x.min()), float(grid.x.max())) if len(grid) else flow_edges(0, 0)
 
 
 def flow_edges(x_min: float, x_max: float) -> np.ndarray:
@@ -137,6 +164,7 @@ def lane_change_flows(
     explained: np.ndarray,
     *,
     min_strategic: int = MIN_STRATEGIC,
+    states: tuple | None = None,
 ) -> dict:
     """The recording's lane-change flows (module doc) as a JSON-ready dict.
 
@@ -145,10 +173,10 @@ def lane_change_flows(
         explained: (c,) bool, :func:`explained_by_mobil` of each change.
         min_strategic: fewer strategic changes than this identify no strategic flow
             (``identified`` false, with the reason in ``note``).
+        states: :func:`traffic_states` of ``grid``, ``changes`` and the flows' bins
+            (computed when None; the calibration's refits pass them once made).
     """
-    x_edges = (
-        flow_edges(float(grid.x.min()), float(grid.x.max())) if len(grid) else flow_edges(0, 0)
-    )
+    x_edges = grid_edges(grid)
     t0 = float(grid.t0)
     t1 = t0 + float(grid.k.max()) * grid.dt if len(grid) else t0
     t_edges = np.arange(0.0, max(t1 - t0, 0.0) + TIME_BIN, TIME_BIN)
@@ -158,15 +186,9 @@ def lane_change_flows(
         np.searchsorted(t_edges, changes.time - t0, side="right") - 1, 0, max(t_edges.size - 2, 0)
     )
     passing = passages(grid, x_edges)
-    # the traffic state of each row (its own lane's speed) and of each change (the lane left)
-    own_lane = np.maximum(-grid.lane.astype(np.int64) - 1, 0)[:, None]
-    row_state = (
-        traffic_state(np.take_along_axis(lane_speeds(grid), own_lane, 1)[:, 0])
-        if len(grid)
-        else np.zeros(0, np.int64)
-    )
-    passing_by_state = [passages(grid, x_edges, row_state == s) for s in range(len(STATE_NAMES))]
-    change_state = traffic_state(changes.speed_from)
+    if states is None:
+        states = traffic_states(grid, changes, x_edges)
+    passing_by_state, change_state = states
     pairs, strategic = {}, {}
     position = by_position(changes, x_edges)
     for name, counts in position["pairs"].items():

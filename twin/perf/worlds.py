@@ -78,10 +78,11 @@ def worlds_bench(store, out, config, *, workers: int = 1, progress: bool = False
 def compare(frames: dict, summaries: dict, config) -> dict:
     """The comparison of the two worlds' rows (``frames``: world -> the evaluation's
     ``episodes.parquet``) and summaries."""
+    from twin.runners.evaluation import ran_rows
+
     physics, kinematic = (frames[w] for w in WORLD_ORDER)
-    ran = physics["skipped"].isna()
     key = ["episode", "arm"]
-    both = physics[ran].merge(kinematic[kinematic["skipped"].isna()], on=key, suffixes=("_p", "_k"))
+    both = ran_rows(physics).merge(ran_rows(kinematic), on=key, suffixes=("_p", "_k"))
     rmse = np.array(
         [speed_rmse(a, b) for a, b in zip(both["ego_speeds_p"], both["ego_speeds_k"], strict=True)]
     )

@@ -22,7 +22,9 @@ A run that is interrupted keeps its finished results; the same command resumes i
 import json
 import math
 import os
+import shlex
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -238,8 +240,11 @@ def evaluate(
             def save(k: int, rows: list[dict]) -> None:
                 _, chunk, arm, _ = jobs[k]
                 for spec, row in zip(chunk, rows, strict=True):
+                    repeat = out / FAILED / f"{spec.index:06d}-{arm[0]}.toml"
                     if row.get("failed"):
-                        row["repeat"] = _repeat_command(out, config, spec, arm, store)
+                        row["repeat"] = _repeat_command(repeat, config, spec, arm, store)
+                    else:
+                        repeat.unlink(missing_ok=True)  # a retry that ran
                     with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
                         tmp.write_text(json.dumps(row, allow_nan=False) + "\n")
                 bar.update(len(rows))
@@ -309,17 +314,17 @@ def _done(path: Path) -> bool:
         return True  # damaged: assemble names it
 
 
-def _repeat_command(out: Path, config: EvalConfig, spec: EpisodeSpec, arm: tuple, store) -> str:
-    """Write the failed episode's resolved settings beside its result
-    (``failed/NNNNNN-ARM.toml``) and return the ``twin run`` that repeats it."""
+def _repeat_command(path: Path, config: EvalConfig, spec: EpisodeSpec, arm: tuple, store) -> str:
+    """Write the failed episode's resolved settings to ``path`` (``failed/NNNNNN-ARM.toml``
+    in the evaluation folder) and return the ``twin run`` that repeats it."""
     from twin.cosim.config import to_toml
 
     cosim, _ = _episode(config, spec, arm)
-    path = out / FAILED / f"{spec.index:06d}-{arm[0]}.toml"
     path.parent.mkdir(exist_ok=True)
     with atomic_file(path) as tmp:
         tmp.write_text(to_toml(cosim))
-    return f"twin run --data {store.path} --config {path}"
+    data, settings = (shlex.quote(str(p.resolve())) for p in (store.path, path))
+    return f"twin run --data {data} --config {settings}"
 
 
 def ran_rows(frame):
@@ -370,8 +375,16 @@ def _run_chunk(config: EvalConfig, chunk: list, arm: tuple, location) -> list[di
     if _batched(config, arm):
         try:
             return _run_batch(config, chunk, arm, location)
-        except Exception:  # which episode failed: each alone, each recorded
-            pass
+        except StoreError:
+            raise
+        except Exception as error:  # which episode failed: each alone, each recorded
+            rows = [_failsafe(config, spec, arm, location) for spec in chunk]
+            if len(chunk) > 1 and all(row.get("failed") for row in rows):
+                raise EvaluationError(  # the same for every episode: not one episode's
+                    f"every episode of a batch failed ({rows[0]['failed']}); the batch: "
+                    f"{type(error).__name__}: {error}"
+                ) from error
+            return rows
     return [_failsafe(config, spec, arm, location) for spec in chunk]
 
 
@@ -384,7 +397,12 @@ def _failsafe(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> di
         raise  # the data are gone or damaged: every episode would fail the same way
     except Exception as error:
         _, row = _episode(config, spec, arm)
-        return {**row, "skipped": None, "failed": f"{type(error).__name__}: {error}"}
+        where = traceback.extract_tb(error.__traceback__)[-1]
+        return {
+            **row,
+            "skipped": None,
+            "failed": f"{type(error).__name__}: {error} (at {where.filename}:{where.lineno})",
+        }
 
 
 def _run_one(config: EvalConfig, spec: EpisodeSpec, arm: tuple, location) -> dict:

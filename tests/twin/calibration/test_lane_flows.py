@@ -222,7 +222,9 @@ def test_the_refit_keeps_the_first_fit_where_too_few_decisions_lie_away(monkeypa
         "strategic": {"-4>-3": {"by_position": [3], "probability": [0.2]}},
         "strategic_count": 3,
     }
-    monkeypatch.setattr(calibrate, "lane_change_flows", lambda *args: dict(flows))
+    monkeypatch.setattr(calibrate, "lane_change_flows", lambda *args, **kwargs: dict(flows))
+    monkeypatch.setattr(calibrate, "grid_edges", lambda grid: None)
+    monkeypatch.setattr(calibrate, "traffic_states", lambda *args: None)
     monkeypatch.setattr(calibrate, "explained_by_mobil", lambda *args: np.zeros(1, bool))
     incentives = Incentives(
         tid=np.array([1, 1]),
@@ -245,3 +247,15 @@ def test_the_refit_keeps_the_first_fit_where_too_few_decisions_lie_away(monkeypa
     )
     assert mobil["threshold"] == fit_threshold(incentives, 1)["threshold"] > 0.0
     assert "too few" in mobil["note"]
+
+
+def test_a_change_is_in_the_state_of_the_lane_it_left_the_vehicle_itself_counted():
+    from twin.calibration.lane_flows import STATE_NAMES, grid_edges, traffic_states
+
+    # one vehicle alone, crawling in lane -3, leaves it for lane -2 at 600 m: its lane
+    # was a queue (before, the lane was judged without it: empty, so free)
+    grid = _grid([(0, -3, 600.0, -2)], speeds=[3.0])
+    changes = lane_changes(grid)
+    passing, state = traffic_states(grid, changes, grid_edges(grid))
+    assert [STATE_NAMES[s] for s in state] == ["queue"]
+    assert passing[0].sum() > 0 and passing[2].sum() == 0

@@ -168,6 +168,7 @@ def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_m
     failed = frame[frame["failed"].notna()]
     assert failed["episode"].tolist() == [1]  # the second; the first and third ran
     assert "returned accel nan" in failed["failed"].iloc[0]
+    assert "controller_api.py:" in failed["failed"].iloc[0]  # where it was raised
     ran = frame[frame["failed"].isna()]
     assert ran["ego_speed_rmse_mps"].notna().all() and failed["ego_speed_rmse_mps"].isna().all()
     entry = result.summary["controllers"]["fails_in_its_second_episode"]
@@ -177,7 +178,7 @@ def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_m
     # the command that repeats it: twin run with the episode's settings
     repeat = entry["failures"][0]["repeat"]
     toml = out / "failed" / "000001-fails_in_its_second_episode.toml"
-    assert repeat == f"twin run --data {calibrated.path} --config {toml}"
+    assert repeat == f"twin run --data {calibrated.path.resolve()} --config {toml.resolve()}"
     assert f"ego_controller = \"{name}\"" in toml.read_text()
     lines = failure_lines(result.summary)
     assert "1 episode run failed" in lines[0] and "returned accel nan" in lines[1]
@@ -186,6 +187,5 @@ def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_m
     _MADE.clear()
     again = evaluate(calibrated, out, config, workers=1, bundle=built_map, progress=False)
     assert again.runs_done_now == 1
-    assert "failed" not in pd.read_parquet(out / "episodes.parquet") or not failure_lines(
-        again.summary
-    )
+    assert "failed" not in pd.read_parquet(out / "episodes.parquet")
+    assert not failure_lines(again.summary) and not toml.exists()

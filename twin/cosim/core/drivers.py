@@ -378,7 +378,8 @@ def flow_arrays(flows: dict | None) -> tuple:
     states = np.asarray(flows["states"]["speeds"] if conditioned else [], dtype=np.float64)
     if states.size != len(names) - 1 or np.any(np.diff(states) <= 0):
         raise CalibrationDataError(
-            "calibration: lane_flows.states needs one speed fewer than names, increasing"
+            "calibration: lane_flows.states needs one speed fewer than names, increasing; "
+            f"got names {names}, speeds {states.tolist()}"
         )
     shape = (len(names), 4, edges.size - 1)
     left, right = np.zeros(shape), np.zeros(shape)
@@ -520,7 +521,12 @@ def flow_probabilities(flows: dict, n_bins: int, state: str | None = None) -> di
     out = {}
     for name, s in flows["strategic"].items():
         a, b = (int(v) for v in name.split(">"))
-        p = s["probability"] if state is None else s["probability_by_state"][state]
+        p = s["probability"] if state is None else s["probability_by_state"].get(state)
+        if p is None:
+            raise CalibrationDataError(
+                f"calibration: lane_flows.strategic[{name!r}] has no probability for the "
+                f"traffic state {state!r}"
+            )
         p = np.asarray(p, dtype=np.float64)
         if p.shape != (n_bins,):
             raise CalibrationDataError(

@@ -167,7 +167,7 @@ def driver_limit(command, emergency, tyre, brake_limit, max_accel):
     """[m/s^2] a driver's ``command`` as its vehicle applies it: braking within the
     driver's ``brake_limit`` share of the tyres' grip ``tyre`` [m/s^2] (all of it in an
     ``emergency``, where the command may be -inf: no room left), accelerating within
-    ``max_accel``. Always finite."""
+    ``max_accel``. Finite for any command but NaN."""
     low = -tyre if emergency else -brake_limit * tyre
     return min(max(command, low), max_accel)
 
@@ -194,7 +194,8 @@ def limit(b, t):
             continue
         kind = ctrl[b, i] % state.GUARDED
         tyre = mu[b, i] * GRAVITY
-        if kind == state.DRIVER:
+        if kind == state.DRIVER or kind == state.HUMAN:  # human: the driver's command
+            # as its vehicle applies it, as a Python controller is shown it
             accel_out[b, i] = driver_limit(
                 command[b, i], emergency[b, i], tyre, brake_limit, params[b, i, column]
             )
