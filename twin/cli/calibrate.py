@@ -60,7 +60,8 @@ def register(commands) -> None:
         help="where this window has too few accepted car-following fits (no waves to fit "
         "them on), take the drivers' car following from this calibration (the same "
         "drivers on another morning, fitted with the same --model); the lane changes, "
-        "their flows, the threshold, desired speeds and merges are still fitted here",
+        "their flows, the threshold, desired speeds and merges are still fitted here "
+        "(default: none, such a road is not calibrated)",
     )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
