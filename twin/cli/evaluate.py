@@ -82,7 +82,8 @@ def add_eval_options(p) -> None:
 def _eval(args) -> int:
     import sys
 
-    from twin.runners.evaluation import evaluate, failure_lines, summary_lines
+    from twin.runners.evaluation import evaluate, summary_lines
+    from twin.runners.failures import failure_lines
 
     store = open_data(args.data, progress=not args.quiet)
     config = eval_config(args, store)

@@ -30,8 +30,8 @@ from twin.runners.evaluation import (
     EvaluationError,
     evaluate,
     folder_line,
-    ran_rows,
 )
+from twin.runners.failures import ran_rows
 
 REFERENCE = "human"
 BOOTSTRAP = 10_000

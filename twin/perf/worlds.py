@@ -78,7 +78,7 @@ def worlds_bench(store, out, config, *, workers: int = 1, progress: bool = False
 def compare(frames: dict, summaries: dict, config) -> dict:
     """The comparison of the two worlds' rows (``frames``: world -> the evaluation's
     ``episodes.parquet``) and summaries."""
-    from twin.runners.evaluation import ran_rows
+    from twin.runners.failures import ran_rows
 
     physics, kinematic = (frames[w] for w in WORLD_ORDER)
     key = ["episode", "arm"]

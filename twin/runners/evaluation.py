@@ -22,7 +22,6 @@ A run that is interrupted keeps its finished results; the same command resumes i
 import json
 import math
 import os
-import shlex
 import time
 import traceback
 from collections.abc import Callable
@@ -52,6 +51,7 @@ from twin.runners.episodes import (
     measure_cells,
     reset_or_skip,
 )
+from twin.runners.failures import done, ran_rows, repeat_command, repeat_path
 from twin.runners.folders import claim
 from twin.traffic.baselines import BASELINES
 
@@ -59,7 +59,6 @@ FORMAT = "i24-twin-eval"
 VERSION = 1
 IDENTITY = "eval.json"
 RESULTS = "results"
-FAILED = "failed"  # the settings of failed episodes, for the twin run that repeats one
 CONGESTED_TRAVEL = 13.4  # [m/s] room is kept ahead of an episode's ego for this speed
 
 #: Baseline controllers named without their module (``--controller human,acc``).
@@ -240,9 +239,10 @@ def evaluate(
             def save(k: int, rows: list[dict]) -> None:
                 _, chunk, arm, _ = jobs[k]
                 for spec, row in zip(chunk, rows, strict=True):
-                    repeat = out / FAILED / f"{spec.index:06d}-{arm[0]}.toml"
+                    repeat = repeat_path(out, spec.index, arm[0])
                     if row.get("failed"):
-                        row["repeat"] = _repeat_command(repeat, config, spec, arm, store)
+                        cosim, _ = _episode(config, spec, arm)
+                        row["repeat"] = repeat_command(repeat, cosim, store)
                     else:
                         repeat.unlink(missing_ok=True)  # a retry that ran
                     with atomic_file(_result_path(out, spec.index, arm[0])) as tmp:
@@ -295,45 +295,13 @@ def _jobs(config: EvalConfig, specs, out: Path, location, workers: int) -> list[
     :data:`BATCH`, and enough chunks to keep the workers busy), else one per job."""
     jobs = []
     for arm in config.arms:
-        todo = [s for s in specs if not _done(_result_path(out, s.index, arm[0]))]
+        todo = [s for s in specs if not done(_result_path(out, s.index, arm[0]))]
         size = BATCH if _batched(config, arm) else 1
         if size > 1:
             size = max(1, min(size, -(-len(todo) // max(workers, 1))))
         for k in range(0, len(todo), size):
             jobs.append((config, todo[k : k + size], arm, location))
     return jobs
-
-
-def _done(path: Path) -> bool:
-    """An episode's result is in (a failed one runs again when the evaluation resumes)."""
-    if not path.is_file():
-        return False
-    try:
-        return not json.loads(path.read_text()).get("failed")
-    except (ValueError, AttributeError):
-        return True  # damaged: assemble names it
-
-
-def _repeat_command(path: Path, config: EvalConfig, spec: EpisodeSpec, arm: tuple, store) -> str:
-    """Write the failed episode's resolved settings to ``path`` (``failed/NNNNNN-ARM.toml``
-    in the evaluation folder) and return the ``twin run`` that repeats it."""
-    from twin.cosim.config import to_toml
-
-    cosim, _ = _episode(config, spec, arm)
-    path.parent.mkdir(exist_ok=True)
-    with atomic_file(path) as tmp:
-        tmp.write_text(to_toml(cosim))
-    data, settings = (shlex.quote(str(p.resolve())) for p in (store.path, path))
-    return f"twin run --data {data} --config {settings}"
-
-
-def ran_rows(frame):
-    """The rows of ``frame`` (``episodes.parquet``) whose episode ran: not skipped (no
-    room for the ego) and not failed."""
-    ran = frame["skipped"].isna() if "skipped" in frame else np.ones(len(frame), bool)
-    if "failed" in frame:
-        ran &= frame["failed"].isna()
-    return frame[ran]
 
 
 def _batched(config: EvalConfig, arm: tuple) -> bool:
@@ -739,23 +707,6 @@ def folder_line(result: EvalResult) -> str:
         f"evaluation folder: {result.folder} (ran {result.runs_done_now} now, "
         f"{result.total_s:.0f} s)"
     )
-
-
-def failure_lines(summary: dict) -> list[str]:
-    """Lines naming each failed episode run, its error and the ``twin run`` that
-    repeats it (none when every episode ran or was skipped)."""
-    key = "controllers" if "controllers" in summary else "behaviours"
-    failures = [(arm, f) for arm, e in summary[key].items() for f in e.get("failures", [])]
-    if not failures:
-        return []
-    lines = [
-        f"{len(failures)} episode run{'s' if len(failures) > 1 else ''} failed (recorded as "
-        "failed, not in the figures; the others ran; rerunning the command retries them):"
-    ]
-    for arm, f in failures:
-        lines.append(f"  episode {f['episode']} ({arm}): {f['error']}")
-        lines.append(f"    repeat: {f['repeat']}")
-    return lines
 
 
 def summary_lines(result: EvalResult) -> str:

@@ -92,14 +92,14 @@ def test_flows_without_states_draw_as_before_whatever_the_speed():
     flows = _flows(0.5, 0.2)
     a = [_draw(flows, key, speed=1.0) for key in range(300)]
     assert a == [_draw(flows, key, speed=30.0) for key in range(300)]
-    edges, left, right, lanes, states = flow_arrays(flows)
+    _, left, _, _, states = flow_arrays(flows)
     assert left.shape == (1, 4, 8) and states.size == 0
 
 
 def test_malformed_state_flows_are_named():
     flows = _by_state(1.0, 0.5, 0.0)
     flows["states"]["speeds"] = [15.0, 5.0]
-    with pytest.raises(CalibrationDataError, match="lane_flows.states"):
+    with pytest.raises(CalibrationDataError, match=r"lane_flows\.states"):
         flow_arrays(flows)
     flows = _by_state(1.0, 0.5, 0.0)
     flows["strategic"]["-3>-2"]["probability_by_state"]["free"] = [0.0] * 3

@@ -156,7 +156,7 @@ def fails_in_its_second_episode(config):
 
 
 def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_map, tmp_path):
-    from twin.runners.evaluation import failure_lines
+    from twin.runners.failures import failure_lines
 
     name = f"{__name__}:fails_in_its_second_episode"
     config = _config(episodes=3, behaviours=("calibrated",), controllers=(name,))
@@ -179,7 +179,7 @@ def test_a_failing_episode_is_recorded_and_the_sweep_goes_on(calibrated, built_m
     repeat = entry["failures"][0]["repeat"]
     toml = out / "failed" / "000001-fails_in_its_second_episode.toml"
     assert repeat == f"twin run --data {calibrated.path.resolve()} --config {toml.resolve()}"
-    assert f"ego_controller = \"{name}\"" in toml.read_text()
+    assert f'ego_controller = "{name}"' in toml.read_text()
     lines = failure_lines(result.summary)
     assert "1 episode run failed" in lines[0] and "returned accel nan" in lines[1]
     assert "Failed episodes (1)" in (out / "summary.md").read_text()
