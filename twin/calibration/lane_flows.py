@@ -28,7 +28,13 @@ import math
 
 import numpy as np
 
-from twin.calibration.following import GridTraffic, LaneChanges, distance_driven, lane_speeds
+from twin.calibration.following import (
+    SPEED_BINS,
+    GridTraffic,
+    LaneChanges,
+    distance_driven,
+    lane_speeds,
+)
 from twin.calibration.lane_changes import Incentives
 from twin.core.i24 import LANES
 
@@ -47,7 +53,7 @@ KEEP_OUT_SHARE = 0.5
 #: [m/s] the lane speeds that part the traffic states a strategic flow is conditioned
 #: on (module doc): a queue below the first, congested traffic up to the second, free
 #: flow above
-STATE_SPEEDS = (5.0, 15.0)
+STATE_SPEEDS = SPEED_BINS[1:3]  # 5 and 15 m/s: the lane-change rates' bins
 STATE_NAMES = ("queue", "congested", "free")
 #: [vehicles] what the pooled probability weighs against a state's own passages in a bin
 PRIOR_PASSAGES = 20.0
