@@ -11,7 +11,8 @@ else in it (the recorded data are never touched)::
                                   errors, desired speeds per lane, lane-change rates,
                                   the lane-change flows by lane pair, position and time
                                   (discretionary and strategic) and the fitted MOBIL
-                                  threshold, and where each on-ramp's vehicles merge
+                                  threshold, where each on-ramp's vehicles merge and
+                                  how lane -4 yields to them
       calibration_fits.parquet    one row per fitted follower: its parameters, errors,
                                   at-bound flags and whether the fit was accepted
       lane_flows_ROAD.png         the lane-change flows by position and lane pair
@@ -55,6 +56,7 @@ from twin.calibration.lane_flows import (
     traffic_states,
 )
 from twin.calibration.merge_positions import describe_merges, merge_section
+from twin.calibration.yielding import describe_yielding, yielding_section
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
 from twin.core.i24 import Road
@@ -287,6 +289,7 @@ def _calibrate_road(store, road, window, settings, model, progress, taken=None):
         keep_right=settings.mobil.keep_right,
     )
     t0, t1 = float(grid.time.min()), float(grid.time.max())
+    with_ramps = store.samples(road, t0, t1, ramps=True)
     section = {
         "window": {
             "from": t0,
@@ -300,7 +303,8 @@ def _calibrate_road(store, road, window, settings, model, progress, taken=None):
         "lane_changes": lane_change_rates(changes),
         "lane_flows": flows,
         "mobil": mobil,
-        "merges": merge_section(store.samples(road, t0, t1, ramps=True), road),
+        "merges": merge_section(with_ramps, road),
+        "yielding": yielding_section(grid, with_ramps, model, driver),
     }
     return section, fits
 
@@ -555,4 +559,5 @@ def describe_calibration(doc: dict | None) -> str:
             lines.append(f"      MOBIL threshold {mobil['note']}")
         lines += describe_flows(section.get("lane_flows", {}))
         lines += describe_merges(section.get("merges", []))
+        lines += describe_yielding(section.get("yielding"))
     return "\n".join(lines)

@@ -11,6 +11,11 @@ recording (``twin calibrate``).
   the calibrated threshold for discretionary changes, and the strategic changes the
   recording's lane-change flows show (a lane left near a place for a reason beyond
   the window), drawn per vehicle (:mod:`twin.cosim.strategic_targets`).
+  With ``traffic.calibrated_yielding``, the cooperative layer's drivers who make room
+  for an urgent change (``traffic.yield_from``, ``traffic.courtesy``,
+  ``traffic.cooperative_decel``) yield as the recording's lane -4 drivers yield to the
+  on-ramps' merging vehicles, where the calibration identified it
+  (:mod:`twin.calibration.yielding`), in ``calibrated`` and ``recorded`` alike.
 - ``recorded``: each vehicle gets the parameters fitted to its own recording (a
   calibrated draw where its fit is missing or was rejected), and makes the lane
   changes its recording makes, where its recording makes them (target lane and place),
@@ -35,6 +40,7 @@ import numpy as np
 from twin.calibration import following
 from twin.calibration.calibrate import calibration_model, read_calibration, read_fits
 from twin.calibration.distributions import ParameterDistribution, class_group
+from twin.calibration.yielding import cooperation
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
@@ -116,6 +122,7 @@ class Behaviour:
         self.strategic_flows: dict | None = None
         self.keep_out: list = []  # lanes kept out of (calibrated): lane_flows.keep_out
         self.merges: list | None = None  # where the on-ramps' vehicles merge (merge_positions)
+        self.cooperation: dict[str, float] = {}  # lane -4's yielding to merges (yielding.py)
         self.calibrated_at: str | None = None  # when the calibration driven by was made
         if self.name == "paper":
             return
@@ -155,6 +162,7 @@ class Behaviour:
             self.strategic_flows = flows
             self.keep_out = list(flows.get("keep_out", []))
         self.merges = section.get("merges")
+        self.cooperation = cooperation(section.get("yielding"))
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])
         if self.name == "recorded":

@@ -45,7 +45,18 @@ class TrafficConfig:
         cooperate_from: [-] a strategic driver's urgency (0 at the place it starts to
             want its change, 1 where it must have made it) from which the driver behind
             it in the target lane drops back to make room (above 1: never).
+        yield_from: [-] the urgency from which the driver behind drops back (where it
+            is above ``cooperate_from``; the urgent driver settles from
+            ``cooperate_from``).
         cooperative_decel: [m/s^2] the most a driver brakes to make that room.
+        courtesy: [-] the share of drivers who make that room (drawn once per driver;
+            the others keep to their own leader).
+        calibrated_yielding: whether the ``calibrated`` and ``recorded`` behaviours set
+            ``yield_from``, ``courtesy`` and ``cooperative_decel`` from how the
+            recording's lane -4 yields to the on-ramps' merges (``calibration.json``'s
+            ``yielding``, where identified). Off by default: the twin's merging drivers
+            seek no gap of their own, and with the recording's yielding fewer merges
+            were done in time (docs: Cooperation).
         urgent_path: [m] the shortest path of an urgent (strategic) lane change: a
             driver who must leave its lane noses across a queue in about three car
             lengths, where a discretionary change keeps a path made for 5 m/s.
@@ -70,7 +81,10 @@ class TrafficConfig:
     path_preview: float = 0.1
     max_lateral_accel: float = 4.0
     cooperate_from: float = 0.3
+    yield_from: float = 0.0
     cooperative_decel: float = 1.5
+    courtesy: float = 1.0
+    calibrated_yielding: bool = False
     urgent_path: float = 15.0
     seed: int = 0
 
@@ -101,6 +115,10 @@ class TrafficConfig:
         low, high = self.lane_change_time
         if not 0 < low <= high:
             raise ValueError(f"lane_change_time must be 0 < low <= high, got {(low, high)}")
+        if not (math.isfinite(self.yield_from) and self.yield_from >= 0):
+            raise ValueError(f"TrafficConfig.yield_from must be >= 0, got {self.yield_from!r}")
+        if not 0 <= self.courtesy <= 1:
+            raise ValueError(f"TrafficConfig.courtesy must be in 0..1, got {self.courtesy!r}")
         if not 0 <= self.hov_share <= 1:
             raise ValueError(f"hov_share must be in 0..1, got {self.hov_share}")
         if not 0 < self.brake_limit <= 1:

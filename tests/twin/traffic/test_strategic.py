@@ -55,6 +55,52 @@ def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map):
     assert np.all(record.lane[:, column] == -3)
 
 
+def _follower_beside_an_urgent_merger(world, built_map, **settings):
+    """Lane -2 one car 10 m behind the back of a merger in lane -3 that must move left,
+    on a free road at 15 m/s, the merger's urgency 0.8 at the start and growing 0.06 a
+    second. Returns (the follower's speeds, whether the merger changed) over 6 s."""
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1, **settings)
+    follower = spawn(world, manager, 1, -2, 162.0, SPEED)
+    merger = spawn(world, manager, 1, -3, 172.0, SPEED)
+    manager.set_desired_speed(np.r_[follower, merger], np.full(2, SPEED))
+    centre = 172.0 + 0.5 * world.params_of(merger).length[0]
+    manager.set_strategic(merger, 1, centre - 200.0, centre + 50.0)
+    record = run(world, manager, 6.0)
+    ids = world.states().id
+    behind = record.speed[:, int(np.flatnonzero(ids == follower[0])[0])]
+    changed = np.any(record.lane[:, int(np.flatnonzero(ids == merger[0])[0])] == -2)
+    return behind, changed
+
+
+@pytest.mark.parametrize("courtesy", [1.0, 0.0])
+def test_only_a_courteous_driver_drops_back_for_an_urgent_change(kinematic, built_map, courtesy):
+    # a courteous follower brakes to open the gap and the merger takes it; one that is
+    # not keeps its speed, and the merger, with no room, stays beside it
+    behind, changed = _follower_beside_an_urgent_merger(kinematic, built_map, courtesy=courtesy)
+    if courtesy == 1.0:
+        assert behind.min() < SPEED - 1.5 and changed
+    else:
+        assert behind.min() == pytest.approx(SPEED) and not changed
+
+
+def test_the_driver_behind_drops_back_only_from_yield_from(kinematic, built_map):
+    # the merger's urgency reaches 0.9 after about 1.7 s: until then its follower keeps
+    # its speed, then it drops back
+    behind, changed = _follower_beside_an_urgent_merger(kinematic, built_map, yield_from=0.9)
+    assert behind[:12].min() == pytest.approx(SPEED)
+    assert behind.min() < SPEED - 1.0 and changed
+
+
+def test_courtesy_is_a_share_of_the_drivers_drawn_once_each():
+    from twin.core.jit import uniform
+    from twin.traffic.kernels.longitudinal import COURTESY_STREAM
+
+    draws = np.array([uniform(np.int64(7), COURTESY_STREAM, np.int64(k), 0) for k in range(4000)])
+    assert abs((draws < 0.3).mean() - 0.3) < 0.03  # the share asked for
+    again = [uniform(np.int64(7), COURTESY_STREAM, np.int64(k), 0) for k in range(5)]
+    assert draws[:5].tolist() == again  # one draw per driver: the same at every step
+
+
 def test_urgency_grows_from_its_start_to_its_place_and_targets_expire():
     manager, params = point_mass_manager(np.full(2, -3), 0)
     manager.add([0, 1], 1, -3, params)

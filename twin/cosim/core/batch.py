@@ -138,7 +138,11 @@ class Shared:
         )  # fmt: skip
         zones = [(z["lane"], z["x0"], z["x1"]) for z in beh.keep_out]
         ends = [(RAMP_LANE, end) for *_, end in cs.merges]
-        ts = traffic_settings(config.traffic, mean, keep_out=zones, lane_ends=ends,
+        # lane -4's yielding to merges as the recording's drivers yield, where asked
+        drive = config.traffic
+        if drive.calibrated_yielding:
+            drive = replace(drive, **beh.cooperation)
+        ts = traffic_settings(drive, mean, keep_out=zones, lane_ends=ends,
                               controller=config.controller, action=action)  # fmt: skip
         return cls(config, store, bundle, traffic, rec, params, beh, arrays, cs, ts, limits)
 

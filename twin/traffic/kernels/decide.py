@@ -41,7 +41,9 @@ TrafficSettings = namedtuple(
     "TrafficSettings",
     "model max_accel_column dt decision_interval decision_steps lane_change_low "
     "lane_change_high emergency_decel emergency_margin reaction_time brake_limit "
-    "lateral_gain path_preview max_lateral_accel cooperate_from cooperative_decel urgent_path "
+    "lateral_gain path_preview max_lateral_accel cooperate_from yield_from cooperative_decel "
+    "courtesy "
+    "urgent_path "
     "hov_openings keep_out lane_ends obstacle_cf "
     "action_speed action_gain action_low action_high "
     "fs_desired fs_dx0 fs_decel fs_gain fs_max_accel fs_max_decel "
@@ -89,7 +91,9 @@ def settings(
         path_preview=float(config.path_preview),
         max_lateral_accel=float(config.max_lateral_accel),
         cooperate_from=float(config.cooperate_from),
+        yield_from=float(config.yield_from),
         cooperative_decel=float(config.cooperative_decel),
+        courtesy=float(config.courtesy),
         urgent_path=float(config.urgent_path),
         hov_openings=np.array(config.hov_openings, dtype=np.float64).reshape(-1, 2),
         keep_out=zones.reshape(-1, 3),
@@ -130,7 +134,7 @@ def decide(b, step, time, seed, t):
     valid, strategic, top = t.vehicles.valid, t.drivers.strategic, t.vehicles.top[b]
     for i in range(top):
         if valid[b, i] and strategic[b, i] != 0:
-            cooperate(b, t)
+            cooperate(b, seed, t)
             break
     _emergency(b, top, valid, sc.need, sc.cf_accel, sc.emergency, sc.command,
                settings.emergency_decel, counters.emergency_steps)  # fmt: skip

@@ -19,9 +19,13 @@ urgency)`` (at most ``emergency_decel``); past ``strategic_by`` it keeps trying 
 GIVE_UP metres beyond (:mod:`twin.traffic.kernels.lane_change`). Once its urgency is at
 least ``cooperate_from``, it settles behind the target lane's vehicle ahead of it (or
 alongside it, when that one is more than half a length past its back), and the driver
-behind that one drops back for it, each braking no harder than ``cooperative_decel``
-(:func:`cooperate`). An urgent change takes a shorter path than a discretionary one
-(``urgent_path``), so that a driver can get across a crawling queue as real drivers do.
+behind that one drops back for it, once the urgency is also at least ``yield_from``,
+if it is courteous (a share ``courtesy`` of the drivers, drawn once per driver), each
+braking no harder than ``cooperative_decel`` (:func:`cooperate`; the last three are
+calibrated from how the recording's lane -4 yields to the on-ramps' merges,
+:mod:`twin.calibration.yielding`). An urgent change takes a
+shorter path than a discretionary one (``urgent_path``), so that a driver can get across
+a crawling queue as real drivers do.
 
 **Lanes that end** (``lane_ends``: an on-ramp's acceleration lane, lane -5, where its
 taper ends) are a standing obstacle to the drivers in them: a driver who has not
@@ -32,12 +36,15 @@ metres past the end: the pavement's shoulder).
 
 import math
 
-from twin.core.jit import kernel
+import numpy as np
+
+from twin.core.jit import kernel, uniform
 from twin.traffic.kernels.models import follow_accel
 from twin.traffic.kernels.neighbours import around, leader_entry
 
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
 MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
+COURTESY_STREAM = np.int64(0x636F75)  # whether a driver is courteous: one draw per driver
 
 
 @kernel(inline=True)
@@ -162,9 +169,10 @@ def urgency(strategic, x_from, x_by, b, i, centre_x):
 
 
 @kernel
-def cooperate(b, t):
+def cooperate(b, seed, t):
     """``cf_accel`` with the urgent drivers settling behind their target lane's vehicle
-    and the one behind it dropping back (module doc)."""
+    and the one behind it dropping back where it is courteous (module doc; ``seed``: the
+    run's, of the courtesy draws)."""
     vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
     valid = vehicles.valid
     lane_to, lane_from, params = drivers.lane, drivers.lane_from, drivers.cf
@@ -172,14 +180,17 @@ def cooperate(b, t):
     key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
     sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
     model, obstacle = settings.model, settings.obstacle_cf
-    start, most = settings.cooperate_from, settings.cooperative_decel
+    start, most, courtesy = settings.cooperate_from, settings.cooperative_decel, settings.courtesy
+    yield_from = settings.yield_from
+    key_of = drivers.key
     n = valid.shape[1]
     for i in range(vehicles.top[b]):
         if not valid[b, i] or strategic[b, i] == 0 or lane_to[b, i] != lane_from[b, i]:
             continue
         x = sx[b, i]
         length = slength[b, i]
-        if urgency(strategic, x_from, x_by, b, i, x + 0.5 * length) < start:
+        urge = urgency(strategic, x_from, x_by, b, i, x + 0.5 * length)
+        if urge < start:
             continue
         target = lane_to[b, i] + strategic[b, i]
         if not -4 <= target <= -1:
@@ -194,8 +205,10 @@ def cooperate(b, t):
             room = sx[b, ahead] - x - length
             behind_it = cf(model, params, obstacle, b, n, i, speed, sspeed[b, ahead], room)
             cf_accel[b, i] = min(cf_accel[b, i], max(behind_it, -most))
-        if behind < 0 or behind >= n:
+        if behind < 0 or behind >= n or urge < yield_from:
             continue
+        if courtesy < 1.0 and not courtesy > uniform(seed, COURTESY_STREAM, key_of[b, behind], 0):
+            continue  # not courteous: keeps to its own leader
         gap = x - sx[b, behind] - slength[b, behind]
         if gap < -0.5 * length:
             continue
