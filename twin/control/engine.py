@@ -35,10 +35,13 @@ class Episodes:
         weights: the reward's (fuel, gap, gap_max, ttc, ttc_min).
         low, high: the observation's bounds.
         base_seed: episode ``k`` is the same for every env with this seed.
+        safety: the drivers' emergency braking beneath the agent's command (the
+            baselines' safety layer; its time counted in ``safety_override_s``).
     """
 
     def __init__(self, store, bundle, cosim, cells, sampling, *, count: int, duration: float,
-                 action: str, weights, low, high, base_seed: int, traffic=None):  # fmt: skip
+                 action: str, weights, low, high, base_seed: int, traffic=None,
+                 safety: bool = False):  # fmt: skip
         self.cosim, self.cells, self.sampling = cosim, cells, sampling
         self.count, self.duration, self.base_seed = int(count), float(duration), int(base_seed)
         self.kinematic = cosim.world == "kinematic"
@@ -46,7 +49,8 @@ class Episodes:
             raise ValueError("the physics world runs one episode at a time")
         self.substeps = max(1, round(CONTROL_DT / cosim.dt))
         self.shared = Shared.make(store, bundle, cosim, traffic=traffic, action=action)
-        self.shared = self.shared.with_controllers(kinds.ACTION)
+        self.agent = kinds.ACTION + (kinds.GUARDED if safety else 0)
+        self.shared = self.shared.with_controllers(self.agent)
         self.bundle = bundle
         self.sim = None
         if self.kinematic:
@@ -116,7 +120,7 @@ class Episodes:
                 camera=replace(self.cosim.camera, enabled=False),
             )  # fmt: skip
             sim = Cosimulator(config, self.shared.traffic, self.bundle,
-                              shared=replace(self.shared, config=config), ego_kind=kinds.ACTION,
+                              shared=replace(self.shared, config=config), ego_kind=self.agent,
                               log=False)  # fmt: skip
             try:
                 sim.reset()

@@ -117,6 +117,9 @@ class WaveDampeningEnv(gym.Env):
             switches with it, see :func:`twin.cosim.config.switch_world`); default:
             ``cosim``'s (physics).
         seed: the episodes' seed (episode ``i`` is the same for any ``reset`` order).
+        safety: the drivers' emergency braking beneath the agent's command, as the
+            baseline controllers have it (its time in ``metrics["safety_override_s"]``;
+            off by default: the agent's command is applied as it is).
 
     Raises:
         ValueError: a setting is impossible (named).
@@ -138,11 +141,12 @@ class WaveDampeningEnv(gym.Env):
         cosim: CosimConfig = SCENARIO_B,
         world: str | None = None,
         seed: int = 0,
+        safety: bool = False,
     ):
         setup = EnvSetup.make(
             data, split=split, split_time=split_time, duration=duration, action=action,
             reward=reward, obs_noise=obs_noise, latency_steps=latency_steps, cosim=cosim,
-            world=world, seed=seed,
+            world=world, seed=seed, safety=safety,
         )  # fmt: skip
         self.setup = setup
         self.store, self.bundle, self.cosim = setup.store, setup.bundle, setup.cosim
@@ -230,11 +234,12 @@ class EnvSetup:
     action: str
     reward: Reward
     seed: int
+    safety: bool = False
 
     @classmethod
     def make(cls, data=None, *, split="train", split_time=None, duration=120.0, action="accel",
              reward=None, obs_noise=0.0, latency_steps=0, cosim=SCENARIO_B, world=None,
-             seed=0) -> "EnvSetup":  # fmt: skip
+             seed=0, safety=False) -> "EnvSetup":  # fmt: skip
         """Raises: ValueError naming an impossible setting."""
         from twin.cosim.windows import road_limits
         from twin.runners.episodes import EpisodeSampling, measure_cells
@@ -272,7 +277,7 @@ class EnvSetup:
             _CELLS[key] = measure_cells(store, sampling, limits, float(duration), window=window,
                                         room_speed=CONGESTED_TRAVEL)  # fmt: skip
         return cls(store, bundle, traffic, cosim, _CELLS[key], sampling, float(duration), action,
-                   reward or Reward(), int(seed))  # fmt: skip
+                   reward or Reward(), int(seed), bool(safety))  # fmt: skip
 
     def action_space(self) -> gym.spaces.Box:
         low, high = ACCEL_RANGE if self.action == "accel" else SPEED_RANGE
@@ -286,6 +291,7 @@ class EnvSetup:
             duration=self.duration, action=self.action,
             weights=(w.fuel_weight, w.gap_weight, w.gap_max, w.ttc_weight, w.ttc_min),
             low=OBS_LOW, high=OBS_HIGH, base_seed=self.seed, traffic=self.traffic,
+            safety=self.safety,
         )  # fmt: skip
 
 

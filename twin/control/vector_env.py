@@ -53,6 +53,7 @@ class VectorWaveDampeningEnv(VectorEnv):
         latency_steps: as :class:`~twin.control.env.WaveDampeningEnv`'s.
         cosim: as :class:`~twin.control.env.WaveDampeningEnv`'s.
         seed: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        safety: as :class:`~twin.control.env.WaveDampeningEnv`'s.
 
     Raises:
         ValueError: a setting is impossible (named).
@@ -63,7 +64,7 @@ class VectorWaveDampeningEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, data: str | None = None, *, split="train",
                  split_time=None, duration=120.0, action="accel", reward=None, obs_noise=0.0,
                  latency_steps=0, cosim=SCENARIO_B, world: str | None = "kinematic",
-                 seed=0, autoreset_mode: str = "next_step"):  # fmt: skip
+                 seed=0, autoreset_mode: str = "next_step", safety=False):  # fmt: skip
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
@@ -77,7 +78,7 @@ class VectorWaveDampeningEnv(VectorEnv):
         setup = EnvSetup.make(
             data, split=split, split_time=split_time, duration=duration, action=action,
             reward=reward, obs_noise=obs_noise, latency_steps=latency_steps, cosim=cosim,
-            world=world, seed=seed,
+            world=world, seed=seed, safety=safety,
         )  # fmt: skip
         if setup.cosim.world != "kinematic":
             raise ValueError(

@@ -215,3 +215,25 @@ def test_stable_baselines3_trains_on_it(data, tmp_path):
     saved = train_ppo(tmp_path / "ppo", steps=64, n_steps=16, data=data, duration=2.0,
                       num_envs=4)  # fmt: skip
     assert saved.is_file()
+
+
+def test_with_the_safety_layer_an_agent_that_only_accelerates_is_held_back(data):
+    # full throttle for 20 s: without the safety layer the AV runs into its leader (or
+    # its followers brake for nothing); with it, the drivers' emergency braking steps
+    # in, counted in safety_override_s, and it does not collide
+    figures = {}
+    for safety in (False, True):
+        envs = VectorWaveDampeningEnv(2, data, duration=20.0, safety=safety, seed=2)
+        envs.reset(seed=2)
+        metrics = None
+        for _ in range(200):
+            _, _, terminated, truncated, info = envs.step(np.full((2, 1), 1.5, np.float32))
+            if "metrics" in info:
+                metrics = metrics or info["metrics"]
+            if (terminated | truncated).all():
+                break
+        envs.close()
+        figures[safety] = metrics
+    assert np.nansum(figures[False]["safety_override_s"]) == 0.0
+    assert np.nansum(figures[True]["safety_override_s"]) > 0.0
+    assert np.nansum(figures[True]["collisions"]) == 0
