@@ -53,7 +53,21 @@ SCALES = (1.0, 0.05, 0.05, 0.5, 0.05, 0.05, 0.05, 0.05)
 FOLLOW_LEADER = (0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 TIME_GAP_CAP = 10.0  # [s] the time gap feature is capped here (and is this with no leader)
 MEMORY = 30.0  # [s] of the mean-speed feature
-SHIPPED = Path(__file__).with_name("policies") / "wave_ars.json"
+POLICIES = Path(__file__).with_name("policies")  # the policies the twin ships, by name
+SHIPPED = POLICIES / "wave_ars.json"
+
+
+def shipped_policy(name: str) -> Path:
+    """The file of the policy the twin ships as ``name`` (``wave_ars``, ...).
+
+    Raises:
+        PolicyError: no such policy, naming those there are.
+    """
+    path = POLICIES / f"{name}.json"
+    if not path.is_file() or "/" in name or name.startswith("."):
+        names = ", ".join(sorted(p.stem for p in POLICIES.glob("*.json")))
+        raise PolicyError(f"no policy named {name!r}: the twin ships {names} (or give a path)")
+    return path
 
 
 class PolicyError(TwinError):
@@ -87,18 +101,13 @@ class LinearSpeedPolicy:
 
     def save(self, path: str | Path) -> Path:
         """Write the policy as JSON, atomically."""
-        path = Path(path)
-        document = {
+        return write_policy_document(path, {
             "format": FORMAT,
             "version": VERSION,
             "features": list(FEATURES),
             "weights": list(self.weights),
             "about": self.about,
-        }
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_file(path) as tmp:
-            tmp.write_text(json.dumps(document, indent=1, allow_nan=False) + "\n")
-        return path
+        })  # fmt: skip
 
     @classmethod
     def load(cls, path: str | Path) -> "LinearSpeedPolicy":
@@ -108,30 +117,67 @@ class LinearSpeedPolicy:
             PolicyError: no such file, not JSON, or not a policy of this format.
         """
         path = Path(path)
-        try:
-            document = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise PolicyError(f"no policy file at {path}") from None
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-            raise PolicyError(f"{path} is not a policy file: {error}") from None
-        if not isinstance(document, dict) or document.get("format") != FORMAT:
-            raise PolicyError(f"{path} is not a {FORMAT} file")
-        if document.get("version") != VERSION:
-            raise PolicyError(f"{path}: version {document.get('version')!r} is not {VERSION}")
+        document = checked_document(path, FORMAT, VERSION)
         if document.get("features") != list(FEATURES):
             raise PolicyError(f"{path}: features {document.get('features')!r} are not {FEATURES}")
         weights = document.get("weights")
-        if not isinstance(weights, list) or not all(
-            isinstance(w, int | float) and not isinstance(w, bool) for w in weights
-        ):
+        if not is_numbers(weights):
             raise PolicyError(f"{path}: weights must be a list of numbers, got {weights!r}")
-        about = document.get("about") or {}
-        if not isinstance(about, dict):
-            raise PolicyError(f"{path}: about must be a table, got {about!r}")
         try:
-            return cls(tuple(weights), about)
+            return cls(tuple(weights), document["about"])
         except PolicyError as error:
             raise PolicyError(f"{path}: {error}") from None
+
+
+def policy_document(path: str | Path) -> dict:
+    """A policy file's JSON object (any format).
+
+    Raises:
+        PolicyError: no such file, or not a JSON object.
+    """
+    try:
+        document = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise PolicyError(f"no policy file at {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise PolicyError(f"{path} is not a policy file: {error}") from None
+    if not isinstance(document, dict):
+        raise PolicyError(f"{path} is not a policy file (not a JSON object)")
+    return document
+
+
+def checked_document(path: Path, form: str, version: int) -> dict:
+    """A policy file's JSON object, of format ``form`` and ``version``, its ``about``
+    a table (``{}`` where missing).
+
+    Raises:
+        PolicyError: no such file, not JSON, or of another format or version.
+    """
+    document = policy_document(path)
+    if document.get("format") != form:
+        raise PolicyError(f"{path} is not a {form} file")
+    if document.get("version") != version:
+        raise PolicyError(f"{path}: version {document.get('version')!r} is not {version}")
+    about = document.get("about") or {}
+    if not isinstance(about, dict):
+        raise PolicyError(f"{path}: about must be a table, got {about!r}")
+    return {**document, "about": about}
+
+
+def is_numbers(values) -> bool:
+    """Whether ``values`` is a list of numbers (not booleans)."""
+    return isinstance(values, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in values
+    )
+
+
+def write_policy_document(path: str | Path, document: dict) -> Path:
+    """Write a policy file's ``document`` as JSON, atomically."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_file(path) as tmp:
+        tmp.write_text(json.dumps(document, indent=1, allow_nan=False) + "\n")
+    return path
 
 
 def policy_features(

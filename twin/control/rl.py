@@ -31,7 +31,15 @@ from twin.control.env import (
     ahead_speeds,
     features,
 )
-from twin.control.policy import SHIPPED, LinearSpeedPolicy, PolicyDriver
+from twin.control.mlp import FORMAT as MLP_FORMAT
+from twin.control.mlp import MLPDriver, MLPPolicy
+from twin.control.policy import (
+    SHIPPED,
+    LinearSpeedPolicy,
+    PolicyDriver,
+    policy_document,
+    shipped_policy,
+)
 from twin.core.errors import TwinError
 from twin.traffic.controller_api import EgoCommand, Observation, controller_factory
 
@@ -185,12 +193,20 @@ def policy(config):
     """The policy of ``[controller.policy] model`` driving the ego: a linear speed
     policy file (``.json``, :mod:`twin.control.policy`, numpy alone) or a
     stable-baselines3 model (``.zip``, the ``rl`` extra); by default the policy the
-    twin ships (:data:`twin.control.policy.SHIPPED`)."""
+    twin ships (:data:`twin.control.policy.SHIPPED`); a name without a suffix is one of
+    the policies the twin ships (``twin/control/policies/NAME.json``). A ``.json`` is a
+    linear speed policy (:mod:`twin.control.policy`) or an MLP speed policy
+    (:mod:`twin.control.mlp`, ``twin train --algorithm es``), by its format."""
     settings = config.controller.policy
     model = settings.model or str(SHIPPED)
+    if Path(model).suffix == "" and not Path(model).exists():
+        model = str(shipped_policy(model))  # a name: a policy the twin ships
     if model.endswith(".json"):
         key = str(Path(model).resolve())
         if key not in _MODELS:  # one read per process (av_share builds one per AV)
-            _MODELS[key] = LinearSpeedPolicy.load(model)
-        return PolicyDriver(_MODELS[key])
+            document = policy_document(model)
+            kind = MLPPolicy if document.get("format") == MLP_FORMAT else LinearSpeedPolicy
+            _MODELS[key] = kind.load(model)
+        loaded = _MODELS[key]
+        return MLPDriver(loaded) if isinstance(loaded, MLPPolicy) else PolicyDriver(loaded)
     return PolicyController(load_policy(model), settings.action)

@@ -283,9 +283,10 @@ class PolicySettings:
     """A trained policy driving the ego (``twin.rl:policy``, the ``rl`` extra).
 
     Attributes:
-        model: path of a policy: a linear speed policy of ``twin train`` (``.json``)
-            or a stable-baselines3 model (``.zip``) trained on
-            ``i24twin/WaveDampening-v0``; empty: the policy the twin ships.
+        model: path of a policy: a linear or MLP speed policy of ``twin train``
+            (``.json``) or a stable-baselines3 model (``.zip``) trained on
+            ``i24twin/WaveDampening-v0``; or the name of one the twin ships
+            (``wave_ars``, ``wave_es_mlp``); empty: the default it ships (``wave_ars``).
         action: a stable-baselines3 model's action in the env: ``accel`` or ``speed``.
     """
 

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.twin.traffic.conftest import observation
+from twin.control import mlp as mlp_module
 from twin.control import policy as policy_module
 from twin.cosim.config import CosimConfig
 from twin.rl import policy
@@ -40,11 +41,13 @@ AHEAD = st.lists(st.sampled_from([0.0, 0.5, 12.0, 33.0, 80.0]), min_size=12, max
 
 
 def _controllers():
-    """A fresh controller of each baseline and of the shipped policy, bound as the
-    cosimulator binds them."""
+    """A fresh controller of each baseline, of the shipped policy and of an MLP policy
+    (weights drawn large: saturated layers), bound as the cosimulator binds them."""
     config = CosimConfig()
     out = {name: load_controller(f"twin.controllers:{name}", config) for name in BASELINES}
     out["twin.rl:policy"] = policy(config)
+    weights = np.random.default_rng(0).standard_normal(mlp_module.n_weights()) * 3.0
+    out["mlp"] = mlp_module.MLPDriver(mlp_module.MLPPolicy(weights))
     sim = SimpleNamespace(
         config=SimpleNamespace(dt=0.1, vel_default=30.0), traffic=None, road=None, t=0.0
     )
@@ -57,7 +60,8 @@ def _controllers():
 @settings(max_examples=150, deadline=None)
 @given(states=st.lists(STATE, min_size=1, max_size=25), ahead=AHEAD)
 def test_every_controller_answers_a_finite_command_in_any_state(states, ahead):
-    with mock.patch.object(policy_module, "ahead_speeds", lambda *args: list(ahead)):
+    speeds = mock.patch.object(mlp_module, "ahead_speeds", lambda *args: list(ahead))
+    with mock.patch.object(policy_module, "ahead_speeds", lambda *args: list(ahead)), speeds:
         controllers = _controllers()
         for step, (speed, gap, leader_speed, default, desired) in enumerate(states):
             obs = replace(

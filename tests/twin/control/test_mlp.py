@@ -1,0 +1,130 @@
+"""The MLP speed policy (twin.control.mlp): what it sees, its start (follow the leader),
+many networks at once, its file, and its controller in the twin with the safety layer."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tests.twin.traffic.conftest import observation
+from twin.control.env import OBS_HIGH, OBS_LOW
+from twin.control.mlp import (
+    INPUTS,
+    JERK_LIMIT,
+    MLPDriver,
+    MLPPolicy,
+    accel_command,
+    act,
+    forward,
+    initial_weights,
+    inputs,
+    n_weights,
+    unpack,
+)
+from twin.control.policy import PolicyError
+from twin.cosim.config import SCENARIO_B, switch_world
+from twin.cosim.cosimulator import Cosimulator
+from twin.data.empirical import EmpiricalTraffic
+
+
+def _obs(rng, n):
+    return rng.uniform(OBS_LOW, OBS_HIGH, size=(n, OBS_LOW.size)).astype(np.float32)
+
+
+def test_the_inputs_are_scaled_features_of_the_observation():
+    obs = np.array([20.0, 1.5, 30.0, 18.0, 40.0, 22.0] + [25.0] * 12)
+    x = dict(zip(INPUTS, inputs(obs), strict=True))
+    assert x["speed"] == pytest.approx(20.0 / 30.0)
+    assert x["time_gap"] == pytest.approx(1.5 / 10.0)  # 30 m at 20 m/s, over the cap
+    assert x["leader_speed_diff"] == pytest.approx(-0.2)
+    assert x["ahead_0_diff"] == pytest.approx(0.5)
+
+
+def test_it_starts_by_following_its_leader_whatever_its_hidden_weights():
+    obs = _obs(np.random.default_rng(0), 50)
+    command = forward(initial_weights(3), obs)
+    assert np.allclose(command, np.clip(obs[:, 3], 0.0, 35.0))
+
+
+def test_its_acceleration_changes_by_at_most_the_jerk_limit():
+    obs = np.array([[20.0, 0.0, 30.0, 25.0, 40.0, 20.0] + [25.0] * 12,
+                    [20.0, 1.0, 30.0, 19.0, 40.0, 20.0] + [25.0] * 12])  # fmt: skip
+    step = JERK_LIMIT * 0.1
+    wanted = accel_command(np.array([25.0, 19.0]), obs)  # the loop wants 1.5 and -1
+    assert wanted.tolist() == pytest.approx([step, 1.0 - step])
+    assert accel_command(np.array([20.05, 20.0]), obs).tolist() == pytest.approx([0.05, 1.0 - step])
+    assert act(initial_weights(0), obs).tolist() == pytest.approx([step, 1.0 - step])
+
+
+def test_many_networks_at_once_are_each_one_alone():
+    rng = np.random.default_rng(1)
+    thetas = rng.standard_normal((6, n_weights())) * 0.3
+    obs = _obs(rng, 6)
+    together = forward(thetas, obs)
+    alone = [forward(thetas[k], obs[k]) for k in range(6)]
+    assert together.tolist() == [float(a) for a in alone]
+    assert np.all((together >= 0.0) & (together <= 35.0))
+    layers = unpack(thetas)
+    assert [w.shape for w, _ in layers] == [(6, 32, 19), (6, 32, 32), (6, 1, 32)]
+
+
+def test_a_policy_file_round_trips_and_bad_files_are_named(tmp_path):
+    weights = np.random.default_rng(2).standard_normal(n_weights((8,)))
+    policy = MLPPolicy(weights, (8,), about={"seed": 2})
+    back = MLPPolicy.load(policy.save(tmp_path / "p.json"))
+    assert np.array_equal(back.weights, policy.weights) and back.hidden == (8,)
+    assert back.about == {"seed": 2}
+    document = json.loads((tmp_path / "p.json").read_text())
+    for change, message in (
+        ({"weights": document["weights"][:-1]}, "finite weights"),
+        ({"weights": [*document["weights"][:-1], "x"]}, "lists of numbers"),
+        ({"format": "other"}, "is not a"),
+        ({"inputs": ["speed"]}, "inputs"),
+        ({"hidden": [0]}, ">= 1 unit"),
+    ):
+        (tmp_path / "bad.json").write_text(json.dumps({**document, **change}))
+        with pytest.raises(PolicyError, match=message):
+            MLPPolicy.load(tmp_path / "bad.json")
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(PolicyError, match="not a policy file"):
+        MLPPolicy.load(tmp_path / "bad.json")
+    with pytest.raises(PolicyError, match="no policy file"):
+        MLPPolicy.load(tmp_path / "missing.json")
+    with pytest.raises(PolicyError, match="finite"):
+        MLPPolicy(np.full(n_weights(), np.nan))
+
+
+def test_twin_rl_policy_drives_an_mlp_file_with_the_safety_layer(
+    calibrated_wave_store, built_map, tmp_path
+):
+    from twin.control.rl import policy as policy_factory
+
+    weights = np.random.default_rng(4).standard_normal(n_weights()) * 0.2
+    path = MLPPolicy(weights).save(tmp_path / "mlp.json")
+    config = replace(switch_world(SCENARIO_B, "kinematic"), t_max=6.0)
+    config = replace(config, controller=replace(config.controller, policy=replace(
+        config.controller.policy, model=str(path))))  # fmt: skip
+    driver = policy_factory(config)
+    assert isinstance(driver, MLPDriver) and driver.emergency_braking
+    with Cosimulator(config, EmpiricalTraffic(calibrated_wave_store), built_map,
+                     controller=driver) as sim:  # fmt: skip
+        sim.run()
+        assert driver._calls >= config.steps
+        assert not sim.counters.collisions
+    with pytest.raises(PolicyError, match="bind"):
+        MLPDriver(MLPPolicy(weights))(observation(20.0, 30.0, 18.0, -2, x=500.0, y=5.5))
+
+
+def test_a_policy_the_twin_ships_is_named_without_a_path():
+    from twin.control.policy import PolicyDriver
+    from twin.control.rl import policy as policy_factory
+
+    config = SCENARIO_B
+    named = replace(config, controller=replace(config.controller, policy=replace(
+        config.controller.policy, model="wave_ars")))  # fmt: skip
+    assert isinstance(policy_factory(named), PolicyDriver)
+    unknown = replace(named, controller=replace(named.controller, policy=replace(
+        named.controller.policy, model="no_such_policy")))  # fmt: skip
+    with pytest.raises(PolicyError, match=r"the twin ships .*wave_ars"):
+        policy_factory(unknown)

@@ -1,0 +1,272 @@
+"""A small multilayer perceptron wave-dampening policy that runs on numpy alone: what it
+sees, what it commands, its file, and the controller that drives the ego with it.
+
+It sees the env's observation (:data:`twin.control.env.OBSERVATION`: own speed and
+acceleration, leader's and follower's gaps and speeds, the recorded speeds ahead per
+lane) as :data:`INPUTS` scaled features: speeds relative to its own, gaps and its time
+gap to the leader, each of order one (:func:`inputs`). No history: the recorded speeds
+ahead carry what is coming, and the speed loop smooths what it commands.
+
+It commands a speed every 0.1 s, tracked by the baselines' speed loop (``1.0 (v_cmd -
+v)`` within the env's limits) whose acceleration changes by at most :data:`JERK_LIMIT`
+(the action is smoothed: jerk limited, from the acceleration it measured over the last
+step)::
+
+    v_cmd = clip(leader_speed + SPAN tanh(MLP(inputs)), 0, 35 m/s)
+    accel = a_measured + clip(clip(v_cmd - v, -3, 1.5) - a_measured, -J dt, J dt)
+
+with two tanh hidden layers (:data:`HIDDEN`); the env's action is that acceleration
+(``accel``). With a zero output layer it follows its
+leader's speed (the linear policy's starting point), whatever the hidden weights, so
+training starts from a driver that is safe with the safety layer beneath it: the
+drivers' emergency braking overrides it where the room is used up (counted in
+``safety_override_s``), in training (the env's ``safety``) as in the twin
+(:class:`MLPDriver`).
+
+Its weights are one flat vector (:func:`unpack` gives the layers), kept in a JSON file
+with how they were trained (:class:`MLPPolicy`). :func:`forward` evaluates many sets of
+weights at once, one per row of observations: the population of an evolution strategy
+(:mod:`twin.control.evolve`).
+"""
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from twin.control.env import (
+    ACCEL_RANGE,
+    CONTROL_DT,
+    OBS_HIGH,
+    OBS_LOW,
+    SPEED_GAIN,
+    SPEED_RANGE,
+    ahead_speeds,
+    features,
+)
+from twin.control.policy import PolicyError, checked_document, is_numbers, write_policy_document
+from twin.traffic.controller_api import EgoCommand, Observation
+
+FORMAT = "i24-twin-mlp-speed-policy"
+VERSION = 1
+HIDDEN = (32, 32)  # units of the hidden layers
+SPAN = 5.0  # [m/s] the command's reach around the leader's speed
+JERK_LIMIT = 2.0  # [m/s^3] the most its commanded acceleration changes per second
+SPEED_SCALE = 10.0  # [m/s] speed differences are inputs in these units
+GAP_SCALE = 100.0  # [m] gaps likewise
+TIME_GAP_CAP = 10.0  # [s] the time gap input is capped here (and is this with no leader)
+#: The inputs, in order (:func:`inputs`).
+INPUTS = (
+    "speed",
+    "accel",
+    "leader_gap",
+    "leader_speed_diff",
+    "follower_gap",
+    "follower_speed_diff",
+    "time_gap",
+    *(f"ahead_{k}_diff" for k in range(12)),
+)
+N_INPUTS = len(INPUTS)
+
+
+def n_weights(hidden: tuple[int, ...] = HIDDEN) -> int:
+    """The length of the flat weight vector of a network with these hidden layers."""
+    sizes = (N_INPUTS, *hidden, 1)
+    return sum(a * b + b for a, b in itertools.pairwise(sizes))
+
+
+def unpack(
+    theta: np.ndarray, hidden: tuple[int, ...] = HIDDEN
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The layers ``[(W (..., out, in), b (..., out)), ...]`` of flat weights ``theta``
+    (..., :func:`n_weights`): any leading axes are kept (one network per row)."""
+    sizes = (N_INPUTS, *hidden, 1)
+    lead = theta.shape[:-1]
+    layers, at = [], 0
+    for a, b in itertools.pairwise(sizes):
+        w = theta[..., at : at + a * b].reshape(*lead, b, a)
+        at += a * b
+        layers.append((w, theta[..., at : at + b]))
+        at += b
+    return layers
+
+
+def initial_weights(seed: int, hidden: tuple[int, ...] = HIDDEN) -> np.ndarray:
+    """Hidden layers drawn (scaled by 1/sqrt(fan-in), from ``seed``), the output layer
+    zero: the network starts by following its leader's speed."""
+    rng = np.random.default_rng([seed, 0x6D6C70])
+    sizes = (N_INPUTS, *hidden, 1)
+    parts = []
+    for k, (a, b) in enumerate(itertools.pairwise(sizes)):
+        last = k == len(sizes) - 2
+        parts.append(np.zeros(a * b) if last else rng.standard_normal(a * b) / math.sqrt(a))
+        parts.append(np.zeros(b))
+    return np.concatenate(parts)
+
+
+def inputs(obs: np.ndarray) -> np.ndarray:
+    """(..., N_INPUTS) scaled features of env observations ``obs`` (..., 18)."""
+    obs = np.asarray(obs, dtype=np.float64)
+    speed, accel = obs[..., 0], obs[..., 1]
+    leader_gap, leader_speed = obs[..., 2], obs[..., 3]
+    follower_gap, follower_speed = obs[..., 4], obs[..., 5]
+    time_gap = np.minimum(np.maximum(leader_gap, 0.0) / np.maximum(speed, 1.0), TIME_GAP_CAP)
+    columns = [
+        speed / 30.0,
+        accel / 3.0,
+        leader_gap / GAP_SCALE,
+        (leader_speed - speed) / SPEED_SCALE,
+        follower_gap / GAP_SCALE,
+        (follower_speed - speed) / SPEED_SCALE,
+        time_gap / TIME_GAP_CAP,
+        *((obs[..., 6 + k] - speed) / SPEED_SCALE for k in range(12)),
+    ]
+    return np.stack(columns, axis=-1)
+
+
+def forward(theta: np.ndarray, obs: np.ndarray, hidden: tuple[int, ...] = HIDDEN) -> np.ndarray:
+    """[m/s] the speed commands (...,) of observations ``obs`` (..., 18), each row with
+    its own weights ``theta`` (..., :func:`n_weights`) or all with one (``theta``
+    (n_weights,))."""
+    x = inputs(obs)
+    layers = unpack(np.asarray(theta, dtype=np.float64), hidden)
+    for k, (w, b) in enumerate(layers):
+        x = np.einsum("...oi,...i->...o", w, x) + b
+        if k < len(layers) - 1:
+            x = np.tanh(x)
+    leader_speed = np.asarray(obs, dtype=np.float64)[..., 3]
+    return np.clip(leader_speed + SPAN * np.tanh(x[..., 0]), *SPEED_RANGE)
+
+
+def accel_command(speed_command: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """[m/s^2] the accelerations (...,) that track ``speed_command`` (...,) from
+    observations ``obs`` (..., 18): the speed loop's, changed by at most
+    ``JERK_LIMIT dt`` from the acceleration measured over the last step."""
+    obs = np.asarray(obs, dtype=np.float64)
+    wanted = np.clip(SPEED_GAIN * (speed_command - obs[..., 0]), *ACCEL_RANGE)
+    measured = np.clip(obs[..., 1], *ACCEL_RANGE)
+    step = JERK_LIMIT * CONTROL_DT
+    return measured + np.clip(wanted - measured, -step, step)
+
+
+def act(theta: np.ndarray, obs: np.ndarray, hidden: tuple[int, ...] = HIDDEN) -> np.ndarray:
+    """[m/s^2] the env's ``accel`` actions (...,) of observations ``obs`` (..., 18),
+    as :func:`forward` takes ``theta``."""
+    return accel_command(forward(theta, obs, hidden), obs)
+
+
+@dataclass(frozen=True)
+class MLPPolicy:
+    """An MLP speed policy (see the module doc).
+
+    Attributes:
+        weights: (:func:`n_weights`,) the flat weights.
+        hidden: the hidden layers' units.
+        about: how it was trained (free-form, kept in the file).
+    """
+
+    weights: np.ndarray
+    hidden: tuple[int, ...] = HIDDEN
+    about: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        hidden = tuple(int(h) for h in self.hidden)
+        weights = np.asarray(self.weights, dtype=np.float64).reshape(-1)
+        if not hidden or min(hidden) < 1:
+            raise PolicyError(
+                f"an MLP policy needs hidden layers of >= 1 unit, got {self.hidden!r}"
+            )
+        if weights.size != n_weights(hidden) or not np.all(np.isfinite(weights)):
+            raise PolicyError(
+                f"an MLP policy with hidden layers {hidden} has {n_weights(hidden)} finite "
+                f"weights, got {weights.size}"
+                + ("" if np.all(np.isfinite(weights)) else " with non-finite values")
+            )
+        object.__setattr__(self, "hidden", hidden)
+        object.__setattr__(self, "weights", weights)
+
+    def speed_command(self, obs: np.ndarray) -> float:
+        """[m/s] the commanded speed for one env observation (18,)."""
+        return float(forward(self.weights, np.asarray(obs), self.hidden))
+
+    def accel(self, obs: np.ndarray) -> float:
+        """[m/s^2] the env's ``accel`` action for one env observation (18,)."""
+        return float(act(self.weights, np.asarray(obs), self.hidden))
+
+    def predict(self, observation, deterministic: bool = True):
+        """stable-baselines3's ``predict``: (``accel`` action (1,), None) for one
+        observation."""
+        return np.array([self.accel(observation)], dtype=np.float32), None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the policy as JSON, atomically."""
+        return write_policy_document(path, {
+            "format": FORMAT,
+            "version": VERSION,
+            "inputs": list(INPUTS),
+            "hidden": list(self.hidden),
+            "weights": [float(w) for w in self.weights],
+            "about": self.about,
+        })  # fmt: skip
+
+    @classmethod
+    def load(cls, path: str | Path) -> "MLPPolicy":
+        """Read a policy file.
+
+        Raises:
+            PolicyError: no such file, not JSON, or not a policy of this format.
+        """
+        path = Path(path)
+        document = checked_document(path, FORMAT, VERSION)
+        if document.get("inputs") != list(INPUTS):
+            raise PolicyError(f"{path}: inputs {document.get('inputs')!r} are not {INPUTS}")
+        weights, hidden = document.get("weights"), document.get("hidden")
+        if not is_numbers(weights) or not isinstance(hidden, list):
+            raise PolicyError(f"{path}: weights and hidden must be lists of numbers")
+        try:
+            return cls(np.array(weights, dtype=np.float64), tuple(hidden), document["about"])
+        except (PolicyError, TypeError, ValueError) as error:
+            raise PolicyError(f"{path}: {error}") from None
+
+
+class MLPDriver:
+    """An :class:`MLPPolicy` as the ego's controller: it decides every
+    :data:`~twin.control.env.CONTROL_DT` from what the env's agent would see (its
+    acceleration measured over that step) and holds its command between, with the
+    drivers' emergency braking beneath it (``emergency_braking``), as in training.
+
+    Needs ``bind(sim)`` (the cosimulator calls it) for the recorded traffic ahead.
+    """
+
+    emergency_braking = True
+
+    def __init__(self, policy: MLPPolicy):
+        self.policy = policy
+        self._sim = None
+        self._every = 1
+        self._calls = 0
+        self._at_decision: float | None = None  # its speed at the last decision
+        self._command = 0.0
+
+    def bind(self, sim) -> None:
+        """Called by the cosimulator: the recorded traffic and the clock."""
+        self._sim = sim
+        self._every = max(1, round(CONTROL_DT / sim.config.dt))
+
+    def __call__(self, obs: Observation) -> EgoCommand:
+        sim = self._sim
+        if sim is None:
+            raise PolicyError("MLPDriver needs bind(sim) before it drives")
+        if self._calls % self._every == 0:
+            # the env's measured acceleration: over the last control step
+            before = self._at_decision
+            measured = 0.0 if before is None else (obs.speed - before) / CONTROL_DT
+            ahead = ahead_speeds(sim.traffic, sim.road, sim.t, obs.x, sim.config.vel_default)
+            vector = np.clip(features(obs, measured, ahead), OBS_LOW, OBS_HIGH)
+            vector = vector.astype(np.float32)  # as the env gives it
+            self._command = self.policy.accel(vector)
+            self._at_decision = obs.speed
+        self._calls += 1
+        return EgoCommand(accel=float(self._command))
