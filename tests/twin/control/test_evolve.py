@@ -1,0 +1,85 @@
+"""Training the MLP policy with an evolution strategy on the vector env
+(twin.control.evolve): the score, the ranks, a generation's files, resuming, bad
+settings."""
+
+import numpy as np
+import pytest
+
+from twin.control.evolve import EvolveConfig, centred_ranks, evolve, score
+from twin.control.mlp import MLPPolicy
+from twin.control.train import TrainingError
+
+
+def _figures(**change):
+    base = {
+        "economy_pct": 3.0, "collisions": 0, "time_gap_p10_s": 1.2, "time_gap_p90_s": 3.0,
+        "min_ttc_s": 8.0, "jerk_rms_mps3": 0.3, "safety_pct": 0.0,
+    }  # fmt: skip
+    return {**base, **change}
+
+
+def test_the_score_is_the_economy_less_each_target_missed():
+    assert score(_figures()) == (3.0, 3.0)
+    assert score(_figures(collisions=1))[0] == pytest.approx(-47.0)
+    assert score(_figures(time_gap_p10_s=0.5))[0] == pytest.approx(-2.0)
+    assert score(_figures(time_gap_p90_s=5.0))[0] == pytest.approx(1.0)
+    assert score(_figures(min_ttc_s=4.0))[0] == pytest.approx(1.0)
+    assert score(_figures(jerk_rms_mps3=0.8))[0] == pytest.approx(0.0)
+    assert score(_figures(safety_pct=1.0))[0] == pytest.approx(1.0)
+
+
+def test_centred_ranks_span_minus_to_plus_a_half():
+    assert centred_ranks(np.array([3.0, -1.0, 10.0])).tolist() == [0.0, -0.5, 0.5]
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [({"population": 0}, "population"), ({"sigma": -1.0}, "sigma"), ({"hidden": (0,)}, "hidden"),
+     ({"weight_decay": float("nan")}, "weight_decay")],
+)  # fmt: skip
+def test_bad_settings_are_named(settings, message):
+    with pytest.raises(TrainingError, match=message):
+        EvolveConfig(**settings)
+
+
+def _config(data, generations):
+    return EvolveConfig(
+        generations=generations, population=2, episodes=1, duration=3.0, hidden=(4,),
+        heldout_every=2, heldout_episodes=2, data=data, seed=5,
+    )  # fmt: skip
+
+
+def test_an_interrupted_training_resumes_to_the_same_weights(calibrated_wave_store, tmp_path):
+    data = str(calibrated_wave_store.path)
+    whole = evolve(tmp_path / "whole", _config(data, 2), progress=False)
+    first = evolve(tmp_path / "cut", _config(data, 1), progress=False)  # stopped after one
+    assert not np.array_equal(first.weights, whole.weights)
+    resumed = evolve(tmp_path / "cut", _config(data, 2), progress=False)
+    assert np.array_equal(whole.weights, resumed.weights)
+    assert np.array_equal(MLPPolicy.load(tmp_path / "cut" / "policy.json").weights, whole.weights)
+    for name in ("policy.json", "curve.csv", "curve.png", "checkpoint.npz"):
+        assert (tmp_path / "whole" / name).is_file()
+    rows = [r.split(",") for r in (tmp_path / "whole" / "curve.csv").read_text().splitlines()]
+    assert rows[0][:3] == ["generation", "env_steps", "wall_s"]
+    assert [r[0] for r in rows[1:]] == ["1", "2"] and rows[2][6] != ""  # held out at the last
+    cut = [r.split(",") for r in (tmp_path / "cut" / "curve.csv").read_text().splitlines()]
+    assert [r[:2] for r in cut] == [r[:2] for r in rows]
+    other = EvolveConfig(**{**_config(data, 3).__dict__, "seed": 6})
+    with pytest.raises(TrainingError, match="other settings"):
+        evolve(tmp_path / "whole", other, progress=False)
+
+
+def test_twin_train_algorithm_es_from_the_command_line(calibrated_wave_store, tmp_path, capsys):
+    from twin.cli import main
+
+    args = ["train", "--algorithm", "es", "--data", str(calibrated_wave_store.path),
+            "--generations", "1", "--population", "1", "--episodes", "1", "--duration", "2",
+            "--hidden", "4", "--heldout-episodes", "1", "--out", str(tmp_path / "es")]  # fmt: skip
+    assert main(args) == 0
+    policy = MLPPolicy.load(tmp_path / "es" / "policy.json")
+    assert policy.hidden == (4,) and policy.about["config"]["data"] == str(
+        calibrated_wave_store.path
+    )
+    assert "generation 1/1" in capsys.readouterr().out
+    assert main([*args[:-2], "--hidden", "4,x", "--out", str(tmp_path / "bad")]) != 0
+    assert "--hidden" in capsys.readouterr().err
