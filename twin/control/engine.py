@@ -37,11 +37,13 @@ class Episodes:
         base_seed: episode ``k`` is the same for every env with this seed.
         safety: the drivers' emergency braking beneath the agent's command (the
             baselines' safety layer; its time counted in ``safety_override_s``).
+        human: the ego drives as ``twin.controllers:human`` (its driver's command), the
+            actions ignored: the baseline of the same episodes.
     """
 
     def __init__(self, store, bundle, cosim, cells, sampling, *, count: int, duration: float,
                  action: str, weights, low, high, base_seed: int, traffic=None,
-                 safety: bool = False):  # fmt: skip
+                 safety: bool = False, human: bool = False):  # fmt: skip
         self.cosim, self.cells, self.sampling = cosim, cells, sampling
         self.count, self.duration, self.base_seed = int(count), float(duration), int(base_seed)
         self.kinematic = cosim.world == "kinematic"
@@ -49,7 +51,7 @@ class Episodes:
             raise ValueError("the physics world runs one episode at a time")
         self.substeps = max(1, round(CONTROL_DT / cosim.dt))
         self.shared = Shared.make(store, bundle, cosim, traffic=traffic, action=action)
-        self.agent = kinds.ACTION + (kinds.GUARDED if safety else 0)
+        self.agent = kinds.HUMAN if human else kinds.ACTION + (kinds.GUARDED if safety else 0)
         self.shared = self.shared.with_controllers(self.agent)
         self.bundle = bundle
         self.sim = None

@@ -283,15 +283,16 @@ class EnvSetup:
         low, high = ACCEL_RANGE if self.action == "accel" else SPEED_RANGE
         return gym.spaces.Box(low, high, shape=(1,), dtype=np.float32)
 
-    def episodes(self, count: int) -> Episodes:
-        """``count`` episodes of this setup on the batched core."""
+    def episodes(self, count: int, human: bool = False) -> Episodes:
+        """``count`` episodes of this setup on the batched core (``human``: the ego
+        driven as ``twin.controllers:human``, the actions ignored)."""
         w = self.reward
         return Episodes(
             self.store, self.bundle, self.cosim, self.cells, self.sampling, count=count,
             duration=self.duration, action=self.action,
             weights=(w.fuel_weight, w.gap_weight, w.gap_max, w.ttc_weight, w.ttc_min),
             low=OBS_LOW, high=OBS_HIGH, base_seed=self.seed, traffic=self.traffic,
-            safety=self.safety,
+            safety=self.safety, human=human,
         )  # fmt: skip
 
 

@@ -35,8 +35,8 @@ counts.
 
 Every ``heldout_every`` generations (and at the last) the current weights drive
 ``heldout_episodes`` fixed episodes of the ``test`` split; the held-out score is their
-economy against the starting weights' (follow the leader's speed) on the same
-episodes [%], with their comfort and safety figures.
+economy against ``human``'s on the same episodes [%] (the vector env's ``ego="human"``,
+the benchmark's pairing), with their comfort and safety figures.
 
 Progress is printed each generation (env steps, steps per second, score, economy,
 held-out); ``OUT/curve.csv`` and ``OUT/curve.png`` are the learning curve (env steps
@@ -65,7 +65,7 @@ from twin.core.atomic import atomic_file
 PENALTIES = {
     "collision": 50.0,
     "time_gap_p10_under_1s": 10.0,
-    "time_gap_p90_over_4s": 2.0,
+    "time_gap_p90_over_4s": 20.0,
     "min_ttc_under_5s": 2.0,
     "jerk_rms_over_0_5": 10.0,
     "safety_percent": 2.0,
@@ -215,11 +215,14 @@ def evolve(out: str | Path, config: EvolveConfig, *, progress: bool = True) -> M
     settings = _settings(config)
     state = _resume(out, settings) or _fresh(config)
     envs = {}
-    for split, count in (("train", config.num_envs), ("test", config.heldout_episodes)):
-        envs[split] = VectorWaveDampeningEnv(
+    held = config.heldout_episodes
+    kinds = {"train": ("train", config.num_envs, "agent"), "test": ("test", held, "agent"),
+             "human": ("test", held, "human")}  # fmt: skip
+    for name, (split, count, ego) in kinds.items():
+        envs[name] = VectorWaveDampeningEnv(
             count, config.data, split=split, duration=config.duration, action="accel",
             obs_noise=config.obs_noise, latency_steps=config.latency_steps,
-            seed=config.seed, safety=True,
+            seed=config.seed, safety=True, ego=ego,
         )  # fmt: skip
     try:
         return _generations(out, config, settings, state, envs, progress)
@@ -235,8 +238,8 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
     pairs, per = config.population, config.episodes
     steps_per_run = round(config.duration / 0.1)
     heldout = _placeable(envs["test"], iter(range(2**31 - 1)), config.heldout_episodes)
-    start = initial_weights(config.seed, config.hidden)
-    baseline = _heldout(envs["test"], start, heldout, config.hidden)
+    start = initial_weights(config.seed, config.hidden)  # any: human ignores the actions
+    baseline = _heldout(envs["human"], start, heldout, config.hidden)
     for generation in range(state["generation"] + 1, config.generations + 1):
         tick = time.perf_counter()
         episodes = _placeable(envs["train"], (int(k) for k in rng.integers(0, 2**31 - 1, 64)), per)
@@ -409,7 +412,7 @@ def _print(row: dict, config: EvolveConfig) -> None:
     held = ""
     if "heldout_economy_pct" in row:
         held = (
-            f"; held out {row['heldout_economy_pct']:+.2f} % vs following the leader, "
+            f"; held out {row['heldout_economy_pct']:+.2f} % vs human, "
             f"gap p10 {row['heldout_time_gap_p10_s']:.2f} s, jerk "
             f"{row['heldout_jerk_rms_mps3']:.2f} m/s^3, {row['heldout_collisions']} collisions"
         )
@@ -441,7 +444,7 @@ def _plot_curve(out: Path, rows: list[dict]) -> None:
         ax.plot([r[x] for r in rows], [r["score_mean"] for r in rows], label="score (train)")
         ax.plot(
             [r[x] for r in held], [r["heldout_economy_pct"] for r in held], "o-",
-            label="held-out economy vs following the leader [%]",
+            label="held-out economy vs human [%]",
         )  # fmt: skip
         ax.axhline(0.0, color="grey", lw=0.8)
         ax.set_xlabel(label)

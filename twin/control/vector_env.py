@@ -54,6 +54,9 @@ class VectorWaveDampeningEnv(VectorEnv):
         cosim: as :class:`~twin.control.env.WaveDampeningEnv`'s.
         seed: as :class:`~twin.control.env.WaveDampeningEnv`'s.
         safety: as :class:`~twin.control.env.WaveDampeningEnv`'s.
+        ego: ``agent`` (the actions drive it) or ``human``: it drives as
+            ``twin.controllers:human`` and the actions are ignored, the baseline of the
+            same episodes for paired figures.
 
     Raises:
         ValueError: a setting is impossible (named).
@@ -64,7 +67,8 @@ class VectorWaveDampeningEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, data: str | None = None, *, split="train",
                  split_time=None, duration=120.0, action="accel", reward=None, obs_noise=0.0,
                  latency_steps=0, cosim=SCENARIO_B, world: str | None = "kinematic",
-                 seed=0, autoreset_mode: str = "next_step", safety=False):  # fmt: skip
+                 seed=0, autoreset_mode: str = "next_step", safety=False,
+                 ego: str = "agent"):  # fmt: skip
         if not (isinstance(num_envs, int) and num_envs >= 1):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
@@ -92,7 +96,9 @@ class VectorWaveDampeningEnv(VectorEnv):
         self.single_observation_space = gym.spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self.episodes = setup.episodes(num_envs)
+        if ego not in ("agent", "human"):
+            raise ValueError(f"ego must be 'agent' or 'human', got {ego!r}")
+        self.episodes = setup.episodes(num_envs, human=ego == "human")
         self._rngs = [np.random.default_rng(seed + i) for i in range(num_envs)]
         self._ended = np.zeros(num_envs, dtype=bool)  # done at the last step: reset next
         # the observations of the last latency_steps + 1 control steps, oldest first

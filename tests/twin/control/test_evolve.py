@@ -22,7 +22,7 @@ def test_the_score_is_the_economy_less_each_target_missed():
     assert score(_figures()) == (3.0, 3.0)
     assert score(_figures(collisions=1))[0] == pytest.approx(-47.0)
     assert score(_figures(time_gap_p10_s=0.5))[0] == pytest.approx(-2.0)
-    assert score(_figures(time_gap_p90_s=5.0))[0] == pytest.approx(1.0)
+    assert score(_figures(time_gap_p90_s=5.0))[0] == pytest.approx(-17.0)
     assert score(_figures(min_ttc_s=4.0))[0] == pytest.approx(1.0)
     assert score(_figures(jerk_rms_mps3=0.8))[0] == pytest.approx(0.0)
     assert score(_figures(safety_pct=1.0))[0] == pytest.approx(1.0)

@@ -237,3 +237,19 @@ def test_with_the_safety_layer_an_agent_that_only_accelerates_is_held_back(data)
     assert np.nansum(figures[False]["safety_override_s"]) == 0.0
     assert np.nansum(figures[True]["safety_override_s"]) > 0.0
     assert np.nansum(figures[True]["collisions"]) == 0
+
+
+def test_with_ego_human_the_actions_are_ignored_the_driver_drives(data):
+    runs = []
+    for throttle in (1.5, -3.0):
+        envs = VectorWaveDampeningEnv(2, data, duration=3.0, ego="human", seed=4)
+        obs, _ = envs.reset(seed=4)
+        rows = [obs]
+        for _ in range(20):
+            obs, *_ = envs.step(np.full((2, 1), throttle, np.float32))
+            rows.append(obs)
+        envs.close()
+        runs.append(np.array(rows))
+    assert np.array_equal(runs[0], runs[1])
+    with pytest.raises(ValueError, match="ego must be"):
+        VectorWaveDampeningEnv(1, data, duration=3.0, ego="robot")
