@@ -17,7 +17,9 @@ of static linear policies is competitive for reinforcement learning"), which
 :mod:`twin.control.train` uses; the weights live in a small JSON file with how they
 were trained.
 
-The policy the twin ships (:data:`SHIPPED`) is the default of ``twin.rl:policy``.
+The linear policy the twin ships (:data:`SHIPPED`, ``wave_ars``) was the default of
+``twin.rl:policy`` until the MLP trained at scale (:data:`DEFAULT`) replaced it; it
+stays, by name, for comparison.
 """
 
 import json
@@ -54,7 +56,10 @@ FOLLOW_LEADER = (0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 TIME_GAP_CAP = 10.0  # [s] the time gap feature is capped here (and is this with no leader)
 MEMORY = 30.0  # [s] of the mean-speed feature
 POLICIES = Path(__file__).with_name("policies")  # the policies the twin ships, by name
-SHIPPED = POLICIES / "wave_ars.json"
+SHIPPED = POLICIES / "wave_ars.json"  # the linear policy the twin ships (``wave_ars``)
+#: The default of ``twin.rl:policy``: the MLP trained by ``twin train --algorithm es``
+#: (:mod:`twin.control.mlp`); the linear one stays as ``wave_ars``.
+DEFAULT = POLICIES / "wave_es_mlp.json"
 
 
 def shipped_policy(name: str) -> Path:

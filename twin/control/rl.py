@@ -6,8 +6,9 @@ PyTorch).
   ``train`` episodes, one or many at once (:mod:`twin.control.sb3_vec_env`, the
   batched vector env as a stable-baselines3 ``VecEnv``), and saves the model,
   atomically.
-- ``twin.rl:policy`` is a controller factory: by default the linear speed policy the
-  twin ships (trained by ``twin train``, :mod:`twin.control.train`; numpy alone), or
+- ``twin.rl:policy`` is a controller factory: by default the MLP speed policy the twin
+  ships (trained by ``twin train --algorithm es``, :mod:`twin.control.evolve`; numpy
+  alone; the linear one of :mod:`twin.control.train` is ``wave_ars``), or
   ``--set controller.policy.model=PATH`` for another: a ``.json`` of ``twin train`` or
   any saved stable-baselines3 model (``.zip``), which sees what the env's agent saw
   (:func:`twin.control.env.features`) and decides every 0.1 s, as in training.
@@ -34,7 +35,7 @@ from twin.control.env import (
 from twin.control.mlp import FORMAT as MLP_FORMAT
 from twin.control.mlp import MLPDriver, MLPPolicy
 from twin.control.policy import (
-    SHIPPED,
+    DEFAULT,
     LinearSpeedPolicy,
     PolicyDriver,
     policy_document,
@@ -193,12 +194,13 @@ def policy(config):
     """The policy of ``[controller.policy] model`` driving the ego: a linear speed
     policy file (``.json``, :mod:`twin.control.policy`, numpy alone) or a
     stable-baselines3 model (``.zip``, the ``rl`` extra); by default the policy the
-    twin ships (:data:`twin.control.policy.SHIPPED`); a name without a suffix is one of
+    twin ships (:data:`twin.control.policy.DEFAULT`, the MLP ``wave_es_mlp``; the linear
+    ``wave_ars`` by name); a name without a suffix is one of
     the policies the twin ships (``twin/control/policies/NAME.json``). A ``.json`` is a
     linear speed policy (:mod:`twin.control.policy`) or an MLP speed policy
     (:mod:`twin.control.mlp`, ``twin train --algorithm es``), by its format."""
     settings = config.controller.policy
-    model = settings.model or str(SHIPPED)
+    model = settings.model or str(DEFAULT)
     if Path(model).suffix == "" and not Path(model).exists():
         model = str(shipped_policy(model))  # a name: a policy the twin ships
     if model.endswith(".json"):

@@ -286,7 +286,7 @@ class PolicySettings:
         model: path of a policy: a linear or MLP speed policy of ``twin train``
             (``.json``) or a stable-baselines3 model (``.zip``) trained on
             ``i24twin/WaveDampening-v0``; or the name of one the twin ships
-            (``wave_ars``, ``wave_es_mlp``); empty: the default it ships (``wave_ars``).
+            (``wave_es_mlp``, ``wave_ars``); empty: the default it ships (``wave_es_mlp``).
         action: a stable-baselines3 model's action in the env: ``accel`` or ``speed``.
     """
 

@@ -128,3 +128,15 @@ def test_a_policy_the_twin_ships_is_named_without_a_path():
         named.controller.policy, model="no_such_policy")))  # fmt: skip
     with pytest.raises(PolicyError, match=r"the twin ships .*wave_ars"):
         policy_factory(unknown)
+
+
+def test_the_default_policy_is_the_shipped_mlp_and_says_how_it_was_trained():
+    from twin.control.policy import DEFAULT
+    from twin.control.rl import policy as policy_factory
+
+    shipped = MLPPolicy.load(DEFAULT)
+    assert shipped.about["env_steps"] >= 20_000_000
+    assert "twin train --algorithm es" in shipped.about["command"]
+    assert "--seed 0" in shipped.about["command"]
+    driver = policy_factory(SCENARIO_B)
+    assert isinstance(driver, MLPDriver) and np.array_equal(driver.policy.weights, shipped.weights)
