@@ -52,6 +52,7 @@ import csv
 import json
 import math
 import time
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -76,6 +77,7 @@ CURVE = (
     "heldout_jerk_rms_mps3", "heldout_safety_pct", "heldout_collisions",
 )  # fmt: skip
 TIME_GAP_CAP = 10.0  # [s] time gaps are counted up to this (and are this with no leader)
+HELDOUT_TRIES = 1000  # held-out episodes are the first that can be placed among these
 
 
 @dataclass(frozen=True)
@@ -152,13 +154,14 @@ def score(figures: dict) -> tuple[float, float]:
     return value, economy
 
 
-def rollout(env, thetas: np.ndarray, episodes: list[int], hidden) -> list[dict]:
+def rollout(env, thetas: np.ndarray, episodes: list[int], hidden, seed: int) -> list[dict]:
     """Run sub-env ``b`` of vector ``env`` on episode ``episodes[b]`` with weights
-    ``thetas[b]`` to its end; each one's figures: the env's metrics with the time gap's
-    p10 and p90 [s] (over the steps with a leader within the gap cap; 10 with none),
-    the safety layer's share of the time [%], collisions and ``mpg``."""
+    ``thetas[b]`` to its end, the sub-envs' generators (observation noise) seeded from
+    ``seed``; each one's figures: the env's metrics with the time gap's p10 and p90 [s]
+    (over every step; one with no leader within the gap cap counts as 10 s), the safety
+    layer's share of the time [%], collisions and ``mpg``."""
     n = env.num_envs
-    obs, _ = env.reset(options={"episode": list(episodes)})
+    obs, _ = env.reset(seed=int(seed), options={"episode": list(episodes)})
     done = np.zeros(n, dtype=bool)
     figures: list[dict | None] = [None] * n
     gaps: list[list[np.ndarray]] = []
@@ -194,8 +197,10 @@ def rollout(env, thetas: np.ndarray, episodes: list[int], hidden) -> list[dict]:
 
 
 def centred_ranks(values: np.ndarray) -> np.ndarray:
-    """Ranks of ``values`` (n,) scaled to [-0.5, 0.5] (ties by order: deterministic)."""
+    """Ranks of ``values`` (n,) scaled to [-0.5, 0.5] (ties by order: deterministic; a
+    NaN lowest)."""
     n = values.size
+    values = np.where(np.isfinite(values), values, -np.inf)  # NaN ranks lowest
     ranks = np.empty(n)
     ranks[np.argsort(values, kind="stable")] = np.arange(n)
     return ranks / max(n - 1, 1) - 0.5
@@ -237,7 +242,7 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
     rows = state["rows"]
     pairs, per = config.population, config.episodes
     steps_per_run = round(config.duration / 0.1)
-    heldout = _placeable(envs["test"], iter(range(2**31 - 1)), config.heldout_episodes)
+    heldout = _placeable(envs["test"], iter(range(HELDOUT_TRIES)), config.heldout_episodes)
     start = initial_weights(config.seed, config.hidden)  # any: human ignores the actions
     baseline = _heldout(envs["human"], start, heldout, config.hidden)
     for generation in range(state["generation"] + 1, config.generations + 1):
@@ -246,8 +251,11 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
         eps = rng.standard_normal((pairs, theta.size))
         members = np.concatenate([theta + config.sigma * eps, theta - config.sigma * eps])
         thetas = np.repeat(members, per, axis=0)  # sub-env b: member b // per
-        runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), config.hidden)
-        mpg = np.array([r["mpg"] or 0.0 for r in runs]).reshape(2 * pairs, per)
+        runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), config.hidden,
+                       seed=episodes[0])  # fmt: skip
+        # a run with no economy (no fuel, a figure missing) ranks lowest
+        mpg = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in runs], float)
+        mpg = np.nan_to_num(mpg, nan=0.0).reshape(2 * pairs, per)
         median = np.median(mpg, axis=0)
         scores = np.empty((2 * pairs, per))
         economy = np.empty((2 * pairs, per))
@@ -307,14 +315,17 @@ def _placeable(env, candidates, count: int) -> list[int]:
 def _heldout(env, theta, episodes: list[int], hidden) -> dict:
     """The held-out ``episodes``' figures with weights ``theta`` (one per run)."""
     start = time.perf_counter()
-    runs = rollout(env, np.repeat(theta[None], env.num_envs, axis=0), episodes, hidden)
+    thetas = np.repeat(theta[None], env.num_envs, axis=0)
+    runs = rollout(env, thetas, episodes, hidden, seed=episodes[0])
     return {"runs": runs, "seconds": time.perf_counter() - start}
 
 
 def _heldout_row(held: dict, baseline: dict) -> dict:
-    mine = np.array([r["mpg"] or np.nan for r in held["runs"]])
-    base = np.array([r["mpg"] or np.nan for r in baseline["runs"]])
-    change = 100.0 * (np.nansum(mine) / np.nansum(base) - 1.0) if np.nansum(base) > 0 else 0.0
+    mine = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in held["runs"]], float)
+    base = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in baseline["runs"]], float)
+    both = np.isfinite(mine) & np.isfinite(base)  # paired: the episodes both have
+    total = base[both].sum()
+    change = 100.0 * (mine[both].sum() / total - 1.0) if total > 0 else 0.0
 
     def median(name):
         return round(float(np.median([r[name] for r in held["runs"]])), 3)
@@ -373,7 +384,7 @@ def _resume(out: Path, settings: dict) -> dict | None:
                 "generation": int(data["generation"]), "rng": rng,
                 "rows": json.loads(str(data["rows"])),
             }  # fmt: skip
-    except (OSError, KeyError, ValueError, TypeError) as error:
+    except (OSError, EOFError, KeyError, ValueError, TypeError, zipfile.BadZipFile) as error:
         raise TrainingError(
             f"{path} is damaged ({error}): remove it to start the training again"
         ) from None

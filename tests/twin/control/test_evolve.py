@@ -28,8 +28,17 @@ def test_the_score_is_the_economy_less_each_target_missed():
     assert score(_figures(safety_pct=1.0))[0] == pytest.approx(1.0)
 
 
-def test_centred_ranks_span_minus_to_plus_a_half():
+def test_centred_ranks_span_minus_to_plus_a_half_and_nan_ranks_lowest():
     assert centred_ranks(np.array([3.0, -1.0, 10.0])).tolist() == [0.0, -0.5, 0.5]
+    assert centred_ranks(np.array([3.0, np.nan, -1.0])).tolist() == [0.5, -0.5, 0.0]
+
+
+def test_a_damaged_checkpoint_is_named(tmp_path):
+    from twin.control.evolve import _resume, _settings
+
+    (tmp_path / "checkpoint.npz").write_bytes(b"PK\x03\x04 half a file")
+    with pytest.raises(TrainingError, match="is damaged"):
+        _resume(tmp_path, _settings(EvolveConfig()))
 
 
 @pytest.mark.parametrize(
@@ -45,7 +54,7 @@ def test_bad_settings_are_named(settings, message):
 def _config(data, generations):
     return EvolveConfig(
         generations=generations, population=2, episodes=1, duration=3.0, hidden=(4,),
-        heldout_every=2, heldout_episodes=2, data=data, seed=5,
+        heldout_every=2, heldout_episodes=2, data=data, seed=5, obs_noise=0.05,
     )  # fmt: skip
 
 
