@@ -120,8 +120,8 @@ def judged_steps(
         out["merge"].append(np.full(rows.size, m, np.int64))
         out["urgency"].append(u)
         out["accel"].append(accel)
-        out["own"].append(np.asarray(own, np.float64) * np.ones(rows.size))
-        out["yield"].append(np.asarray(yielding, np.float64) * np.ones(rows.size))
+        out["own"].append(np.asarray(own, np.float64))
+        out["yield"].append(np.asarray(yielding, np.float64))
     empty = {"merge": np.int64}
     steps = {
         name: np.concatenate(parts) if parts else np.zeros(0, empty.get(name, np.float64))

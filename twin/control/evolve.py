@@ -48,7 +48,6 @@ resumes where it stopped (the same command again) and ends with the same weights
 one that was not interrupted.
 """
 
-import csv
 import json
 import math
 import time
@@ -59,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from twin.control.mlp import HIDDEN, MLPPolicy, act, initial_weights, n_weights
-from twin.control.train import TrainingError
+from twin.control.train import TrainingError, write_curve
 from twin.core.atomic import atomic_file
 
 #: The score's penalties (see the module doc), per unit of each excess.
@@ -159,7 +158,7 @@ def rollout(env, thetas: np.ndarray, episodes: list[int], hidden, seed: int) -> 
     ``thetas[b]`` to its end, the sub-envs' generators (observation noise) seeded from
     ``seed``; each one's figures: the env's metrics with the time gap's p10 and p90 [s]
     (over every step; one with no leader within the gap cap counts as 10 s), the safety
-    layer's share of the time [%], collisions and ``mpg``."""
+    layer's share of the time [%], collisions and ``mpg`` (NaN where there is none)."""
     n = env.num_envs
     obs, _ = env.reset(seed=int(seed), options={"episode": list(episodes)})
     done = np.zeros(n, dtype=bool)
@@ -183,9 +182,9 @@ def rollout(env, thetas: np.ndarray, episodes: list[int], hidden, seed: int) -> 
         m = figures[b]
         g = series[:, b][np.isfinite(series[:, b])]
         seconds = max(float(m["simulated_s"]), 1e-9)
-        ttc = m["min_ttc_s"]
+        ttc, mpg = m["min_ttc_s"], m["ego_and_followers_mpg"]
         out.append({
-            "mpg": m["ego_and_followers_mpg"],
+            "mpg": np.nan if mpg is None else float(mpg),
             "collisions": int(m["collisions"]),
             "time_gap_p10_s": float(np.quantile(g, 0.1)) if g.size else TIME_GAP_CAP,
             "time_gap_p90_s": float(np.quantile(g, 0.9)) if g.size else TIME_GAP_CAP,
@@ -254,8 +253,7 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
         runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), config.hidden,
                        seed=episodes[0])  # fmt: skip
         # a run with no economy (no fuel, a figure missing) ranks lowest
-        mpg = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in runs], float)
-        mpg = np.nan_to_num(mpg, nan=0.0).reshape(2 * pairs, per)
+        mpg = np.nan_to_num([r["mpg"] for r in runs], nan=0.0).reshape(2 * pairs, per)
         median = np.median(mpg, axis=0)
         scores = np.empty((2 * pairs, per))
         economy = np.empty((2 * pairs, per))
@@ -283,7 +281,7 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
         policy = MLPPolicy(theta, config.hidden, about=_about(config, row))
         policy.save(out / "policy.json")
         _save(out, settings, theta, m, v, generation, rng, rows)
-        _write_curve(out, rows)
+        write_curve(out, rows, CURVE)
         if "heldout_economy_pct" in row:
             _plot_curve(out, rows)
         if progress:
@@ -321,8 +319,8 @@ def _heldout(env, theta, episodes: list[int], hidden) -> dict:
 
 
 def _heldout_row(held: dict, baseline: dict) -> dict:
-    mine = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in held["runs"]], float)
-    base = np.array([r["mpg"] if r["mpg"] is not None else np.nan for r in baseline["runs"]], float)
+    mine = np.array([r["mpg"] for r in held["runs"]])
+    base = np.array([r["mpg"] for r in baseline["runs"]])
     both = np.isfinite(mine) & np.isfinite(base)  # paired: the episodes both have
     total = base[both].sum()
     change = 100.0 * (mine[both].sum() / total - 1.0) if total > 0 else 0.0
@@ -433,13 +431,6 @@ def _print(row: dict, config: EvolveConfig) -> None:
         f"median {row['economy_pct_mean']:+.2f} %{held}",
         flush=True,
     )
-
-
-def _write_curve(out: Path, rows: list[dict]) -> None:
-    with atomic_file(out / "curve.csv") as tmp, tmp.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CURVE, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 def _plot_curve(out: Path, rows: list[dict]) -> None:

@@ -202,7 +202,7 @@ def train(
             },
         )
         policy.save(out / "policy.json")
-        _write_curve(out, rows)
+        write_curve(out, rows)
         if progress:
             r = rows[-1]
             print(
@@ -273,9 +273,11 @@ def _traffic(location):
     return EmpiricalTraffic(worker_data(location)[0])
 
 
-def _write_curve(out: Path, rows: list[dict]) -> None:
+def write_curve(out: Path, rows: list[dict], columns=CURVE) -> None:
+    """``OUT/curve.csv``: a row per iteration (or generation) of ``columns``, atomically;
+    a figure a row lacks is left empty."""
     with atomic_file(out / "curve.csv") as tmp, tmp.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CURVE)
+        writer = csv.DictWriter(f, fieldnames=columns, restval="")
         writer.writeheader()
         writer.writerows(rows)
 
