@@ -157,17 +157,25 @@ def lines(summary: dict) -> list[str]:
     paired = summary.get("paired_vs_human") or {}
     for label, entry in summary["controllers"].items():
         m = entry["metrics"]
-        change = paired.get(label, {}).get("metrics", {}).get("ego_and_followers_mpg", {})
-        text = ""
-        if change.get("mean") is not None:
-            low, high = change["ci95"]
-            text = f"; vs human {change['mean']:+.1f} % [{low:+.1f}, {high:+.1f}]"
+        changes = paired.get(label, {}).get("metrics", {})
         out.append(
-            f"{label:<17} ego + followers {_median(m, 'ego_and_followers_mpg')} mpg{text}; "
-            f"speed std behind {_median(m, 'speed_std_behind_mps')} m/s; min TTC "
+            f"{label:<17} ego + followers {_median(m, 'ego_and_followers_mpg')} mpg"
+            f"{_change(changes, 'ego_and_followers_mpg')}; window "
+            f"{_median(m, 'window_mpg')} mpg{_change(changes, 'window_mpg')}, speed std "
+            f"{_median(m, 'speed_std_window_mps')} m/s; speed std behind "
+            f"{_median(m, 'speed_std_behind_mps')} m/s; min TTC "
             f"{_median(m, 'min_ttc_s')} s; collisions {m['collisions']['sum']:g}"
         )
     return out
+
+
+def _change(changes: dict, metric: str) -> str:
+    """`` (vs human +x % [low, high])`` of a paired metric, "" where it has none."""
+    change = changes.get(metric, {})
+    if change.get("mean") is None:
+        return ""
+    low, high = change["ci95"]
+    return f" (vs human {change['mean']:+.1f} % [{low:+.1f}, {high:+.1f}])"
 
 
 def plot_traces(frame, config, path) -> None:

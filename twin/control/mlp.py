@@ -237,13 +237,27 @@ class MLPDriver:
     acceleration measured over that step) and holds its command between, with the
     drivers' emergency braking beneath it (``emergency_braking``), as in training.
 
+    ``obs_noise`` and ``latency_steps`` put the env's observation noise and latency
+    (:class:`~twin.control.env.WaveDampeningEnv`) between the twin and the policy: every
+    value of its observation multiplied by ``1 + obs_noise N(0, 1)`` (clipped to the
+    observation's bounds; the draws from ``seed`` and the vehicle's id), and the
+    observation it decides on ``latency_steps`` control steps old.
+
     Needs ``bind(sim)`` (the cosimulator calls it) for the recorded traffic ahead.
     """
 
     emergency_braking = True
 
-    def __init__(self, policy: MLPPolicy):
+    def __init__(self, policy: MLPPolicy, obs_noise: float = 0.0, latency_steps: int = 0,
+                 seed: int = 0):
+        if not (math.isfinite(obs_noise) and obs_noise >= 0):
+            raise PolicyError(f"obs_noise must be >= 0, got {obs_noise!r}")
+        if not (isinstance(latency_steps, int) and latency_steps >= 0):
+            raise PolicyError(f"latency_steps must be an integer >= 0, got {latency_steps!r}")
         self.policy = policy
+        self.obs_noise, self.latency_steps, self.seed = obs_noise, latency_steps, seed
+        self._rng: np.random.Generator | None = None  # drawn for the vehicle it drives
+        self._seen: list[np.ndarray] = []  # the last latency_steps + 1 observations
         self._sim = None
         self._every = 1
         self._calls = 0
@@ -264,9 +278,15 @@ class MLPDriver:
             before = self._at_decision
             measured = 0.0 if before is None else (obs.speed - before) / CONTROL_DT
             ahead = ahead_speeds(sim.traffic, sim.road, sim.t, obs.x, sim.config.vel_default)
-            vector = np.clip(features(obs, measured, ahead), OBS_LOW, OBS_HIGH)
-            vector = vector.astype(np.float32)  # as the env gives it
-            self._command = self.policy.accel(vector)
+            vector = features(obs, measured, ahead)
+            if self.obs_noise > 0:
+                if self._rng is None:
+                    self._rng = np.random.default_rng([self.seed, obs.id])
+                vector = vector * (1.0 + self.obs_noise * self._rng.standard_normal(vector.size))
+            vector = np.clip(vector, OBS_LOW, OBS_HIGH).astype(np.float32)  # as the env's
+            self._seen.append(vector)
+            del self._seen[: -(self.latency_steps + 1)]
+            self._command = self.policy.accel(self._seen[0])
             self._at_decision = obs.speed
         self._calls += 1
         return EgoCommand(accel=float(self._command))

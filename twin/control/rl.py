@@ -210,5 +210,20 @@ def policy(config):
             kind = MLPPolicy if document.get("format") == MLP_FORMAT else LinearSpeedPolicy
             _MODELS[key] = kind.load(model)
         loaded = _MODELS[key]
-        return MLPDriver(loaded) if isinstance(loaded, MLPPolicy) else PolicyDriver(loaded)
+        if isinstance(loaded, MLPPolicy):
+            return MLPDriver(loaded, settings.obs_noise, settings.latency_steps, config.seed)
+        _without_perturbation(settings, model)
+        return PolicyDriver(loaded)
+    _without_perturbation(settings, model)
     return PolicyController(load_policy(model), settings.action)
+
+
+def _without_perturbation(settings, model: str) -> None:
+    """Observation noise and latency are an MLP policy's settings: refused for others
+    rather than ignored."""
+    if settings.obs_noise or settings.latency_steps:
+        raise RLError(
+            f"controller.policy.obs_noise and latency_steps apply to an MLP policy; {model} "
+            "is not one (train one with twin train --algorithm es, or study noise and "
+            "latency in the env: WaveDampeningEnv(obs_noise=, latency_steps=))"
+        )

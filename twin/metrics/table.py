@@ -216,6 +216,10 @@ METRICS: tuple[Metric, ...] = (
     Metric("speed_std_behind_mps", "m/s", "standard deviation of each follower's speed over "
            "the episode (10 Hz), averaged over the followers",
            _control("speed_std_behind_mps"), paired="lower"),
+    Metric("speed_std_window_mps", "m/s", "standard deviation of each simulated vehicle's "
+           "speed over its time in the window (10 Hz), averaged over the vehicles weighted "
+           "by their time: the window's oscillation, which a fleet of AVs is to lower",
+           _control("speed_std_window_mps"), paired="lower"),
     Metric("wave_amplitude_behind_mps", "m/s", "max - min speed of each follower, averaged",
            _control("wave_amplitude_behind_mps"), paired="lower"),
     Metric("throughput_veh_per_h", "veh/h", "simulated vehicles passing the ego's starting "

@@ -3,7 +3,8 @@
 The words are the field's (the CIRCLES and Stern et al. wave-dampening benchmarks'):
 fuel economy of the AV (the ego), of its K followers and of the window
 (:mod:`twin.metrics.economy`); the speed standard deviation and the wave amplitude behind the
-AV; throughput past the ego's starting point; safety (minimum time to collision, the
+AV, and the speed standard deviation of every simulated vehicle (the window's, which a
+fleet of AVs is meant to lower); throughput past the ego's starting point; safety (minimum time to collision, the
 share of time under 4 s, time gaps); comfort (acceleration and jerk RMS).
 
 Gaps are measured from the log at :data:`SAMPLE_PERIOD`: the AV's leader is the
@@ -108,6 +109,7 @@ def control_figures(
     return {
         "followers": [int(i) for i in followers],
         "speed_std_behind_mps": _r(per_follower.std(ddof=0).mean()) if len(behind) else None,
+        "speed_std_window_mps": _window_speed_std(rows),
         "wave_amplitude_behind_mps": _r((per_follower.max() - per_follower.min()).mean())
         if len(behind)
         else None,
@@ -125,6 +127,20 @@ def control_figures(
         "accel_rms_mps2": _r(np.sqrt(np.mean(accel**2))) if accel.size else None,
         "jerk_rms_mps3": _r(np.sqrt(np.mean(jerk**2))) if jerk.size else None,
     }
+
+
+def _window_speed_std(rows: pd.DataFrame) -> float | None:
+    """Each simulated vehicle's speed standard deviation over its time in the log (10 Hz
+    samples), averaged over the vehicles weighted by their samples: how much the
+    window's traffic oscillates, whoever drives it."""
+    per_vehicle = rows.groupby("id")["speed"].agg(["std", "size"])
+    per_vehicle = per_vehicle[per_vehicle["size"] >= 2]
+    if per_vehicle.empty:
+        return None
+    # std with ddof 0 from pandas' ddof 1: sqrt((n - 1) / n)
+    n = per_vehicle["size"].to_numpy(float)
+    std = per_vehicle["std"].to_numpy(float) * np.sqrt((n - 1.0) / n)
+    return _r(np.sum(std * n) / np.sum(n))
 
 
 def _crossings(rows: pd.DataFrame, x0: float) -> int:

@@ -288,14 +288,28 @@ class PolicySettings:
             ``i24twin/WaveDampening-v0``; or the name of one the twin ships
             (``wave_es_mlp``, ``wave_ars``); empty: the default it ships (``wave_es_mlp``).
         action: a stable-baselines3 model's action in the env: ``accel`` or ``speed``.
+        obs_noise: [-] an MLP policy's observation noise, as the env's: every value it
+            sees multiplied by ``1 + obs_noise N(0, 1)`` (0: none; robustness studies).
+        latency_steps: [-] control steps (0.1 s) an MLP policy's observation lags, as the
+            env's.
     """
 
     model: str = ""
     action: str = "accel"
+    obs_noise: float = 0.0
+    latency_steps: int = 0
 
     def __post_init__(self):
         if self.action not in ("accel", "speed"):
             raise ValueError(f"action must be 'accel' or 'speed', got {self.action!r}")
+        if not (isinstance(self.obs_noise, int | float) and not isinstance(self.obs_noise, bool)
+                and math.isfinite(self.obs_noise) and self.obs_noise >= 0):
+            raise ValueError(f"obs_noise must be a number >= 0, got {self.obs_noise!r}")
+        if not (isinstance(self.latency_steps, int) and not isinstance(self.latency_steps, bool)
+                and self.latency_steps >= 0):
+            raise ValueError(
+                f"latency_steps must be an integer >= 0, got {self.latency_steps!r}"
+            )
 
 
 @dataclass(frozen=True)

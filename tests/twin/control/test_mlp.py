@@ -140,3 +140,83 @@ def test_the_default_policy_is_the_shipped_mlp_and_says_how_it_was_trained():
     assert "--seed 0" in shipped.about["command"]
     driver = policy_factory(SCENARIO_B)
     assert isinstance(driver, MLPDriver) and np.array_equal(driver.policy.weights, shipped.weights)
+
+
+class _Clock:
+    """What MLPDriver reads of a cosimulation: one decision per call."""
+
+    def __init__(self):
+        from types import SimpleNamespace
+
+        from twin.control.env import CONTROL_DT
+
+        self.config = SimpleNamespace(dt=CONTROL_DT, vel_default=30.0)
+        self.traffic = self.road = None
+        self.t = 0.0
+
+
+def _commands(driver, observations) -> list[float]:
+    driver.bind(_Clock())
+    return [driver(o).accel for o in observations]
+
+
+def _drive(n=12):
+    """Observations of an ego closing on a slower leader, speed and gap changing."""
+    return [
+        observation(20.0 + 0.03 * k, 40.0 - 0.5 * k, 19.0, -2, x=500.0 + 2.0 * k, y=5.5)
+        for k in range(n)
+    ]
+
+
+@pytest.fixture
+def flat_ahead(monkeypatch):
+    """The recorded speeds ahead, 20 m/s everywhere (no recording needed)."""
+    import twin.control.mlp as mlp
+
+    monkeypatch.setattr(mlp, "ahead_speeds", lambda *args: [20.0] * 12)
+
+
+def test_latency_decides_on_the_observation_of_steps_before(flat_ahead):
+    weights = np.random.default_rng(5).standard_normal(n_weights()) * 0.3
+    policy = MLPPolicy(weights)
+    now = _commands(MLPDriver(policy), _drive())
+    late = _commands(MLPDriver(policy, latency_steps=2), _drive())
+    # the first decisions see the first observation; then two control steps late
+    assert late[:3] == [now[0]] * 3
+    assert late[2:] == now[:-2]
+    assert now[2:] != now[:-2]  # the drive changes what it commands
+
+
+def test_observation_noise_is_drawn_per_vehicle_and_seed(flat_ahead):
+    weights = np.random.default_rng(6).standard_normal(n_weights()) * 0.3
+    policy = MLPPolicy(weights)
+    clean = _commands(MLPDriver(policy), _drive())
+    assert _commands(MLPDriver(policy, obs_noise=0.0, seed=3), _drive()) == clean
+    noisy = _commands(MLPDriver(policy, obs_noise=0.05, seed=3), _drive())
+    assert noisy != clean and np.all(np.isfinite(noisy))
+    assert _commands(MLPDriver(policy, obs_noise=0.05, seed=3), _drive()) == noisy
+    assert _commands(MLPDriver(policy, obs_noise=0.05, seed=4), _drive()) != noisy
+    other = [replace(o, id=o.id + 1) for o in _drive()]
+    assert _commands(MLPDriver(policy, obs_noise=0.05, seed=3), other) != noisy
+
+
+def test_noise_and_latency_are_settings_of_an_mlp_policy_only():
+    from twin.control.rl import RLError
+    from twin.control.rl import policy as policy_factory
+    from twin.traffic.baselines import PolicySettings
+
+    def with_policy(**settings):
+        return replace(SCENARIO_B, controller=replace(
+            SCENARIO_B.controller, policy=PolicySettings(**settings)))  # fmt: skip
+
+    driver = policy_factory(with_policy(obs_noise=0.05, latency_steps=2))
+    assert isinstance(driver, MLPDriver)
+    assert (driver.obs_noise, driver.latency_steps) == (0.05, 2)
+    with pytest.raises(RLError, match="apply to an MLP policy.*wave_ars"):
+        policy_factory(with_policy(model="wave_ars", obs_noise=0.05))
+    for bad in ({"obs_noise": -0.1}, {"obs_noise": float("nan")}, {"latency_steps": 1.5},
+                {"latency_steps": -1}):  # fmt: skip
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            PolicySettings(**bad)
+    with pytest.raises(PolicyError, match="latency_steps"):
+        MLPDriver(MLPPolicy(np.zeros(n_weights())), latency_steps=-1)
