@@ -58,7 +58,8 @@ def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map):
 def _follower_beside_an_urgent_merger(world, built_map, **settings):
     """Lane -2 one car 10 m behind the back of a merger in lane -3 that must move left,
     on a free road at 15 m/s, the merger's urgency 0.8 at the start and growing 0.06 a
-    second. Returns (the follower's speeds, whether the merger changed) over 6 s."""
+    second. Returns (the follower's speeds, whether the merger changed) over 6 s, and
+    whether it changed behind the follower."""
     manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1, **settings)
     follower = spawn(world, manager, 1, -2, 162.0, SPEED)
     merger = spawn(world, manager, 1, -3, 172.0, SPEED)
@@ -67,28 +68,37 @@ def _follower_beside_an_urgent_merger(world, built_map, **settings):
     manager.set_strategic(merger, 1, centre - 200.0, centre + 50.0)
     record = run(world, manager, 6.0)
     ids = world.states().id
-    behind = record.speed[:, int(np.flatnonzero(ids == follower[0])[0])]
-    changed = np.any(record.lane[:, int(np.flatnonzero(ids == merger[0])[0])] == -2)
-    return behind, changed
+    f_column = int(np.flatnonzero(ids == follower[0])[0])
+    m_column = int(np.flatnonzero(ids == merger[0])[0])
+    behind = record.speed[:, f_column]
+    into = np.flatnonzero(record.lane[:, m_column] == -2)
+    changed = into.size > 0
+    behind_it = changed and record.x[into[0], m_column] < record.x[into[0], f_column]
+    return behind, changed, behind_it
 
 
 @pytest.mark.parametrize("courtesy", [1.0, 0.0])
 def test_only_a_courteous_driver_drops_back_for_an_urgent_change(kinematic, built_map, courtesy):
-    # a courteous follower brakes to open the gap and the merger takes it; one that is
-    # not keeps its speed, and the merger, with no room, stays beside it
-    behind, changed = _follower_beside_an_urgent_merger(kinematic, built_map, courtesy=courtesy)
+    # a courteous follower brakes to open the gap and the merger takes it, in front of
+    # it; one that is not keeps its speed, and the merger, with no room in front of it,
+    # drops back and takes the gap behind it (LC2013's speed adaptation)
+    behind, changed, behind_it = _follower_beside_an_urgent_merger(
+        kinematic, built_map, courtesy=courtesy
+    )
     if courtesy == 1.0:
-        assert behind.min() < SPEED - 1.5 and changed
+        assert behind.min() < SPEED - 1.5 and changed and not behind_it
     else:
-        assert behind.min() == pytest.approx(SPEED) and not changed
+        assert behind.min() == pytest.approx(SPEED) and changed and behind_it
 
 
 def test_the_driver_behind_drops_back_only_from_yield_from(kinematic, built_map):
     # the merger's urgency reaches 0.9 after about 1.7 s: until then its follower keeps
     # its speed, then it drops back
-    behind, changed = _follower_beside_an_urgent_merger(kinematic, built_map, yield_from=0.9)
+    behind, changed, behind_it = _follower_beside_an_urgent_merger(
+        kinematic, built_map, yield_from=0.9
+    )
     assert behind[:12].min() == pytest.approx(SPEED)
-    assert behind.min() < SPEED - 1.0 and changed
+    assert behind.min() < SPEED - 1.0 and changed and not behind_it
 
 
 def test_courtesy_is_a_share_of_the_drivers_drawn_once_each():

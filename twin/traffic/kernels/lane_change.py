@@ -21,11 +21,10 @@ import numpy as np
 
 from twin.core.i24 import HOV_LANE, N_LANES
 from twin.core.jit import kernel, uniform
-from twin.traffic.kernels.longitudinal import MIN_SPEED_PATH, cf, urgency
+from twin.traffic.kernels.longitudinal import MIN_LANE_CHANGE_GAP, MIN_SPEED_PATH, cf, urgency
 from twin.traffic.kernels.neighbours import around
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
-MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of the new neighbours
 GIVE_UP = 150.0  # [m] past strategic_by a strategic change is no longer tried
 # The random streams of the next decision and the manoeuvre time (numpy integers: a
 # kernel called with a Python int constant is compiled once per value)

@@ -21,7 +21,10 @@ least ``cooperate_from``, it settles behind the target lane's vehicle ahead of i
 alongside it, when that one is more than half a length past its back), and the driver
 behind that one drops back for it, once the urgency is also at least ``yield_from``,
 if it is courteous (a share ``courtesy`` of the drivers, drawn once per driver), each
-braking no harder than ``cooperative_decel`` (:func:`cooperate`; the last three are
+braking no harder than ``cooperative_decel``; where that one is not courteous and its
+gap is too short for the change (:func:`takes`), the urgent driver drops back to fall
+in behind it instead, as LC2013's merging drivers adapt their speed to a gap
+(:func:`cooperate`; the last three are
 calibrated from how the recording's lane -4 yields to the on-ramps' merges,
 :mod:`twin.calibration.yielding`). An urgent change takes a
 shorter path than a discretionary one (``urgent_path``), so that a driver can get across
@@ -45,6 +48,7 @@ from twin.traffic.kernels.neighbours import around, leader_entry
 MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times their time
 MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
 COURTESY_STREAM = np.int64(0x636F75)  # whether a driver is courteous: one draw per driver
+MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of a lane change's new neighbours
 
 
 @kernel(inline=True)
@@ -168,6 +172,33 @@ def urgency(strategic, x_from, x_by, b, i, centre_x):
     return min(max(u, 0.0), 1.0)
 
 
+@kernel(inline=True)
+def yields(seed, key, urge, yield_from, courtesy):
+    """Whether the driver of ``key`` drops back for an urgent change of urgency
+    ``urge``: from ``yield_from``, if it is courteous (a share ``courtesy``, one draw
+    per driver)."""
+    if urge < yield_from:
+        return False
+    return courtesy >= 1.0 or courtesy > uniform(seed, COURTESY_STREAM, key, 0)
+
+
+@kernel(inline=True)
+def takes(t, b, n, i, behind, urge, x, speed):
+    """Whether urgent driver ``i`` at back ``x`` [m] and ``speed`` [m/s] could change in
+    front of ``behind`` now as it is: the gap to it at least
+    :data:`MIN_LANE_CHANGE_GAP` and its braking behind ``i`` no harder than the lane
+    change's test accepts at urgency ``urge`` (:mod:`twin.traffic.kernels.lane_change`)."""
+    sc, settings = t.scratch, t.settings
+    gap = x - sc.sx[b, behind] - sc.slength[b, behind]
+    if gap < MIN_LANE_CHANGE_GAP:
+        return False
+    safe_decel = t.drivers.safe_decel[b, i]
+    accepted = max(min(safe_decel * (1.0 + max(urge, 0.0)), settings.emergency_decel), safe_decel)
+    brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, behind,
+               sc.sspeed[b, behind], speed, gap)  # fmt: skip
+    return brake >= -accepted
+
+
 @kernel
 def cooperate(b, seed, t):
     """``cf_accel`` with the urgent drivers settling behind their target lane's vehicle
@@ -201,14 +232,22 @@ def cooperate(b, seed, t):
             ahead = behind
             _, behind = around(key, group, owner, count, b, target, sx[b, ahead])
         speed = sspeed[b, i]
+        if (
+            0 <= behind < n
+            and not yields(seed, key_of[b, behind], 1.0, 0.0, courtesy)
+            and not takes(t, b, n, i, behind, urge, x, speed)
+        ):
+            # the one behind will never make room and its gap is too short: drop back
+            # to the gap behind it (the speed adaptation of LC2013's merging drivers)
+            ahead = behind
+            _, behind = around(key, group, owner, count, b, target, sx[b, ahead])
         if ahead >= 0:
             room = sx[b, ahead] - x - length
             behind_it = cf(model, params, obstacle, b, n, i, speed, sspeed[b, ahead], room)
             cf_accel[b, i] = min(cf_accel[b, i], max(behind_it, -most))
-        if behind < 0 or behind >= n or urge < yield_from:
-            continue
-        if courtesy < 1.0 and not courtesy > uniform(seed, COURTESY_STREAM, key_of[b, behind], 0):
-            continue  # not courteous: keeps to its own leader
+        if behind < 0 or behind >= n or not yields(seed, key_of[b, behind], urge, yield_from,
+                                                   courtesy):  # fmt: skip
+            continue  # not (yet) courteous: keeps to its own leader
         gap = x - sx[b, behind] - slength[b, behind]
         if gap < -0.5 * length:
             continue
