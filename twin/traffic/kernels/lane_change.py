@@ -21,7 +21,13 @@ import numpy as np
 
 from twin.core.i24 import HOV_LANE, N_LANES
 from twin.core.jit import kernel, uniform
-from twin.traffic.kernels.longitudinal import MIN_LANE_CHANGE_GAP, MIN_SPEED_PATH, cf, urgency
+from twin.traffic.kernels.longitudinal import (
+    MIN_LANE_CHANGE_GAP,
+    MIN_SPEED_PATH,
+    accepted_decel,
+    cf,
+    urgency,
+)
 from twin.traffic.kernels.neighbours import around
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
@@ -173,9 +179,8 @@ def _choose(b, i, x, urge, t, n):
     if asked == 0 and urgent:
         asked = strategic
     safe_decel = drivers.safe_decel[b, i]
-    accepted = safe_decel  # an urgent driver takes a harder gap, never past emergency braking
-    if urge > 0.0:
-        accepted = max(min(safe_decel * (1.0 + urge), settings.emergency_decel), safe_decel)
+    # an urgent driver takes a harder gap, never past emergency braking
+    accepted = accepted_decel(safe_decel, urge, settings.emergency_decel)
     best, choice = 0.0, 0
     for step in (LEFT, RIGHT):
         target = lane + step

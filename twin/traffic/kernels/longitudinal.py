@@ -183,6 +183,16 @@ def yields(seed, key, urge, yield_from, courtesy):
 
 
 @kernel(inline=True)
+def accepted_decel(safe_decel, urge, emergency_decel):
+    """[m/s^2] the braking a lane change may ask of its new follower: ``safe_decel``,
+    raised by an urgent driver's urgency ``urge`` to ``safe_decel (1 + urge)``, never
+    past emergency braking."""
+    if urge > 0.0:
+        return max(min(safe_decel * (1.0 + urge), emergency_decel), safe_decel)
+    return safe_decel
+
+
+@kernel(inline=True)
 def takes(t, b, n, i, behind, urge, x, speed):
     """Whether urgent driver ``i`` at back ``x`` [m] and ``speed`` [m/s] could change in
     front of ``behind`` now as it is: the gap to it at least
@@ -192,8 +202,7 @@ def takes(t, b, n, i, behind, urge, x, speed):
     gap = x - sc.sx[b, behind] - sc.slength[b, behind]
     if gap < MIN_LANE_CHANGE_GAP:
         return False
-    safe_decel = t.drivers.safe_decel[b, i]
-    accepted = max(min(safe_decel * (1.0 + max(urge, 0.0)), settings.emergency_decel), safe_decel)
+    accepted = accepted_decel(t.drivers.safe_decel[b, i], urge, settings.emergency_decel)
     brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, behind,
                sc.sspeed[b, behind], speed, gap)  # fmt: skip
     return brake >= -accepted
