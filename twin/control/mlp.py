@@ -248,8 +248,9 @@ class MLPDriver:
 
     emergency_braking = True
 
-    def __init__(self, policy: MLPPolicy, obs_noise: float = 0.0, latency_steps: int = 0,
-                 seed: int = 0):
+    def __init__(
+        self, policy: MLPPolicy, obs_noise: float = 0.0, latency_steps: int = 0, seed: int = 0
+    ):
         if not (math.isfinite(obs_noise) and obs_noise >= 0):
             raise PolicyError(f"obs_noise must be >= 0, got {obs_noise!r}")
         if not (isinstance(latency_steps, int) and latency_steps >= 0):

@@ -4,8 +4,9 @@ The words are the field's (the CIRCLES and Stern et al. wave-dampening benchmark
 fuel economy of the AV (the ego), of its K followers and of the window
 (:mod:`twin.metrics.economy`); the speed standard deviation and the wave amplitude behind the
 AV, and the speed standard deviation of every simulated vehicle (the window's, which a
-fleet of AVs is meant to lower); throughput past the ego's starting point; safety (minimum time to collision, the
-share of time under 4 s, time gaps); comfort (acceleration and jerk RMS).
+fleet of AVs is meant to lower); throughput past the ego's starting point; safety
+(minimum time to collision, the share of time under 4 s, time gaps); comfort
+(acceleration and jerk RMS).
 
 Gaps are measured from the log at :data:`SAMPLE_PERIOD`: the AV's leader is the
 nearest vehicle ahead in its lane, simulated or ghost, bumper to bumper.

@@ -302,14 +302,19 @@ class PolicySettings:
     def __post_init__(self):
         if self.action not in ("accel", "speed"):
             raise ValueError(f"action must be 'accel' or 'speed', got {self.action!r}")
-        if not (isinstance(self.obs_noise, int | float) and not isinstance(self.obs_noise, bool)
-                and math.isfinite(self.obs_noise) and self.obs_noise >= 0):
+        if not (
+            isinstance(self.obs_noise, int | float)
+            and not isinstance(self.obs_noise, bool)
+            and math.isfinite(self.obs_noise)
+            and self.obs_noise >= 0
+        ):
             raise ValueError(f"obs_noise must be a number >= 0, got {self.obs_noise!r}")
-        if not (isinstance(self.latency_steps, int) and not isinstance(self.latency_steps, bool)
-                and self.latency_steps >= 0):
-            raise ValueError(
-                f"latency_steps must be an integer >= 0, got {self.latency_steps!r}"
-            )
+        if not (
+            isinstance(self.latency_steps, int)
+            and not isinstance(self.latency_steps, bool)
+            and self.latency_steps >= 0
+        ):
+            raise ValueError(f"latency_steps must be an integer >= 0, got {self.latency_steps!r}")
 
 
 @dataclass(frozen=True)

@@ -176,15 +176,25 @@ def flat_ahead(monkeypatch):
     monkeypatch.setattr(mlp, "ahead_speeds", lambda *args: [20.0] * 12)
 
 
+class _Seen:
+    """A policy that records the observations it decides on."""
+
+    def __init__(self):
+        self.seen = []
+
+    def accel(self, obs):
+        self.seen.append(np.array(obs))
+        return 0.0
+
+
 def test_latency_decides_on_the_observation_of_steps_before(flat_ahead):
-    weights = np.random.default_rng(5).standard_normal(n_weights()) * 0.3
-    policy = MLPPolicy(weights)
-    now = _commands(MLPDriver(policy), _drive())
-    late = _commands(MLPDriver(policy, latency_steps=2), _drive())
+    now, late = _Seen(), _Seen()
+    _commands(MLPDriver(now), _drive())
+    _commands(MLPDriver(late, latency_steps=2), _drive())
     # the first decisions see the first observation; then two control steps late
-    assert late[:3] == [now[0]] * 3
-    assert late[2:] == now[:-2]
-    assert now[2:] != now[:-2]  # the drive changes what it commands
+    assert all(np.array_equal(o, now.seen[0]) for o in late.seen[:3])
+    assert all(np.array_equal(a, b) for a, b in zip(late.seen[2:], now.seen[:-2], strict=True))
+    assert not np.array_equal(now.seen[2], now.seen[0])  # the drive changes what it sees
 
 
 def test_observation_noise_is_drawn_per_vehicle_and_seed(flat_ahead):
@@ -212,7 +222,7 @@ def test_noise_and_latency_are_settings_of_an_mlp_policy_only():
     driver = policy_factory(with_policy(obs_noise=0.05, latency_steps=2))
     assert isinstance(driver, MLPDriver)
     assert (driver.obs_noise, driver.latency_steps) == (0.05, 2)
-    with pytest.raises(RLError, match="apply to an MLP policy.*wave_ars"):
+    with pytest.raises(RLError, match=r"apply to an MLP policy.*wave_ars"):
         policy_factory(with_policy(model="wave_ars", obs_noise=0.05))
     for bad in ({"obs_noise": -0.1}, {"obs_noise": float("nan")}, {"latency_steps": 1.5},
                 {"latency_steps": -1}):  # fmt: skip
