@@ -18,13 +18,13 @@ def kinematic(built_map):
         yield world
 
 
-def _dense_lane_beside_a_merger(world, built_map, **settings):
+def _dense_lane_beside_a_merger(world, built_map, merger_class=0, **settings):
     """Lane -2 a platoon at 15 m/s with 16 m from back to back (no gap a car can take
-    without its new follower braking hard); one car beside it in lane -3, alone there,
-    whose target is to move left within 250 m."""
+    without its new follower braking hard); one car (or a vehicle of ``merger_class``)
+    beside it in lane -3, alone there, whose target is to move left within 250 m."""
     manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1, **settings)
     platoon = spawn(world, manager, 1, -2, 100.0 + 16.0 * np.arange(10), SPEED)
-    merger = spawn(world, manager, 1, -3, 172.0, SPEED)
+    merger = spawn(world, manager, 1, -3, 172.0, SPEED, vehicle_class=merger_class)
     everyone = np.r_[platoon, merger]
     manager.set_desired_speed(everyone, np.full(everyone.size, SPEED))
     centre = 172.0 + 0.5 * world.params_of(merger).length[0]
@@ -53,6 +53,23 @@ def test_without_cooperation_the_same_driver_finds_no_gap(kinematic, built_map):
     record = run(kinematic, manager, 18.0)
     column = int(np.flatnonzero(kinematic.states().id == merger)[0])
     assert np.all(record.lane[:, column] == -3)
+
+
+def test_with_no_one_to_make_room_and_no_gap_to_fall_into_it_drives_on(kinematic, built_map):
+    # a semi (20.5 m) beside a crawling queue whose drivers do not make room: no gap
+    # behind the one beside it is long enough, so it drives on along its lane (to a
+    # gap further on, or its lane's end) rather than braking to fall back gap after gap
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=1, courtesy=0.0)
+    queue = spawn(kinematic, manager, 1, -2, 100.0 + 9.0 * np.arange(20), 3.0)
+    manager.set_desired_speed(queue, np.full(queue.size, 3.0))
+    semi = spawn(kinematic, manager, 1, -3, 180.0, 3.0, vehicle_class=4)
+    manager.set_desired_speed(semi, np.full(1, 10.0))
+    centre = 180.0 + 0.5 * kinematic.params_of(semi).length[0]
+    manager.set_strategic(semi, 1, centre - 100.0, centre + 200.0)  # urgency 0.33
+    record = run(kinematic, manager, 10.0)
+    column = int(np.flatnonzero(kinematic.states().id == semi[0])[0])
+    assert record.speed[:, column].min() >= 3.0 - 1e-6
+    assert record.x[-1, column] - record.x[0, column] > 50.0
 
 
 def _follower_beside_an_urgent_merger(world, built_map, **settings):

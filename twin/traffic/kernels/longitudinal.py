@@ -21,10 +21,11 @@ least ``cooperate_from``, it settles behind the target lane's vehicle ahead of i
 alongside it, when that one is more than half a length past its back), and the driver
 behind that one drops back for it, once the urgency is also at least ``yield_from``,
 if it is courteous (a share ``courtesy`` of the drivers, drawn once per driver), each
-braking no harder than ``cooperative_decel``; where that one is not courteous and its
-gap is too short for the change (:func:`takes`), the urgent driver drops back to fall
-in behind it instead, as LC2013's merging drivers adapt their speed to a gap
-(:func:`cooperate`; the last three are
+braking no harder than ``cooperative_decel``; where that one does not make room and
+the gap is too short for the change (:func:`opening`, :func:`takes`), the urgent
+driver drops back to the gap behind it if that is one to take, and otherwise drives on
+along its lane to a gap further on or its lane's end, as LC2013's merging drivers
+adapt their speed to a gap (:func:`cooperate`; the last three are
 calibrated from how the recording's lane -4 yields to the on-ramps' merges,
 :mod:`twin.calibration.yielding`). An urgent change takes a
 shorter path than a discretionary one (``urgent_path``), so that a driver can get across
@@ -208,6 +209,27 @@ def takes(t, b, n, i, behind, urge, x, speed):
     return brake >= -accepted
 
 
+@kernel(inline=True)
+def opening(t, b, n, i, front, back, urge, seed, yield_from, courtesy):
+    """Whether urgent driver ``i`` could fall in between ``front`` and ``back`` (-1:
+    none) of its target lane: room for its length and :data:`MIN_LANE_CHANGE_GAP` to
+    each, and ``back`` either making room for it (:func:`yields`) or braking behind it
+    there, at ``front``'s speed, no harder than the change's test accepts."""
+    if back < 0:
+        return True
+    sc, settings = t.scratch, t.settings
+    space = sc.sx[b, front] - sc.sx[b, back] - sc.slength[b, back]
+    gap = space - sc.slength[b, i] - MIN_LANE_CHANGE_GAP
+    if gap < MIN_LANE_CHANGE_GAP:
+        return False
+    if back < n and yields(seed, t.drivers.key[b, back], urge, yield_from, courtesy):
+        return True
+    accepted = accepted_decel(t.drivers.safe_decel[b, i], urge, settings.emergency_decel)
+    brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, back,
+               sc.sspeed[b, back], sc.sspeed[b, front], gap)  # fmt: skip
+    return brake >= -accepted
+
+
 @kernel
 def cooperate(b, seed, t):
     """``cf_accel`` with the urgent drivers settling behind their target lane's vehicle
@@ -243,13 +265,21 @@ def cooperate(b, seed, t):
         speed = sspeed[b, i]
         if (
             0 <= behind < n
-            and not yields(seed, key_of[b, behind], 1.0, 0.0, courtesy)
-            and not takes(t, b, n, i, behind, urge, x, speed)
+            and not yields(seed, key_of[b, behind], urge, yield_from, courtesy)
+            and not (
+                opening(t, b, n, i, ahead, behind, urge, seed, yield_from, courtesy)
+                if ahead >= 0
+                else takes(t, b, n, i, behind, urge, x, speed)
+            )
         ):
-            # the one behind will never make room and its gap is too short: drop back
-            # to the gap behind it (the speed adaptation of LC2013's merging drivers)
-            ahead = behind
-            _, behind = around(key, group, owner, count, b, target, sx[b, ahead])
+            # the one behind will not make room (not now, or never) and the gap is too
+            # short: drop back to the gap behind it where that gap is one to take (the
+            # speed adaptation of LC2013's merging drivers); otherwise drive on along
+            # its own lane to a gap further on, or to the lane's end
+            _, next_back = around(key, group, owner, count, b, target, sx[b, behind])
+            if not opening(t, b, n, i, behind, next_back, urge, seed, yield_from, courtesy):
+                continue
+            ahead, behind = behind, next_back
         if ahead >= 0:
             room = sx[b, ahead] - x - length
             behind_it = cf(model, params, obstacle, b, n, i, speed, sspeed[b, ahead], room)
