@@ -151,8 +151,9 @@ def markdown(summary: dict) -> str:
 
 
 def lines(summary: dict) -> list[str]:
-    """Terminal lines: each controller's medians, and its paired change in the
-    ego-and-followers fuel economy."""
+    """Terminal lines: each controller's medians, with its paired changes against
+    ``human`` in the AV and its followers' economy, the window's economy and the
+    window's speed standard deviation."""
     out = []
     paired = summary.get("paired_vs_human") or {}
     for label, entry in summary["controllers"].items():
@@ -162,7 +163,8 @@ def lines(summary: dict) -> list[str]:
             f"{label:<17} ego + followers {_median(m, 'ego_and_followers_mpg')} mpg"
             f"{_change(changes, 'ego_and_followers_mpg')}; window "
             f"{_median(m, 'window_mpg')} mpg{_change(changes, 'window_mpg')}, speed std "
-            f"{_median(m, 'speed_std_window_mps')} m/s; speed std behind "
+            f"{_median(m, 'speed_std_window_mps')} m/s"
+            f"{_change(changes, 'speed_std_window_mps')}; speed std behind "
             f"{_median(m, 'speed_std_behind_mps')} m/s; min TTC "
             f"{_median(m, 'min_ttc_s')} s; collisions {m['collisions']['sum']:g}"
         )

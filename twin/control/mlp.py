@@ -251,9 +251,18 @@ class MLPDriver:
     def __init__(
         self, policy: MLPPolicy, obs_noise: float = 0.0, latency_steps: int = 0, seed: int = 0
     ):
-        if not (math.isfinite(obs_noise) and obs_noise >= 0):
-            raise PolicyError(f"obs_noise must be >= 0, got {obs_noise!r}")
-        if not (isinstance(latency_steps, int) and latency_steps >= 0):
+        if not (
+            isinstance(obs_noise, int | float | np.floating)
+            and not isinstance(obs_noise, bool)
+            and math.isfinite(obs_noise)
+            and obs_noise >= 0
+        ):
+            raise PolicyError(f"obs_noise must be a number >= 0, got {obs_noise!r}")
+        if not (
+            isinstance(latency_steps, int | np.integer)
+            and not isinstance(latency_steps, bool)
+            and latency_steps >= 0
+        ):
             raise PolicyError(f"latency_steps must be an integer >= 0, got {latency_steps!r}")
         self.policy = policy
         self.obs_noise, self.latency_steps, self.seed = obs_noise, latency_steps, seed

@@ -134,12 +134,12 @@ def _window_speed_std(rows: pd.DataFrame) -> float | None:
     """Each simulated vehicle's speed standard deviation over its time in the log (10 Hz
     samples), averaged over the vehicles weighted by their samples: how much the
     window's traffic oscillates, whoever drives it."""
-    per_vehicle = rows.groupby("id")["speed"].agg(["std", "size"])
-    per_vehicle = per_vehicle[per_vehicle["size"] >= 2]
+    per_vehicle = rows.groupby("id")["speed"].agg(["std", "count"])  # both skip NaN
+    per_vehicle = per_vehicle[per_vehicle["count"] >= 2]
     if per_vehicle.empty:
         return None
     # std with ddof 0 from pandas' ddof 1: sqrt((n - 1) / n)
-    n = per_vehicle["size"].to_numpy(float)
+    n = per_vehicle["count"].to_numpy(float)
     std = per_vehicle["std"].to_numpy(float) * np.sqrt((n - 1.0) / n)
     return _r(np.sum(std * n) / np.sum(n))
 

@@ -59,3 +59,21 @@ def test_paired_changes_and_their_interval():
     assert spread["ci95"][0] < 19.5 < spread["ci95"][1]
     assert spread == benchmark.mean_with_ci(list(range(40)))  # seeded: deterministic
     assert benchmark.mean_with_ci([])["mean"] is None
+
+
+def test_the_terminal_line_gives_the_window_and_the_paired_changes():
+    def medians(**values):
+        metrics = {name: {"median": value} for name, value in values.items()}
+        metrics["collisions"] = {"sum": 0}
+        return {"metrics": metrics}
+
+    figures = dict(ego_and_followers_mpg=90.0, window_mpg=84.0, speed_std_window_mps=3.07,
+                   speed_std_behind_mps=3.2, min_ttc_s=18.0)  # fmt: skip
+    change = {"mean": -6.0, "ci95": [-7.2, -4.7]}
+    summary = {
+        "controllers": {"human": medians(**figures), "policy": medians(**figures)},
+        "paired_vs_human": {"policy": {"metrics": {"speed_std_window_mps": change}}},
+    }
+    human, policy = benchmark.lines(summary)
+    assert "window 84.00 mpg, speed std 3.07 m/s;" in human and "vs human" not in human
+    assert "speed std 3.07 m/s (vs human -6.0 % [-7.2, -4.7])" in policy

@@ -228,5 +228,6 @@ def test_noise_and_latency_are_settings_of_an_mlp_policy_only():
                 {"latency_steps": -1}):  # fmt: skip
         with pytest.raises(ValueError, match=next(iter(bad))):
             PolicySettings(**bad)
-    with pytest.raises(PolicyError, match="latency_steps"):
-        MLPDriver(MLPPolicy(np.zeros(n_weights())), latency_steps=-1)
+    for bad in ({"latency_steps": -1}, {"latency_steps": True}, {"obs_noise": "0.1"}):
+        with pytest.raises(PolicyError, match=next(iter(bad))):
+            MLPDriver(MLPPolicy(np.zeros(n_weights())), **bad)

@@ -25,5 +25,10 @@ def test_the_window_speed_std_weighs_each_vehicle_by_its_time():
         pd.concat([ego, waving, lone]), ghosts, 0, [], np.full(3, 4.5), dt=0.1
     )
     assert figures["speed_std_window_mps"] == pytest.approx((0 * 20 + 5.0 * 10) / 30, abs=1e-4)
+    # a speed the log lacks (NaN) is no sample: neither in the std nor in the weights
+    gappy = waving.assign(speed=waving["speed"].where(waving.index != 0))  # 9 samples
+    nan_std = np.std(gappy["speed"].dropna())
+    figures = control_figures(pd.concat([ego, gappy]), ghosts, 0, [], np.full(3, 4.5), 0.1)
+    assert figures["speed_std_window_mps"] == pytest.approx(nan_std * 9 / 29, abs=1e-4)
     # the ego alone: a steady window
     assert control_figures(ego, ghosts, 0, [], np.full(3, 4.5), 0.1)["speed_std_window_mps"] == 0
