@@ -222,11 +222,17 @@ def opening(t, b, n, i, front, back, urge, seed, yield_from, courtesy):
     gap = space - sc.slength[b, i] - MIN_LANE_CHANGE_GAP
     if gap < MIN_LANE_CHANGE_GAP:
         return False
+    # in the middle of it, at its front's speed: its own braking behind the front as the
+    # change's test asks of it
+    v = sc.sspeed[b, front]
+    own = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, i, v, v, 0.5 * gap)
+    if own < -t.drivers.safe_decel[b, i]:
+        return False
     if back < n and yields(seed, t.drivers.key[b, back], urge, yield_from, courtesy):
         return True
     accepted = accepted_decel(t.drivers.safe_decel[b, i], urge, settings.emergency_decel)
     brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, back,
-               sc.sspeed[b, back], sc.sspeed[b, front], gap)  # fmt: skip
+               sc.sspeed[b, back], v, 0.5 * gap)  # fmt: skip
     return brake >= -accepted
 
 
