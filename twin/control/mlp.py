@@ -47,6 +47,7 @@ from twin.control.env import (
     features,
 )
 from twin.control.policy import PolicyError, checked_document, is_numbers, write_policy_document
+from twin.traffic.baselines import check_perturbation
 from twin.traffic.controller_api import EgoCommand, Observation
 
 FORMAT = "i24-twin-mlp-speed-policy"
@@ -251,19 +252,10 @@ class MLPDriver:
     def __init__(
         self, policy: MLPPolicy, obs_noise: float = 0.0, latency_steps: int = 0, seed: int = 0
     ):
-        if not (
-            isinstance(obs_noise, int | float | np.floating)
-            and not isinstance(obs_noise, bool)
-            and math.isfinite(obs_noise)
-            and obs_noise >= 0
-        ):
-            raise PolicyError(f"obs_noise must be a number >= 0, got {obs_noise!r}")
-        if not (
-            isinstance(latency_steps, int | np.integer)
-            and not isinstance(latency_steps, bool)
-            and latency_steps >= 0
-        ):
-            raise PolicyError(f"latency_steps must be an integer >= 0, got {latency_steps!r}")
+        try:
+            check_perturbation(obs_noise, latency_steps)
+        except ValueError as error:
+            raise PolicyError(str(error)) from None
         self.policy = policy
         self.obs_noise, self.latency_steps, self.seed = obs_noise, latency_steps, seed
         self._rng: np.random.Generator | None = None  # drawn for the vehicle it drives

@@ -302,19 +302,26 @@ class PolicySettings:
     def __post_init__(self):
         if self.action not in ("accel", "speed"):
             raise ValueError(f"action must be 'accel' or 'speed', got {self.action!r}")
-        if not (
-            isinstance(self.obs_noise, int | float)
-            and not isinstance(self.obs_noise, bool)
-            and math.isfinite(self.obs_noise)
-            and self.obs_noise >= 0
-        ):
-            raise ValueError(f"obs_noise must be a number >= 0, got {self.obs_noise!r}")
-        if not (
-            isinstance(self.latency_steps, int)
-            and not isinstance(self.latency_steps, bool)
-            and self.latency_steps >= 0
-        ):
-            raise ValueError(f"latency_steps must be an integer >= 0, got {self.latency_steps!r}")
+        check_perturbation(self.obs_noise, self.latency_steps)
+
+
+def check_perturbation(obs_noise, latency_steps) -> None:
+    """Raise ValueError naming ``obs_noise`` unless it is a finite number >= 0, or
+    ``latency_steps`` unless it is an integer >= 0 (a policy's observation noise and
+    latency, :class:`PolicySettings`)."""
+    if not (
+        isinstance(obs_noise, int | float | np.floating)
+        and not isinstance(obs_noise, bool)
+        and math.isfinite(obs_noise)
+        and obs_noise >= 0
+    ):
+        raise ValueError(f"obs_noise must be a number >= 0, got {obs_noise!r}")
+    if not (
+        isinstance(latency_steps, int | np.integer)
+        and not isinstance(latency_steps, bool)
+        and latency_steps >= 0
+    ):
+        raise ValueError(f"latency_steps must be an integer >= 0, got {latency_steps!r}")
 
 
 @dataclass(frozen=True)

@@ -199,13 +199,19 @@ def takes(t, b, n, i, behind, urge, x, speed):
     front of ``behind`` now as it is: the gap to it at least
     :data:`MIN_LANE_CHANGE_GAP` and its braking behind ``i`` no harder than the lane
     change's test accepts at urgency ``urge`` (:mod:`twin.traffic.kernels.lane_change`)."""
-    sc, settings = t.scratch, t.settings
-    gap = x - sc.sx[b, behind] - sc.slength[b, behind]
-    if gap < MIN_LANE_CHANGE_GAP:
-        return False
+    gap = x - t.scratch.sx[b, behind] - t.scratch.slength[b, behind]
+    return gap >= MIN_LANE_CHANGE_GAP and accepts(t, b, n, i, behind, urge, speed, gap)
+
+
+@kernel(inline=True)
+def accepts(t, b, n, i, back, urge, speed, gap):
+    """Whether ``back`` would brake no harder than urgent driver ``i``'s change may ask
+    (:func:`accepted_decel` at urgency ``urge``) behind ``i`` at ``speed`` [m/s],
+    ``gap`` [m] ahead of it."""
+    settings = t.settings
     accepted = accepted_decel(t.drivers.safe_decel[b, i], urge, settings.emergency_decel)
-    brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, behind,
-               sc.sspeed[b, behind], speed, gap)  # fmt: skip
+    brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, back,
+               t.scratch.sspeed[b, back], speed, gap)  # fmt: skip
     return brake >= -accepted
 
 
@@ -230,10 +236,7 @@ def opening(t, b, n, i, front, back, urge, seed, yield_from, courtesy):
         return False
     if back < n and yields(seed, t.drivers.key[b, back], urge, yield_from, courtesy):
         return True
-    accepted = accepted_decel(t.drivers.safe_decel[b, i], urge, settings.emergency_decel)
-    brake = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, back,
-               sc.sspeed[b, back], v, 0.5 * gap)  # fmt: skip
-    return brake >= -accepted
+    return accepts(t, b, n, i, back, urge, v, 0.5 * gap)
 
 
 @kernel
