@@ -83,6 +83,19 @@ def register(commands) -> None:
     )
     p.add_argument("--latency-steps", type=int, default=0, help="es: the env's observation latency")
     p.add_argument(
+        "--smoothing", type=float, default=0.0,
+        help="es: [s] the policy's smoothing of its observations (default 0: none)",
+    )  # fmt: skip
+    p.add_argument(
+        "--jerk-from", choices=["measured", "command"], default="measured",
+        help="es: what the policy's jerk limit counts from: its measured acceleration "
+        "(default) or its own previous command",
+    )  # fmt: skip
+    p.add_argument(
+        "--start", type=Path, default=None,
+        help="es: a policy file whose weights the training starts from",
+    )  # fmt: skip
+    p.add_argument(
         "--world",
         choices=["kinematic", "physics"],
         default="kinematic",
@@ -136,7 +149,8 @@ def _evolve(args) -> int:
         duration=60.0 if args.duration is None else args.duration, sigma=args.sigma,
         learning_rate=args.learning_rate, hidden=hidden, heldout_every=args.heldout_every,
         heldout_episodes=args.heldout_episodes, obs_noise=args.obs_noise,
-        latency_steps=args.latency_steps, data=str(args.data or "embedded:morning"), seed=args.seed,
+        latency_steps=args.latency_steps, smoothing=args.smoothing, jerk_from=args.jerk_from,
+        start=args.start, data=str(args.data or "embedded:morning"), seed=args.seed,
     )  # fmt: skip
     policy = evolve(args.out, config, progress=not args.quiet)
     print(

@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.control.mlp import HIDDEN, MLPPolicy, act, initial_weights, n_weights
+from twin.control.mlp import HIDDEN, Actor, MLPPolicy, check_memory, initial_weights, n_weights
 from twin.control.train import TrainingError, write_curve
 from twin.core.atomic import atomic_file
 
@@ -93,6 +93,10 @@ class EvolveConfig:
         hidden: the MLP's hidden layers.
         heldout_every: generations between held-out scores; heldout_episodes: how many.
         obs_noise, latency_steps: the env's (train under noise and latency).
+        smoothing, jerk_from: the policy's memory (:class:`twin.control.mlp.Actor`).
+        start: a policy file whose weights it starts from (its hidden layers must be
+            these; its smoothing and jerk_from are replaced by these) instead of drawn
+            weights that follow the leader.
         data: the store (``embedded:morning`` by default).
         seed: the episodes', perturbations' and initial weights' seed.
     """
@@ -109,6 +113,9 @@ class EvolveConfig:
     heldout_episodes: int = 16
     obs_noise: float = 0.0
     latency_steps: int = 0
+    smoothing: float = 0.0
+    jerk_from: str = "measured"
+    start: str | None = None
     data: str = "embedded:morning"
     seed: int = 0
 
@@ -128,6 +135,12 @@ class EvolveConfig:
             raise TrainingError(f"weight_decay must be >= 0, got {self.weight_decay!r}")
         if not self.hidden or not all(isinstance(h, int) and h >= 1 for h in self.hidden):
             raise TrainingError(f"hidden must be layer sizes >= 1, got {self.hidden!r}")
+        try:
+            check_memory(self.smoothing, self.jerk_from)
+        except ValueError as error:
+            raise TrainingError(str(error)) from None
+        if self.start is not None:
+            object.__setattr__(self, "start", str(self.start))  # a Path too
 
     @property
     def num_envs(self) -> int:
@@ -153,9 +166,10 @@ def score(figures: dict) -> tuple[float, float]:
     return value, economy
 
 
-def rollout(env, thetas: np.ndarray, episodes: list[int], hidden, seed: int) -> list[dict]:
+def rollout(env, thetas: np.ndarray, episodes: list[int], actor: Actor, seed: int) -> list[dict]:
     """Run sub-env ``b`` of vector ``env`` on episode ``episodes[b]`` with weights
-    ``thetas[b]`` to its end, the sub-envs' generators (observation noise) seeded from
+    ``thetas[b]`` to its end, deciding with a fresh ``actor`` (its memory: one row per
+    sub-env), the sub-envs' generators (observation noise) seeded from
     ``seed``; each one's figures: the env's metrics with the time gap's p10 and p90 [s]
     (over every step; one with no leader within the gap cap counts as 10 s), the safety
     layer's share of the time [%], collisions and ``mpg`` (NaN where there is none)."""
@@ -165,7 +179,7 @@ def rollout(env, thetas: np.ndarray, episodes: list[int], hidden, seed: int) -> 
     figures: list[dict | None] = [None] * n
     gaps: list[list[np.ndarray]] = []
     while not done.all():
-        actions = act(thetas, obs, hidden)
+        actions = actor(thetas, obs)
         obs_before = obs
         obs, _, terminated, truncated, info = env.step(actions[:, None])
         speed, gap = obs_before[:, 0].astype(np.float64), obs_before[:, 2].astype(np.float64)
@@ -243,14 +257,14 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
     steps_per_run = round(config.duration / 0.1)
     heldout = _placeable(envs["test"], iter(range(HELDOUT_TRIES)), config.heldout_episodes)
     start = initial_weights(config.seed, config.hidden)  # any: human ignores the actions
-    baseline = _heldout(envs["human"], start, heldout, config.hidden)
+    baseline = _heldout(envs["human"], start, heldout, config)
     for generation in range(state["generation"] + 1, config.generations + 1):
         tick = time.perf_counter()
         episodes = _placeable(envs["train"], (int(k) for k in rng.integers(0, 2**31 - 1, 64)), per)
         eps = rng.standard_normal((pairs, theta.size))
         members = np.concatenate([theta + config.sigma * eps, theta - config.sigma * eps])
         thetas = np.repeat(members, per, axis=0)  # sub-env b: member b // per
-        runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), config.hidden,
+        runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), _actor(config),
                        seed=episodes[0])  # fmt: skip
         # a run with no economy (no fuel, a figure missing) ranks lowest
         mpg = np.nan_to_num([r["mpg"] for r in runs], nan=0.0).reshape(2 * pairs, per)
@@ -274,11 +288,12 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
             "economy_pct_mean": round(float(economy.mean()), 3),
         }
         if generation % config.heldout_every == 0 or generation == config.generations:
-            held = _heldout(envs["test"], theta, heldout, config.hidden)
+            held = _heldout(envs["test"], theta, heldout, config)
             row.update(_heldout_row(held, baseline))
             row["wall_s"] = round(row["wall_s"] + held["seconds"], 1)
         rows.append(row)
-        policy = MLPPolicy(theta, config.hidden, about=_about(config, row))
+        policy = MLPPolicy(theta, config.hidden, config.smoothing, config.jerk_from,
+                           about=_about(config, row))  # fmt: skip
         policy.save(out / "policy.json")
         _save(out, settings, theta, m, v, generation, rng, rows)
         write_curve(out, rows, CURVE)
@@ -286,7 +301,8 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
             _plot_curve(out, rows)
         if progress:
             _print(row, config)
-    return MLPPolicy(theta, config.hidden, about=_about(config, rows[-1]))
+    return MLPPolicy(theta, config.hidden, config.smoothing, config.jerk_from,
+                     about=_about(config, rows[-1]))  # fmt: skip
 
 
 def _placeable(env, candidates, count: int) -> list[int]:
@@ -310,11 +326,15 @@ def _placeable(env, candidates, count: int) -> list[int]:
     raise TrainingError(f"only {len(found)} of the episodes drawn could be placed (need {count})")
 
 
-def _heldout(env, theta, episodes: list[int], hidden) -> dict:
+def _actor(config: EvolveConfig) -> Actor:
+    return Actor(config.hidden, config.smoothing, config.jerk_from)
+
+
+def _heldout(env, theta, episodes: list[int], config: EvolveConfig) -> dict:
     """The held-out ``episodes``' figures with weights ``theta`` (one per run)."""
     start = time.perf_counter()
     thetas = np.repeat(theta[None], env.num_envs, axis=0)
-    runs = rollout(env, thetas, episodes, hidden, seed=episodes[0])
+    runs = rollout(env, thetas, episodes, _actor(config), seed=episodes[0])
     return {"runs": runs, "seconds": time.perf_counter() - start}
 
 
@@ -357,10 +377,32 @@ def _settings(config: EvolveConfig) -> dict:
 
 def _fresh(config: EvolveConfig) -> dict:
     theta = initial_weights(config.seed, config.hidden)
+    if config.start is not None:
+        theta = _start_weights(config)
     return {
         "theta": theta, "m": np.zeros_like(theta), "v": np.zeros_like(theta),
         "generation": 0, "rng": np.random.default_rng([config.seed, 0x4553]), "rows": [],
     }  # fmt: skip
+
+
+def _start_weights(config: EvolveConfig) -> np.ndarray:
+    """The weights of the policy file ``config.start``.
+
+    Raises:
+        TrainingError: it cannot be read, or is a policy of another network.
+    """
+    from twin.control.policy import PolicyError
+
+    try:
+        policy = MLPPolicy.load(config.start)
+    except PolicyError as error:
+        raise TrainingError(f"--start: {error}") from None
+    if policy.hidden != config.hidden:
+        raise TrainingError(
+            f"--start {config.start} is a policy with hidden layers {policy.hidden}, not the "
+            f"training's {config.hidden}"
+        )
+    return policy.weights.copy()
 
 
 def _resume(out: Path, settings: dict) -> dict | None:
@@ -374,7 +416,9 @@ def _resume(out: Path, settings: dict) -> dict | None:
         return None
     try:
         with np.load(path, allow_pickle=False) as data:
-            saved = json.loads(str(data["settings"]))
+            # a training from before these settings had them at their defaults
+            saved = {"smoothing": 0.0, "jerk_from": "measured", "start": None}
+            saved |= json.loads(str(data["settings"]))
             rng = np.random.default_rng()
             rng.bit_generator.state = json.loads(str(data["rng"]))
             state = {

@@ -4,13 +4,15 @@ sees, what it commands, its file, and the controller that drives the ego with it
 It sees the env's observation (:data:`twin.control.env.OBSERVATION`: own speed and
 acceleration, leader's and follower's gaps and speeds, the recorded speeds ahead per
 lane) as :data:`INPUTS` scaled features: speeds relative to its own, gaps and its time
-gap to the leader, each of order one (:func:`inputs`). No history: the recorded speeds
-ahead carry what is coming, and the speed loop smooths what it commands.
+gap to the leader, each of order one (:func:`inputs`). The recorded speeds ahead carry
+what is coming; a policy may keep a memory of what it saw (:class:`Actor`): its
+observations smoothed (``smoothing``, against observation noise) and its jerk limit
+counted from its own previous command (``jerk_from``).
 
 It commands a speed every 0.1 s, tracked by the baselines' speed loop (``1.0 (v_cmd -
 v)`` within the env's limits) whose acceleration changes by at most :data:`JERK_LIMIT`
 (the action is smoothed: jerk limited, from the acceleration it measured over the last
-step)::
+step, or, ``jerk_from="command"``, from its own previous command)::
 
     v_cmd = clip(leader_speed + SPAN tanh(MLP(inputs)), 0, 35 m/s)
     accel = a_measured + clip(clip(v_cmd - v, -3, 1.5) - a_measured, -J dt, J dt)
@@ -58,6 +60,8 @@ JERK_LIMIT = 2.0  # [m/s^3] the most its commanded acceleration changes per seco
 SPEED_SCALE = 10.0  # [m/s] speed differences are inputs in these units
 GAP_SCALE = 100.0  # [m] gaps likewise
 TIME_GAP_CAP = 10.0  # [s] the time gap input is capped here (and is this with no leader)
+#: What its jerk limit counts from (:class:`Actor`).
+JERK_FROM = ("measured", "command")
 #: The inputs, in order (:func:`inputs`).
 INPUTS = (
     "speed",
@@ -154,8 +158,68 @@ def accel_command(speed_command: np.ndarray, obs: np.ndarray) -> np.ndarray:
 
 def act(theta: np.ndarray, obs: np.ndarray, hidden: tuple[int, ...] = HIDDEN) -> np.ndarray:
     """[m/s^2] the env's ``accel`` actions (...,) of observations ``obs`` (..., 18),
-    as :func:`forward` takes ``theta``."""
+    as :func:`forward` takes ``theta``: a policy with no memory (no smoothing, its jerk
+    limit from the measured acceleration)."""
     return accel_command(forward(theta, obs, hidden), obs)
+
+
+class Actor:
+    """A policy's decisions over one drive, for ``n`` vehicles at once (one row of
+    observations each): what it remembers between control steps.
+
+    * ``smoothing`` [s] > 0: it decides on an exponential moving average of its
+      observations (time constant ``smoothing``; the first observation starts it)
+      instead of each one as it comes, every value but its measured acceleration:
+      observation noise is averaged out at the cost of that lag;
+    * ``jerk_from="command"``: its jerk limit counts from its own previous command
+      (which it knows exactly) instead of the acceleration it measured (which noise and
+      latency blur); the first decision counts from the measured one.
+
+    With neither (``smoothing=0``, ``jerk_from="measured"``) it is :func:`act`, bit for
+    bit.
+    """
+
+    def __init__(self, hidden: tuple[int, ...] = HIDDEN, smoothing: float = 0.0,
+                 jerk_from: str = "measured"):  # fmt: skip
+        check_memory(smoothing, jerk_from)
+        self.hidden, self.smoothing, self.jerk_from = tuple(hidden), float(smoothing), jerk_from
+        self._mean: np.ndarray | None = None  # the smoothed observations
+        self._command: np.ndarray | None = None  # the last commands
+
+    def __call__(self, theta: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """[m/s^2] the ``accel`` actions (n,) for observations ``obs`` (n, 18) with
+        weights ``theta`` (as :func:`forward` takes them)."""
+        obs = np.asarray(obs, dtype=np.float64)
+        seen = obs
+        if self.smoothing > 0:
+            if self._mean is None:
+                self._mean = obs.copy()
+            else:
+                self._mean += CONTROL_DT / (self.smoothing + CONTROL_DT) * (obs - self._mean)
+            seen = self._mean.copy()
+            seen[..., 1] = obs[..., 1]  # the measured acceleration as it comes
+        speed_command = forward(theta, seen, self.hidden)
+        if self.jerk_from == "command" and self._command is not None:
+            wanted = np.clip(SPEED_GAIN * (speed_command - seen[..., 0]), *ACCEL_RANGE)
+            step = JERK_LIMIT * CONTROL_DT
+            command = self._command + np.clip(wanted - self._command, -step, step)
+        else:
+            command = accel_command(speed_command, seen)
+        self._command = command
+        return command
+
+
+def check_memory(smoothing, jerk_from) -> None:
+    """Raises ValueError naming a bad ``smoothing`` (a number >= 0 [s]) or
+    ``jerk_from`` (one of :data:`JERK_FROM`)."""
+    if (
+        isinstance(smoothing, bool)
+        or not isinstance(smoothing, int | float)
+        or not (math.isfinite(smoothing) and smoothing >= 0)
+    ):
+        raise ValueError(f"smoothing must be a number of seconds >= 0, got {smoothing!r}")
+    if jerk_from not in JERK_FROM:
+        raise ValueError(f"jerk_from must be one of {JERK_FROM}, got {jerk_from!r}")
 
 
 @dataclass(frozen=True)
@@ -165,11 +229,15 @@ class MLPPolicy:
     Attributes:
         weights: (:func:`n_weights`,) the flat weights.
         hidden: the hidden layers' units.
+        smoothing: [s] its observations' smoothing (:class:`Actor`; 0: none).
+        jerk_from: what its jerk limit counts from (:class:`Actor`).
         about: how it was trained (free-form, kept in the file).
     """
 
     weights: np.ndarray
     hidden: tuple[int, ...] = HIDDEN
+    smoothing: float = 0.0
+    jerk_from: str = "measured"
     about: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
@@ -185,16 +253,26 @@ class MLPPolicy:
                 f"weights, got {weights.size}"
                 + ("" if np.all(np.isfinite(weights)) else " with non-finite values")
             )
+        try:
+            check_memory(self.smoothing, self.jerk_from)
+        except ValueError as error:
+            raise PolicyError(f"an MLP policy's {error}") from None
         object.__setattr__(self, "hidden", hidden)
         object.__setattr__(self, "weights", weights)
+        object.__setattr__(self, "smoothing", float(self.smoothing))
+
+    def actor(self) -> Actor:
+        """A fresh :class:`Actor` of this policy: its memory for one drive."""
+        return Actor(self.hidden, self.smoothing, self.jerk_from)
 
     def speed_command(self, obs: np.ndarray) -> float:
         """[m/s] the commanded speed for one env observation (18,)."""
         return float(forward(self.weights, np.asarray(obs), self.hidden))
 
     def accel(self, obs: np.ndarray) -> float:
-        """[m/s^2] the env's ``accel`` action for one env observation (18,)."""
-        return float(act(self.weights, np.asarray(obs), self.hidden))
+        """[m/s^2] the env's ``accel`` action for one env observation (18,), decided
+        with no memory (as a drive's first decision is; :meth:`actor` remembers)."""
+        return float(self.actor()(self.weights, np.asarray(obs)))
 
     def predict(self, observation, deterministic: bool = True):
         """stable-baselines3's ``predict``: (``accel`` action (1,), None) for one
@@ -208,6 +286,8 @@ class MLPPolicy:
             "version": VERSION,
             "inputs": list(INPUTS),
             "hidden": list(self.hidden),
+            **({"smoothing_s": self.smoothing} if self.smoothing else {}),
+            **({"jerk_from": self.jerk_from} if self.jerk_from != "measured" else {}),
             "weights": [float(w) for w in self.weights],
             "about": self.about,
         })  # fmt: skip
@@ -226,8 +306,11 @@ class MLPPolicy:
         weights, hidden = document.get("weights"), document.get("hidden")
         if not is_numbers(weights) or not isinstance(hidden, list):
             raise PolicyError(f"{path}: weights and hidden must be lists of numbers")
+        smoothing = document.get("smoothing_s", 0.0)
+        jerk_from = document.get("jerk_from", "measured")
         try:
-            return cls(np.array(weights, dtype=np.float64), tuple(hidden), document["about"])
+            return cls(np.array(weights, dtype=np.float64), tuple(hidden), smoothing, jerk_from,
+                       document.get("about", {}))  # fmt: skip
         except (PolicyError, TypeError, ValueError) as error:
             raise PolicyError(f"{path}: {error}") from None
 
@@ -260,6 +343,7 @@ class MLPDriver:
         self.obs_noise, self.latency_steps, self.seed = obs_noise, latency_steps, seed
         self._rng: np.random.Generator | None = None  # drawn for the vehicle it drives
         self._seen: list[np.ndarray] = []  # the last latency_steps + 1 observations
+        self._actor = policy.actor()
         self._sim = None
         self._every = 1
         self._calls = 0
@@ -288,7 +372,7 @@ class MLPDriver:
             vector = np.clip(vector, OBS_LOW, OBS_HIGH).astype(np.float32)  # as the env's
             self._seen.append(vector)
             del self._seen[: -(self.latency_steps + 1)]
-            self._command = self.policy.accel(self._seen[0])
+            self._command = float(self._actor(self.policy.weights, self._seen[0]))
             self._at_decision = obs.speed
         self._calls += 1
         return EgoCommand(accel=float(self._command))

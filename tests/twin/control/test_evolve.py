@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from twin.control.evolve import EvolveConfig, centred_ranks, evolve, score
-from twin.control.mlp import MLPPolicy
+from twin.control.mlp import MLPPolicy, n_weights
 from twin.control.train import TrainingError
 
 
@@ -44,7 +44,8 @@ def test_a_damaged_checkpoint_is_named(tmp_path):
 @pytest.mark.parametrize(
     "settings, message",
     [({"population": 0}, "population"), ({"sigma": -1.0}, "sigma"), ({"hidden": (0,)}, "hidden"),
-     ({"weight_decay": float("nan")}, "weight_decay")],
+     ({"weight_decay": float("nan")}, "weight_decay"), ({"smoothing": -1.0}, "smoothing"),
+     ({"jerk_from": "guess"}, "jerk_from")],
 )  # fmt: skip
 def test_bad_settings_are_named(settings, message):
     with pytest.raises(TrainingError, match=message):
@@ -92,3 +93,24 @@ def test_twin_train_algorithm_es_from_the_command_line(calibrated_wave_store, tm
     assert "generation 1/1" in capsys.readouterr().out
     assert main([*args[:-2], "--hidden", "4,x", "--out", str(tmp_path / "bad")]) != 0
     assert "--hidden" in capsys.readouterr().err
+
+
+def test_a_training_starts_from_a_policy_files_weights(calibrated_wave_store, tmp_path):
+    from twin.control.evolve import _fresh
+
+    data = str(calibrated_wave_store.path)
+    start = MLPPolicy(np.random.default_rng(1).standard_normal(n_weights((4,))), (4,))
+    path = start.save(tmp_path / "start.json")
+    config = EvolveConfig(hidden=(4,), data=data, start=path, smoothing=2.0, jerk_from="command")
+    assert np.array_equal(_fresh(config)["theta"], start.weights)
+    policy = evolve(tmp_path / "out", EvolveConfig(**{**_config(data, 1).__dict__,
+                    "start": str(path), "smoothing": 2.0, "jerk_from": "command"}),
+                    progress=False)  # fmt: skip
+    assert (policy.smoothing, policy.jerk_from) == (2.0, "command")
+    assert not np.array_equal(policy.weights, start.weights)  # one generation on from it
+    saved = MLPPolicy.load(tmp_path / "out" / "policy.json")
+    assert (saved.smoothing, saved.jerk_from) == (2.0, "command")
+    with pytest.raises(TrainingError, match="hidden layers"):
+        _fresh(EvolveConfig(hidden=(8,), data=data, start=path))
+    with pytest.raises(TrainingError, match="--start"):
+        _fresh(EvolveConfig(hidden=(4,), data=data, start=tmp_path / "missing.json"))

@@ -12,6 +12,7 @@ from twin.control.env import OBS_HIGH, OBS_LOW
 from twin.control.mlp import (
     INPUTS,
     JERK_LIMIT,
+    Actor,
     MLPDriver,
     MLPPolicy,
     accel_command,
@@ -67,6 +68,76 @@ def test_many_networks_at_once_are_each_one_alone():
     assert np.all((together >= 0.0) & (together <= 35.0))
     layers = unpack(thetas)
     assert [w.shape for w, _ in layers] == [(6, 32, 19), (6, 32, 32), (6, 1, 32)]
+
+
+def _drift(rng, steps, n=3, noise=0.0):
+    """``steps`` observations (n, 18) of a slowly changing scene, noisy by ``noise``."""
+    base = np.array([20.0, 0.0, 30.0, 19.0, 40.0, 20.0] + [21.0] * 12)
+    out = []
+    for k in range(steps):
+        clean = base + np.array([0.05 * k, 0.0, -0.1 * k, 0.08 * k, 0.0, 0.0] + [0.05 * k] * 12)
+        clean = np.repeat(clean[None], n, axis=0)
+        out.append(clean * (1.0 + noise * rng.standard_normal(clean.shape)))
+    return out
+
+
+def test_an_actor_with_no_memory_is_act_bit_for_bit():
+    rng = np.random.default_rng(7)
+    thetas = rng.standard_normal((3, n_weights())) * 0.3
+    actor = Actor()
+    for obs in _drift(rng, 20, noise=0.05):
+        obs = obs.astype(np.float32)
+        assert np.array_equal(actor(thetas, obs), act(thetas, obs))
+
+
+def test_smoothing_averages_what_it_decides_on_and_its_first_decision_is_acts():
+    rng = np.random.default_rng(8)
+    theta = rng.standard_normal(n_weights()) * 0.3
+    noisy = _drift(rng, 60, noise=0.05)
+    smooth = Actor(smoothing=2.0)
+    assert np.array_equal(smooth(theta, noisy[0]), act(theta, noisy[0]))
+    # what it decides on is the moving average, but for the measured acceleration
+    mean = noisy[0].copy()
+    for obs in noisy[1:]:
+        mean += 0.1 / 2.1 * (obs - mean)
+        seen = mean.copy()
+        seen[:, 1] = obs[:, 1]
+        speed = forward(theta, seen)
+        assert np.allclose(smooth(theta, obs), accel_command(speed, seen))
+    # the commanded speeds it decides on vary less than those of each noisy observation
+    spread = np.std([forward(theta, o)[0] for o in noisy[30:]])
+    means, m = [], noisy[0].copy()
+    for obs in noisy[1:]:
+        m += 0.1 / 2.1 * (obs - m)
+        means.append(forward(theta, m)[0])
+    assert np.std(means[29:]) < 0.5 * spread
+
+
+def test_a_jerk_limit_from_its_own_command_holds_whatever_it_measures():
+    rng = np.random.default_rng(9)
+    theta = rng.standard_normal(n_weights())
+    scenes = _drift(rng, 30)
+    for obs in scenes:
+        obs[:, 1] = rng.uniform(-3.0, 1.5, size=obs.shape[0])  # a measurement all over
+    own, measured = Actor(jerk_from="command"), Actor()
+    steps = np.abs(np.diff(np.array([own(theta, obs) for obs in scenes]), axis=0))
+    assert steps.max() <= JERK_LIMIT * 0.1 + 1e-12
+    # from the measured acceleration, its commands jump with the measurement
+    jumps = np.abs(np.diff(np.array([measured(theta, obs) for obs in scenes]), axis=0))
+    assert jumps.max() > 1.0
+
+
+def test_a_policys_memory_is_in_its_file_and_bad_memory_is_named(tmp_path):
+    weights = np.random.default_rng(3).standard_normal(n_weights((4,)))
+    policy = MLPPolicy(weights, (4,), smoothing=1.5, jerk_from="command")
+    back = MLPPolicy.load(policy.save(tmp_path / "p.json"))
+    assert (back.smoothing, back.jerk_from) == (1.5, "command")
+    plain = json.loads(MLPPolicy(weights, (4,)).save(tmp_path / "plain.json").read_text())
+    assert "smoothing_s" not in plain and "jerk_from" not in plain  # files as before
+    for change, message in (({"smoothing": -1.0}, "smoothing"), ({"smoothing": float("nan")},
+                            "smoothing"), ({"jerk_from": "guess"}, "jerk_from")):  # fmt: skip
+        with pytest.raises(PolicyError, match=message):
+            MLPPolicy(weights, (4,), **change)
 
 
 def test_a_policy_file_round_trips_and_bad_files_are_named(tmp_path):
@@ -179,12 +250,17 @@ def flat_ahead(monkeypatch):
 class _Seen:
     """A policy that records the observations it decides on."""
 
+    weights = None
+
     def __init__(self):
         self.seen = []
 
-    def accel(self, obs):
+    def actor(self):
+        return self
+
+    def __call__(self, theta, obs):
         self.seen.append(np.array(obs))
-        return 0.0
+        return np.float64(0.0)
 
 
 def test_latency_decides_on_the_observation_of_steps_before(flat_ahead):
