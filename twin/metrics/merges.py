@@ -11,11 +11,19 @@ however many times it was spawned):
   whose end is the first at or beyond its back);
 * ``waiting``: it never merged and stands (below ``STANDING`` m/s) on lane -5 at its
   last row: waiting for a gap, at the lane's end or beside a standing queue;
+  ``waiting_at_end`` of them with its front within ``AT_END`` m of the taper's end: it
+  reached the end of its lane without merging (the others stand short of it, in the
+  ramp's queue or beside lane -4's, their outcome not yet seen);
 * ``unfinished``: it left the visible window or the episode ended while it was on its
   way, before the end: its outcome is not seen.
 
 ``completed_share`` is ``before_taper_end / (merged + waiting)``, the share of the
-merges whose outcome is seen that were done in time (None where none is seen).
+merges whose outcome is seen that were done in time, counting every vehicle standing on
+the ramp at the end of the run as one that failed (None where none is seen).
+``in_time_share`` is ``before_taper_end / (merged + waiting_at_end)``: of the vehicles
+that merged or reached the lane's end, the share that merged before it; a vehicle
+queued on the ramp when the run ends (as the recording's are in a jam) counts in
+neither part.
 """
 
 import numpy as np
@@ -25,6 +33,7 @@ from twin.core.i24 import N_LANES
 from twin.core.ramps import RAMP_LANE
 
 STANDING = 1.0  # [m/s] a ramp vehicle slower than this waits for a gap
+AT_END = 10.0  # [m] a waiting vehicle's front this near its lane's end waits at the end
 
 
 def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | None:
@@ -45,7 +54,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
     lane = vehicles["lane"].to_numpy()
     on_ramp = np.unique(vehicles["tid"].to_numpy()[lane == RAMP_LANE])
     rows = vehicles[vehicles["tid"].isin(on_ramp)].sort_values(["tid", "time"], kind="stable")
-    merged = before_end = waiting = unfinished = 0
+    merged = before_end = waiting = at_end = unfinished = 0
     for _, own in rows.groupby("tid", sort=True):
         lanes = own["lane"].to_numpy()
         x = own["x"].to_numpy(dtype=np.float64)
@@ -62,14 +71,17 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
         speed = own["speed"].to_numpy(dtype=np.float64)[last]
         if speed < STANDING:
             waiting += 1
+            at_end += bool(front[last] >= end - AT_END)
         else:
             unfinished += 1
-    seen = merged + waiting
+    seen, reached = merged + waiting, merged + at_end
     return {
         "ramp_vehicles": int(on_ramp.size),
         "merged": merged,
         "before_taper_end": before_end,
         "waiting": waiting,
+        "waiting_at_end": at_end,
         "unfinished": unfinished,
         "completed_share": round(before_end / seen, 6) if seen else None,
+        "in_time_share": round(before_end / reached, 6) if reached else None,
     }

@@ -733,13 +733,16 @@ def summary_lines(result: EvalResult) -> str:
 def _merge_words(m: dict) -> str:
     """The on-ramp's merges over the episodes, where there were any: how many ramp
     vehicles merged before the taper's end, of those whose outcome was seen (merged or
-    waiting for a gap; :mod:`twin.metrics.merges`)."""
+    waiting for a gap) and of those that merged or reached the lane's end
+    (:mod:`twin.metrics.merges`)."""
     if "ramp_vehicles" not in m or not m["ramp_vehicles"]["sum"]:
         return ""
     seen = m["merges"]["sum"] + m["merges_waiting"]["sum"]
+    reached = m["merges"]["sum"] + m["merges_waiting_at_end"]["sum"]
     return (f"; merges before the taper's end {m['merges_before_taper_end']['sum']:g} of "
             f"{seen:g} (ramp vehicles {m['ramp_vehicles']['sum']:g}, waiting "
-            f"{m['merges_waiting']['sum']:g})")  # fmt: skip
+            f"{m['merges_waiting']['sum']:g}), of {reached:g} that merged or reached the "
+            f"lane's end")  # fmt: skip
 
 
 def _seam_words(m: dict) -> str:

@@ -91,7 +91,7 @@ def test_a_ramp_vehicle_with_no_gap_waits_on_its_lane(built_map, tmp_path):
     )
     assert merges == {
         "ramp_vehicles": 1, "merged": 0, "before_taper_end": 0, "waiting": 1,
-        "unfinished": 0, "completed_share": 0.0,
+        "waiting_at_end": 0, "unfinished": 0, "completed_share": 0.0, "in_time_share": None,
     }  # fmt: skip
     own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
     assert (own["lane"] == RAMP_LANE).all()
@@ -112,18 +112,20 @@ def test_the_merges_section_counts_outcomes():
 
     add(0, [-5, -5, -4], [100.0, 110.0, 120.0], [10.0] * 3)  # merged in time
     add(1, [-5, -5, -4], [130.0, 138.0, 141.0], [10.0] * 3)  # its front 145 m: too late
-    add(2, [-5, -5], [100.0, 106.0], [2.0, 0.0])  # standing on the ramp
+    add(2, [-5, -5], [100.0, 106.0], [2.0, 0.0])  # standing on the ramp, short of its end
     add(3, [-5, -5], [20.0, 30.0], [10.0, 10.0])  # on its way when the run ended
     add(4, [-3, -3], [20.0, 30.0], [10.0, 10.0])  # never on the ramp
+    add(5, [-5, -5], [128.0, 132.0], [1.5, 0.2])  # standing at the end: front 136 m
 
-    section = merge_section(pd.DataFrame(frame), np.full(5, 4.0), [end])
+    section = merge_section(pd.DataFrame(frame), np.full(6, 4.0), [end])
     assert section == {
-        "ramp_vehicles": 4, "merged": 2, "before_taper_end": 1, "waiting": 1,
-        "unfinished": 1, "completed_share": pytest.approx(1 / 3, abs=1e-6),
+        "ramp_vehicles": 5, "merged": 2, "before_taper_end": 1, "waiting": 2,
+        "waiting_at_end": 1, "unfinished": 1, "completed_share": 0.25,
+        "in_time_share": pytest.approx(1 / 3, abs=1e-6),
     }  # fmt: skip
-    assert merge_section(pd.DataFrame(frame), np.full(5, 4.0), []) is None
+    assert merge_section(pd.DataFrame(frame), np.full(6, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
-        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(5, 4.0), [end])
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(6, 4.0), [end])
 
 
 def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
