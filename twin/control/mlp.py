@@ -62,6 +62,9 @@ GAP_SCALE = 100.0  # [m] gaps likewise
 TIME_GAP_CAP = 10.0  # [s] the time gap input is capped here (and is this with no leader)
 #: What its jerk limit counts from (:class:`Actor`).
 JERK_FROM = ("measured", "command")
+#: [m/s^2] a measured acceleration this far from its own last command was another's
+#: decision (the safety layer's): its jerk limit then counts from the measured one.
+OVERRIDDEN = 1.0
 #: The inputs, in order (:func:`inputs`).
 INPUTS = (
     "speed",
@@ -173,7 +176,9 @@ class Actor:
       observation noise is averaged out at the cost of that lag;
     * ``jerk_from="command"``: its jerk limit counts from its own previous command
       (which it knows exactly) instead of the acceleration it measured (which noise and
-      latency blur); the first decision counts from the measured one.
+      latency blur); the first decision counts from the measured one, and so does one
+      where the measured acceleration is more than :data:`OVERRIDDEN` from its command
+      (the safety layer braked instead: it goes on from what the vehicle did).
 
     With neither (``smoothing=0``, ``jerk_from="measured"``) it is :func:`act`, bit for
     bit.
@@ -202,7 +207,12 @@ class Actor:
         if self.jerk_from == "command" and self._command is not None:
             wanted = np.clip(SPEED_GAIN * (speed_command - seen[..., 0]), *ACCEL_RANGE)
             step = JERK_LIMIT * CONTROL_DT
-            command = self._command + np.clip(wanted - self._command, -step, step)
+            # its own command, unless what it measured says something else decided (the
+            # safety layer braked): then from what it measured
+            measured = np.clip(obs[..., 1], *ACCEL_RANGE)
+            overridden = np.abs(measured - self._command) > OVERRIDDEN
+            reference = np.where(overridden, measured, self._command)
+            command = reference + np.clip(wanted - reference, -step, step)
         else:
             command = accel_command(speed_command, seen)
         self._command = command
