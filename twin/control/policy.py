@@ -18,8 +18,9 @@ of static linear policies is competitive for reinforcement learning"), which
 were trained.
 
 The linear policy the twin ships (:data:`SHIPPED`, ``wave_ars``) was the default of
-``twin.rl:policy`` until the MLP trained at scale (:data:`DEFAULT`) replaced it; it
-stays, by name, for comparison.
+``twin.rl:policy`` until the MLP trained at scale (``wave_es_mlp``, then its fine-tuned
+``wave_es_mlp_robust``, :data:`DEFAULT`) replaced it; both stay, by name, for
+comparison.
 """
 
 import json
@@ -58,8 +59,10 @@ MEMORY = 30.0  # [s] of the mean-speed feature
 POLICIES = Path(__file__).with_name("policies")  # the policies the twin ships, by name
 SHIPPED = POLICIES / "wave_ars.json"  # the linear policy the twin ships (``wave_ars``)
 #: The default of ``twin.rl:policy``: the MLP trained by ``twin train --algorithm es``
-#: (:mod:`twin.control.mlp`); the linear one stays as ``wave_ars``.
-DEFAULT = POLICIES / "wave_es_mlp.json"
+#: (:mod:`twin.control.mlp`) and fine-tuned under observation noise and latency with a
+#: memory (``wave_es_mlp_robust``); the MLP it started from stays as ``wave_es_mlp``,
+#: the linear one as ``wave_ars``.
+DEFAULT = POLICIES / "wave_es_mlp_robust.json"
 
 
 def shipped_policy(name: str) -> Path:
