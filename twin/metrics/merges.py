@@ -6,16 +6,18 @@ at the end (:mod:`twin.traffic.kernels.longitudinal`). From the run's log, per v
 seen in lane -5 inside the visible window (a recorded vehicle, by its store ``tid``,
 however many times it was spawned):
 
-* ``merged``: its first row in a through lane after lane -5; ``before_taper_end`` of
-  them where its front was short of the taper's end then (the ramp under it: the one
-  whose end is the first at or beyond its back);
+* ``merged``: its first row in a through lane after lane -5, seen: within
+  ``SEEN_GAP`` s of its row before, on lane -5; ``before_taper_end`` of them where its
+  front was short of the taper's end then (the ramp under it: the one whose end is the
+  first at or beyond its back);
 * ``waiting``: it never merged and stands (below ``STANDING`` m/s) on lane -5 at its
   last row: waiting for a gap, at the lane's end or beside a standing queue;
   ``waiting_at_end`` of them with its front within ``AT_END`` m of the taper's end: it
   reached the end of its lane without merging (the others stand short of it, in the
   ramp's queue or beside lane -4's, their outcome not yet seen);
 * ``unfinished``: it left the visible window or the episode ended while it was on its
-  way, before the end: its outcome is not seen.
+  way, before the end: its outcome is not seen (one that left the window on lane -5
+  and came back into it in a through lane merged out of sight: unfinished too).
 
 ``completed_share`` is ``before_taper_end / (merged + waiting)``, the share of the
 merges whose outcome is seen that were done in time, counting every vehicle standing on
@@ -34,6 +36,7 @@ from twin.core.ramps import RAMP_LANE
 
 STANDING = 1.0  # [m/s] a ramp vehicle slower than this waits for a gap
 AT_END = 10.0  # [m] a waiting vehicle's front this near its lane's end waits at the end
+SEEN_GAP = 0.5  # [s] a merge is seen where its rows before and after are this close
 
 
 def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | None:
@@ -64,6 +67,10 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
         end = ends[min(int(np.searchsorted(ends, x[first_ramp])), ends.size - 1)]
         if through.any():
             k = first_ramp + int(np.argmax(through))
+            times = own["time"].to_numpy(dtype=np.float64)
+            if times[k] - times[k - 1] > SEEN_GAP:  # out of the window as it merged
+                unfinished += 1
+                continue
             merged += 1
             before_end += bool(front[k] <= end)
             continue

@@ -116,16 +116,21 @@ def test_the_merges_section_counts_outcomes():
     add(3, [-5, -5], [20.0, 30.0], [10.0, 10.0])  # on its way when the run ended
     add(4, [-3, -3], [20.0, 30.0], [10.0, 10.0])  # never on the ramp
     add(5, [-5, -5], [128.0, 132.0], [1.5, 0.2])  # standing at the end: front 136 m
+    # left the window on the ramp, back in it in lane -4 far on: merged out of sight
+    frame["time"] += [0.0, 0.1, 30.0]
+    for name, values in (("id", [6] * 3), ("tid", [6] * 3), ("x", [40.0, 41.0, 400.0]),
+                         ("lane", [-5, -5, -4]), ("speed", [10.0, 10.0, 25.0])):  # fmt: skip
+        frame[name] += values
 
-    section = merge_section(pd.DataFrame(frame), np.full(6, 4.0), [end])
+    section = merge_section(pd.DataFrame(frame), np.full(7, 4.0), [end])
     assert section == {
-        "ramp_vehicles": 5, "merged": 2, "before_taper_end": 1, "waiting": 2,
-        "waiting_at_end": 1, "unfinished": 1, "completed_share": 0.25,
+        "ramp_vehicles": 6, "merged": 2, "before_taper_end": 1, "waiting": 2,
+        "waiting_at_end": 1, "unfinished": 2, "completed_share": 0.25,
         "in_time_share": pytest.approx(1 / 3, abs=1e-6),
     }  # fmt: skip
-    assert merge_section(pd.DataFrame(frame), np.full(6, 4.0), []) is None
+    assert merge_section(pd.DataFrame(frame), np.full(7, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
-        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(6, 4.0), [end])
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(7, 4.0), [end])
 
 
 def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
