@@ -93,7 +93,8 @@ def register(commands) -> None:
     )  # fmt: skip
     p.add_argument(
         "--start", type=Path, default=None,
-        help="es: a policy file whose weights the training starts from",
+        help="es: a policy file whose weights the training starts from (default: none, drawn "
+        "weights that follow the leader)",
     )  # fmt: skip
     p.add_argument(
         "--world",
