@@ -199,3 +199,57 @@ def test_a_ramp_driver_merges_where_the_recording_says(
     assert len(merged), "it never merged"
     assert earliest <= merged["x"].iloc[0] <= latest
     assert sim.manager.merges == 1 and not sim.counters.collisions
+
+
+def test_a_ramp_vehicle_that_reaches_its_lane_end_waits_where_its_change_crosses_before_it(
+    built_map, tmp_path
+):
+    # lane -4 stands bumper to bumper beside the whole ramp and makes no room
+    # (courtesy 0): the ramp vehicle drives on to its lane's end and waits where a
+    # change from a stop (an urgent change's shortest path, crossing half-way) still
+    # crosses into lane -4 before the end
+    from dataclasses import replace
+
+    docs = [vehicle(100 + k, -4, -300.0 + 7.0 * k, 0.0, seconds=60.0) for k in range(90)]
+    docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
+    store = make_store(tmp_path, [*docs, vehicle(999, -1, EGO_X, 0.0, seconds=60.0)])
+    config = CosimConfig(road="westbound", lane=-1, x=EGO_X, time=T0, t_max=30.0,
+                         world="kinematic")  # fmt: skip
+    config = replace(config, traffic=replace(config.traffic, courtesy=0.0))
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        rows = sim.log.vehicles()
+        lengths = store.trajectory_arrays["length"]
+        merges = merge_section(rows, lengths, [RAMP.x_end])
+        own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+        assert (own["lane"] == RAMP_LANE).all()
+        front = own["x"].to_numpy() + lengths[own["tid"].to_numpy()]
+        wait = RAMP.x_end - 0.5 * config.traffic.urgent_path
+        print("front", front.max(), "wait", wait, "v", own["speed"].iloc[-1], merges)
+        assert wait - 5.0 <= front.max() <= wait
+        assert own["speed"].iloc[-1] < 0.1
+        assert merges["waiting"] == 1 and merges["waiting_at_end"] == 1
+        assert not sim.counters.collisions
+
+
+def test_a_change_out_of_a_lane_that_ends_crosses_into_lane_4_before_the_end(built_map, tmp_path):
+    # lane -4 stands bumper to bumper and makes no room beside the ramp but for its last
+    # 30 m: the ramp vehicle, driving on, changes there at speed, on a path short
+    # enough to cross into lane -4 before the taper's end
+    from dataclasses import replace
+
+    docs = [vehicle(100 + k, -4, -300.0 + 7.0 * k, 0.0, seconds=60.0) for k in range(59)]
+    docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
+    store = make_store(tmp_path, [*docs, vehicle(999, -1, EGO_X, 0.0, seconds=60.0)])
+    config = CosimConfig(road="westbound", lane=-1, x=EGO_X, time=T0, t_max=30.0,
+                         world="kinematic")  # fmt: skip
+    config = replace(config, traffic=replace(config.traffic, courtesy=0.0))
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        rows = sim.log.vehicles()
+        merges = merge_section(rows, store.trajectory_arrays["length"], [RAMP.x_end])
+        print(merges)
+        assert merges["merged"] == merges["before_taper_end"] == 1
+        assert not sim.counters.collisions

@@ -137,7 +137,9 @@ class Shared:
             merges=merges(bundle.road, road),
         )  # fmt: skip
         zones = [(z["lane"], z["x0"], z["x1"]) for z in beh.keep_out]
-        ends = [(RAMP_LANE, end) for *_, end in cs.merges]
+        # a driver who has not merged waits where a change from a stop (an urgent
+        # change's shortest path) still crosses into lane -4 before the taper's end
+        ends = [(RAMP_LANE, end - 0.5 * config.traffic.urgent_path) for *_, end in cs.merges]
         # lane -4's yielding to merges as the recording's drivers yield, where asked
         drive = config.traffic
         if drive.calibrated_yielding:

@@ -26,6 +26,7 @@ from twin.traffic.kernels.longitudinal import (
     MIN_SPEED_PATH,
     accepted_decel,
     cf,
+    lane_end_gap,
     urgency,
 )
 from twin.traffic.kernels.neighbours import around
@@ -238,6 +239,12 @@ def _start(b, seed, t, i, choice, centre, y, urgent):
     drivers.lane[b, i] = drivers.lane[b, i] + choice
     drivers.start_x[b, i] = centre
     drivers.start_y[b, i] = y
-    drivers.path_length[b, i] = path_length(sc.sspeed[b, i], duration, urgent,
-                                            settings.urgent_path)  # fmt: skip
+    path = path_length(sc.sspeed[b, i], duration, urgent, settings.urgent_path)
+    # out of a lane that ends (an on-ramp's): crossing the line (half-way) before its end
+    length = sc.slength[b, i]
+    end = lane_end_gap(settings.lane_ends, drivers.lane_from[b, i], centre - 0.5 * length,
+                       length)  # fmt: skip
+    if math.isfinite(end):
+        path = min(path, max(2.0 * end, settings.urgent_path))
+    drivers.path_length[b, i] = path
     drivers.requested[b, i] = 0

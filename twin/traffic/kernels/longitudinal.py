@@ -31,11 +31,14 @@ calibrated from how the recording's lane -4 yields to the on-ramps' merges,
 shorter path than a discretionary one (``urgent_path``), so that a driver can get across
 a crawling queue as real drivers do.
 
-**Lanes that end** (``lane_ends``: an on-ramp's acceleration lane, lane -5, where its
-taper ends) are a standing obstacle to the drivers in them: a driver who has not
-merged by then slows and waits there (:func:`lane_end_gap`), as a real one does, and
-merges from there when lane -4 gives it a gap (its change's path may then run a few
-metres past the end: the pavement's shoulder).
+**Lanes that end** (``lane_ends``: an on-ramp's acceleration lane, lane -5, half an
+urgent change's shortest path before its taper ends) are a standing obstacle to the
+drivers in them: a driver who has not merged by then slows and waits there
+(:func:`lane_end_gap`), as a real one does, and merges from there when lane -4 gives
+it a gap, its change from a stop crossing into lane -4 (half-way along its path) before
+the taper's end; a change out of such a lane at speed takes a path no longer than
+twice the distance to that place (nor shorter than an urgent one), so that it too
+crosses before the end (:mod:`twin.traffic.kernels.lane_change`).
 """
 
 import math
