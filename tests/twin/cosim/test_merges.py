@@ -226,7 +226,6 @@ def test_a_ramp_vehicle_that_reaches_its_lane_end_waits_where_its_change_crosses
         assert (own["lane"] == RAMP_LANE).all()
         front = own["x"].to_numpy() + lengths[own["tid"].to_numpy()]
         wait = RAMP.x_end - 0.5 * config.traffic.urgent_path
-        print("front", front.max(), "wait", wait, "v", own["speed"].iloc[-1], merges)
         assert wait - 5.0 <= front.max() <= wait
         assert own["speed"].iloc[-1] < 0.1
         assert merges["waiting"] == 1 and merges["waiting_at_end"] == 1
@@ -250,6 +249,5 @@ def test_a_change_out_of_a_lane_that_ends_crosses_into_lane_4_before_the_end(bui
         sim.run()
         rows = sim.log.vehicles()
         merges = merge_section(rows, store.trajectory_arrays["length"], [RAMP.x_end])
-        print(merges)
         assert merges["merged"] == merges["before_taper_end"] == 1
         assert not sim.counters.collisions
