@@ -5,6 +5,7 @@ making room; one that finds no gap waits at the lane's end."""
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -35,11 +36,13 @@ def ramp_vehicle(n: int, x: float, speed: float, merge_x: float, seconds: float 
     return doc
 
 
-def _run(built_map, tmp_path, docs, t_max=30.0, lane=-2, speed=12.0):
-    """A kinematic run of ``docs`` with the ego in ``lane`` at EGO_X at ``speed``."""
+def _run(built_map, tmp_path, docs, t_max=30.0, lane=-2, speed=12.0, **traffic):
+    """A kinematic run of ``docs`` with the ego in ``lane`` at EGO_X at ``speed``
+    (``traffic``: settings of the traffic manager changed)."""
     store = make_store(tmp_path, [*docs, vehicle(999, lane, EGO_X, speed, seconds=60.0)])
     config = CosimConfig(road="westbound", lane=lane, x=EGO_X, time=T0, t_max=t_max,
                          world="kinematic")  # fmt: skip
+    config = replace(config, traffic=replace(config.traffic, **traffic))
     with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
         sim.reset()
         sim.run()
@@ -208,46 +211,27 @@ def test_a_ramp_vehicle_that_reaches_its_lane_end_waits_where_its_change_crosses
     # (courtesy 0): the ramp vehicle drives on to its lane's end and waits where a
     # change from a stop (an urgent change's shortest path, crossing half-way) still
     # crosses into lane -4 before the end
-    from dataclasses import replace
-
     docs = [vehicle(100 + k, -4, -300.0 + 7.0 * k, 0.0, seconds=60.0) for k in range(90)]
     docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
-    store = make_store(tmp_path, [*docs, vehicle(999, -1, EGO_X, 0.0, seconds=60.0)])
-    config = CosimConfig(road="westbound", lane=-1, x=EGO_X, time=T0, t_max=30.0,
-                         world="kinematic")  # fmt: skip
-    config = replace(config, traffic=replace(config.traffic, courtesy=0.0))
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        sim.reset()
-        sim.run()
-        rows = sim.log.vehicles()
-        lengths = store.trajectory_arrays["length"]
-        merges = merge_section(rows, lengths, [RAMP.x_end])
-        own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
-        assert (own["lane"] == RAMP_LANE).all()
-        front = own["x"].to_numpy() + lengths[own["tid"].to_numpy()]
-        wait = RAMP.x_end - 0.5 * config.traffic.urgent_path
-        assert wait - 5.0 <= front.max() <= wait
-        assert own["speed"].iloc[-1] < 0.1
-        assert merges["waiting"] == 1 and merges["waiting_at_end"] == 1
-        assert not sim.counters.collisions
+    sim, store, rows, merges, lengths = _run(
+        built_map, tmp_path, docs, lane=-1, speed=0.0, courtesy=0.0
+    )
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
+    assert (own["lane"] == RAMP_LANE).all()
+    front = own["x"].to_numpy() + lengths[own["tid"].to_numpy()]
+    wait = RAMP.x_end - 0.5 * sim.config.traffic.urgent_path
+    assert wait - 5.0 <= front.max() <= wait
+    assert own["speed"].iloc[-1] < 0.1
+    assert merges["waiting"] == 1 and merges["waiting_at_end"] == 1
+    assert not sim.counters.collisions
 
 
 def test_a_change_out_of_a_lane_that_ends_crosses_into_lane_4_before_the_end(built_map, tmp_path):
     # lane -4 stands bumper to bumper and makes no room beside the ramp but for its last
     # 30 m: the ramp vehicle, driving on, changes there at speed, on a path short
     # enough to cross into lane -4 before the taper's end
-    from dataclasses import replace
-
     docs = [vehicle(100 + k, -4, -300.0 + 7.0 * k, 0.0, seconds=60.0) for k in range(59)]
     docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
-    store = make_store(tmp_path, [*docs, vehicle(999, -1, EGO_X, 0.0, seconds=60.0)])
-    config = CosimConfig(road="westbound", lane=-1, x=EGO_X, time=T0, t_max=30.0,
-                         world="kinematic")  # fmt: skip
-    config = replace(config, traffic=replace(config.traffic, courtesy=0.0))
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        sim.reset()
-        sim.run()
-        rows = sim.log.vehicles()
-        merges = merge_section(rows, store.trajectory_arrays["length"], [RAMP.x_end])
-        assert merges["merged"] == merges["before_taper_end"] == 1
-        assert not sim.counters.collisions
+    sim, _, _, merges, _ = _run(built_map, tmp_path, docs, lane=-1, speed=0.0, courtesy=0.0)
+    assert merges["merged"] == merges["before_taper_end"] == 1
+    assert not sim.counters.collisions
