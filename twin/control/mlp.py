@@ -65,6 +65,14 @@ JERK_FROM = ("measured", "command")
 #: [m/s^2] a measured acceleration this far from its own last command was another's
 #: decision (the safety layer's): its jerk limit then counts from the measured one.
 OVERRIDDEN = 1.0
+#: How many of its last commands a measured acceleration is compared with (observations
+#: up to this many control steps late still match their command).
+COMMANDS_KEPT = 10
+#: A filtered gap restarts from the observation where the two differ by more than this
+#: share of the gap (4 sd of 5 % observation noise; a cut-in or a new leader)...
+GATE = 0.2
+#: [m] ... and by more than this.
+GATE_FLOOR = 2.0
 #: The inputs, in order (:func:`inputs`).
 INPUTS = (
     "speed",
@@ -170,15 +178,23 @@ class Actor:
     """A policy's decisions over one drive, for ``n`` vehicles at once (one row of
     observations each): what it remembers between control steps.
 
-    * ``smoothing`` [s] > 0: it decides on an exponential moving average of its
-      observations (time constant ``smoothing``; the first observation starts it)
-      instead of each one as it comes, every value but its measured acceleration:
-      observation noise is averaged out at the cost of that lag;
+    * ``smoothing`` [s] > 0: it decides on a filtered estimate of its observations
+      instead of each one as it comes (against observation noise), every value but its
+      measured acceleration. Each step the estimate is first carried forward by what it
+      knows moved (:func:`predicted`: its own speed by its measured acceleration, the
+      gaps by the speed differences), then moved towards the new observation by
+      ``dt / (smoothing + dt)``: an exponential moving average of time constant
+      ``smoothing`` with no lag behind its own acceleration, so its speed loop is not
+      slowed by the filter. A leader or follower gap that jumps by more than
+      :data:`GATE` of itself (at least :data:`GATE_FLOOR`), as at a cut-in or a lane
+      change, is another vehicle: that gap and its speed restart from the observation.
+      The first observation starts it.
     * ``jerk_from="command"``: its jerk limit counts from its own previous command
       (which it knows exactly) instead of the acceleration it measured (which noise and
       latency blur); the first decision counts from the measured one, and so does one
-      where the measured acceleration is more than :data:`OVERRIDDEN` from its command
-      (the safety layer braked instead: it goes on from what the vehicle did).
+      where the measured acceleration is more than :data:`OVERRIDDEN` from every
+      command of its last :data:`COMMANDS_KEPT` (the safety layer braked instead: it goes
+      on from what the vehicle did; a late measurement matches an older command).
 
     With neither (``smoothing=0``, ``jerk_from="measured"``) it is :func:`act`, bit for
     bit.
@@ -188,8 +204,8 @@ class Actor:
                  jerk_from: str = "measured"):  # fmt: skip
         check_memory(smoothing, jerk_from)
         self.hidden, self.smoothing, self.jerk_from = tuple(hidden), float(smoothing), jerk_from
-        self._mean: np.ndarray | None = None  # the smoothed observations
-        self._command: np.ndarray | None = None  # the last commands
+        self._estimate: np.ndarray | None = None  # the filtered observations
+        self._commands: list[np.ndarray] = []  # the last COMMANDS_KEPT commands, newest last
 
     def __call__(self, theta: np.ndarray, obs: np.ndarray) -> np.ndarray:
         """[m/s^2] the ``accel`` actions (n,) for observations ``obs`` (n, 18) with
@@ -197,26 +213,58 @@ class Actor:
         obs = np.asarray(obs, dtype=np.float64)
         seen = obs
         if self.smoothing > 0:
-            if self._mean is None:
-                self._mean = obs.copy()
+            if self._estimate is None:
+                self._estimate = obs.copy()
             else:
-                self._mean += CONTROL_DT / (self.smoothing + CONTROL_DT) * (obs - self._mean)
-            seen = self._mean.copy()
+                self._estimate = filtered(self._estimate, obs, self.smoothing)
+            seen = self._estimate.copy()
             seen[..., 1] = obs[..., 1]  # the measured acceleration as it comes
         speed_command = forward(theta, seen, self.hidden)
-        if self.jerk_from == "command" and self._command is not None:
+        if self.jerk_from == "command" and self._commands:
             wanted = np.clip(SPEED_GAIN * (speed_command - seen[..., 0]), *ACCEL_RANGE)
             step = JERK_LIMIT * CONTROL_DT
-            # its own command, unless what it measured says something else decided (the
-            # safety layer braked): then from what it measured
+            # its own command, unless what it measured matches none it gave lately
+            # (the safety layer braked): then from what it measured
             measured = np.clip(obs[..., 1], *ACCEL_RANGE)
-            overridden = np.abs(measured - self._command) > OVERRIDDEN
-            reference = np.where(overridden, measured, self._command)
+            off = np.min([np.abs(measured - c) for c in self._commands], axis=0)
+            reference = np.where(off > OVERRIDDEN, measured, self._commands[-1])
             command = reference + np.clip(wanted - reference, -step, step)
         else:
             command = accel_command(speed_command, seen)
-        self._command = command
+        self._commands.append(command)
+        del self._commands[:-COMMANDS_KEPT]
         return command
+
+
+def predicted(estimate: np.ndarray) -> np.ndarray:
+    """Filtered observations ``estimate`` (..., 18) carried one control step forward by
+    what they say moves: its own speed by its measured acceleration, the leader's gap
+    by the leader's speed less its own, the follower's by its own less the
+    follower's (the other values held)."""
+    ahead = estimate.copy()
+    speed, accel = estimate[..., 0], estimate[..., 1]
+    ahead[..., 0] = speed + np.clip(accel, *ACCEL_RANGE) * CONTROL_DT
+    ahead[..., 2] += (estimate[..., 3] - speed) * CONTROL_DT
+    ahead[..., 4] += (speed - estimate[..., 5]) * CONTROL_DT
+    return ahead
+
+
+def filtered(estimate: np.ndarray, obs: np.ndarray, smoothing: float) -> np.ndarray:
+    """The filtered observations after observation ``obs`` (..., 18): ``estimate``
+    carried forward (:func:`predicted`, with the new measured acceleration) and moved
+    ``dt / (smoothing + dt)`` towards ``obs``; a gap (and its vehicle's speed) that
+    jumped past the gate (:class:`Actor`) restarts from ``obs``."""
+    estimate = estimate.copy()
+    estimate[..., 1] = obs[..., 1]
+    ahead = predicted(estimate)
+    out = ahead + CONTROL_DT / (smoothing + CONTROL_DT) * (obs - ahead)
+    for gap, speed in ((2, 3), (4, 5)):
+        jumped = np.abs(obs[..., gap] - ahead[..., gap]) > np.maximum(
+            GATE * np.abs(ahead[..., gap]), GATE_FLOOR
+        )
+        out[..., gap] = np.where(jumped, obs[..., gap], out[..., gap])
+        out[..., speed] = np.where(jumped, obs[..., speed], out[..., speed])
+    return out
 
 
 def check_memory(smoothing, jerk_from) -> None:
@@ -284,10 +332,17 @@ class MLPPolicy:
         with no memory (as a drive's first decision is; :meth:`actor` remembers)."""
         return float(self.actor()(self.weights, np.asarray(obs)))
 
-    def predict(self, observation, deterministic: bool = True):
-        """stable-baselines3's ``predict``: (``accel`` action (1,), None) for one
-        observation."""
-        return np.array([self.accel(observation)], dtype=np.float32), None
+    def predict(self, observation, state: "Actor | None" = None, episode_start=None,
+                deterministic: bool = True):  # fmt: skip
+        """stable-baselines3's ``predict``, as its recurrent policies have it: (``accel``
+        action (1,), state) for one observation, where the state is the policy's memory
+        (:class:`Actor`). Pass it back with the next observation to decide with the
+        memory (``state=None``, or ``episode_start`` true, starts a fresh one); a policy
+        with no memory decides the same either way."""
+        if state is None or (episode_start is not None and bool(np.any(episode_start))):
+            state = self.actor()
+        action = state(self.weights, np.asarray(observation, dtype=np.float64))
+        return np.array([float(action)], dtype=np.float32), state
 
     def save(self, path: str | Path) -> Path:
         """Write the policy as JSON, atomically."""

@@ -18,6 +18,7 @@ from twin.control.mlp import (
     MLPPolicy,
     accel_command,
     act,
+    filtered,
     forward,
     initial_weights,
     inputs,
@@ -97,21 +98,63 @@ def test_smoothing_averages_what_it_decides_on_and_its_first_decision_is_acts():
     noisy = _drift(rng, 60, noise=0.05)
     smooth = Actor(smoothing=2.0)
     assert np.array_equal(smooth(theta, noisy[0]), act(theta, noisy[0]))
-    # what it decides on is the moving average, but for the measured acceleration
-    mean = noisy[0].copy()
+    # it decides on the filtered observations, but for the measured acceleration
+    estimate = noisy[0].copy()
     for obs in noisy[1:]:
-        mean += 0.1 / 2.1 * (obs - mean)
-        seen = mean.copy()
+        estimate = filtered(estimate, obs, 2.0)
+        seen = estimate.copy()
         seen[:, 1] = obs[:, 1]
-        speed = forward(theta, seen)
-        assert np.allclose(smooth(theta, obs), accel_command(speed, seen))
+        assert np.array_equal(smooth(theta, obs), accel_command(forward(theta, seen), seen))
     # the commanded speeds it decides on vary less than those of each noisy observation
     spread = np.std([forward(theta, o)[0] for o in noisy[30:]])
     means, m = [], noisy[0].copy()
     for obs in noisy[1:]:
-        m += 0.1 / 2.1 * (obs - m)
+        m = filtered(m, obs, 2.0)
         means.append(forward(theta, m)[0])
     assert np.std(means[29:]) < 0.5 * spread
+
+
+def test_on_a_still_scene_the_filter_is_the_moving_average():
+    rng = np.random.default_rng(10)
+    still = np.array([20.0, 0.0, 30.0, 20.0, 40.0, 20.0] + [21.0] * 12)
+    estimate = mean = still.copy()
+    for _ in range(50):  # noise on everything but what moves the scene
+        obs = still * (1.0 + 0.05 * rng.standard_normal(still.size))
+        obs[[0, 1, 3, 5]] = still[[0, 1, 3, 5]]
+        estimate = filtered(estimate, obs, 2.0)
+        mean = mean + 0.1 / 2.1 * (obs - mean)
+        assert np.allclose(estimate, mean, rtol=0, atol=1e-12)
+
+
+def test_the_filter_does_not_lag_behind_its_own_acceleration():
+    # speeding up at 1 m/s^2 between a leader at 25 m/s and a follower at 15: the
+    # estimate is the truth, where a plain moving average would lag 2 m/s behind
+    # (accel x smoothing)
+    def scene(k):
+        speeds = 15.0 + 0.1 * np.arange(k)
+        gap = 60.0 + np.sum(25.0 - speeds) * 0.1
+        follower_gap = 40.0 + np.sum(speeds - 15.0) * 0.1
+        return np.array([15.0 + 0.1 * k, 1.0, gap, 25.0, follower_gap, 15.0] + [25.0] * 12)
+
+    estimate = scene(0)
+    for k in range(1, 60):
+        estimate = filtered(estimate, scene(k), 2.0)
+    assert np.allclose(estimate, scene(59), rtol=0, atol=1e-9)
+
+
+def test_a_cut_in_or_a_new_follower_restarts_that_vehicles_estimate():
+    rng = np.random.default_rng(11)
+    steady = np.array([20.0, 0.0, 40.0, 20.0, 30.0, 20.0] + [21.0] * 12)
+    estimate = steady.copy()
+    for _ in range(30):  # noise of 5 % never passes the gate
+        noisy = steady * (1.0 + 0.05 * rng.standard_normal(steady.size))
+        noisy[[0, 1, 3, 5]] = steady[[0, 1, 3, 5]]
+        estimate = filtered(estimate, noisy, 2.0)
+        assert abs(estimate[2] - 40.0) < 4.0
+    cut_in = steady.copy()
+    cut_in[2:6] = [15.0, 17.0, 12.0, 23.0]  # a slower leader 15 m ahead, a new follower
+    after = filtered(estimate, cut_in, 2.0)
+    assert np.array_equal(after[2:6], cut_in[2:6])
 
 
 def test_a_jerk_limit_from_its_own_command_holds_whatever_it_measures():
@@ -133,6 +176,22 @@ def test_a_jerk_limit_from_its_own_command_holds_whatever_it_measures():
     obs[:, 1] = commands[-1] - OVERRIDDEN - 1.0
     after = own(theta, obs)
     assert np.abs(after - obs[:, 1]).max() <= JERK_LIMIT * 0.1 + 1e-12
+
+
+def test_a_late_measurement_of_an_earlier_command_is_not_an_override():
+    theta = np.zeros(n_weights())  # commands its leader's speed: far below its own
+    own = Actor(jerk_from="command")
+    scene = np.array([[25.0, 0.0, 80.0, 5.0, 40.0, 25.0] + [5.0] * 12])
+    commands = [own(theta, scene)]
+    for _ in range(9):  # its command falls by the jerk limit each step
+        obs = scene.copy()
+        obs[:, 1] = commands[max(0, len(commands) - 8)]  # measured 8 steps late
+        commands.append(own(theta, obs))
+    assert commands[-9][0] - commands[-1][0] > OVERRIDDEN  # late by more than the rule
+    assert np.allclose(np.diff(np.concatenate(commands)), -JERK_LIMIT * 0.1)
+    obs = scene.copy()
+    obs[:, 1] = commands[-9]
+    assert np.isclose(own(theta, obs)[0] - commands[-1][0], -JERK_LIMIT * 0.1)
 
 
 def test_a_policys_memory_is_in_its_file_and_bad_memory_is_named(tmp_path):
@@ -324,3 +383,30 @@ def test_noise_and_latency_are_settings_of_an_mlp_policy_only():
     for bad in ({"latency_steps": -1}, {"latency_steps": True}, {"obs_noise": "0.1"}):
         with pytest.raises(PolicyError, match=next(iter(bad))):
             MLPDriver(MLPPolicy(np.zeros(n_weights())), **bad)
+
+
+def test_the_twins_driver_decides_with_the_policys_memory(flat_ahead):
+    weights = np.random.default_rng(12).standard_normal(n_weights()) * 0.3
+    remembering = MLPPolicy(weights, smoothing=2.0, jerk_from="command")
+    seen = _Seen()
+    _commands(MLPDriver(seen), _drive(30))
+    actor = remembering.actor()
+    expected = [float(actor(weights, o)) for o in seen.seen]
+    assert _commands(MLPDriver(remembering), _drive(30)) == expected
+    assert _commands(MLPDriver(MLPPolicy(weights)), _drive(30)) != expected
+
+
+def test_predict_keeps_the_policys_memory_in_its_state():
+    rng = np.random.default_rng(13)
+    policy = MLPPolicy(rng.standard_normal(n_weights()) * 0.3, smoothing=2.0, jerk_from="command")
+    scenes = [o[0] for o in _drift(rng, 20, n=1, noise=0.05)]
+    actor, state, actions = policy.actor(), None, []
+    for obs in scenes:
+        action, state = policy.predict(obs, state)
+        assert action.shape == (1,) and action.dtype == np.float32
+        actions.append(float(action[0]))
+    assert actions == [float(np.float32(actor(policy.weights, o))) for o in scenes]
+    # a fresh state (or an episode's start) decides as the first decision does
+    assert policy.predict(scenes[5])[0][0] == np.float32(policy.accel(scenes[5]))
+    restarted, _ = policy.predict(scenes[5], state, episode_start=np.array([True]))
+    assert restarted[0] == np.float32(policy.accel(scenes[5]))
