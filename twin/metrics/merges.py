@@ -12,9 +12,12 @@ however many times it was spawned):
   first at or beyond its back);
 * ``waiting``: it never merged and stands (below ``STANDING`` m/s) on lane -5 at its
   last row: waiting for a gap, at the lane's end or beside a standing queue;
-  ``waiting_at_end`` of them with its front within ``AT_END`` m of the taper's end: it
-  reached the end of its lane without merging (the others stand short of it, in the
-  ramp's queue or beside lane -4's, their outcome not yet seen);
+  ``waiting_at_end`` of them first in its lane (no vehicle on lane -5 ahead of it and
+  short of the taper's end then) with its front within ``AT_END`` m of the taper's end:
+  it reached the end of its lane without merging (a driver waits short of the end by
+  half an urgent change's path and its standstill gap, ``min_gap`` up to 10 m; the
+  others stand short of it, in the ramp's queue or beside lane -4's, their outcome not
+  yet seen);
 * ``unfinished``: it left the visible window or the episode ended while it was on its
   way, before the end: its outcome is not seen (one that left the window on lane -5
   and came back into it in a through lane merged out of sight: unfinished too).
@@ -35,7 +38,10 @@ from twin.core.i24 import N_LANES
 from twin.core.ramps import RAMP_LANE
 
 STANDING = 1.0  # [m/s] a ramp vehicle slower than this waits for a gap
-AT_END = 10.0  # [m] a waiting vehicle's front this near its lane's end waits at the end
+#: [m] the first waiting vehicle with its front this near its lane's end waits at the
+#: end (where one waits: 7.5 m, half the default urgent path, and its standstill gap
+#: short of it, up to 17.5 m)
+AT_END = 20.0
 SEEN_GAP = 0.5  # [s] a merge is seen where its rows before and after are this close
 
 
@@ -57,6 +63,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
     lane = vehicles["lane"].to_numpy()
     on_ramp = np.unique(vehicles["tid"].to_numpy()[lane == RAMP_LANE])
     rows = vehicles[vehicles["tid"].isin(on_ramp)].sort_values(["tid", "time"], kind="stable")
+    ramp_rows = vehicles[lane == RAMP_LANE]
     merged = before_end = waiting = at_end = unfinished = 0
     for _, own in rows.groupby("tid", sort=True):
         lanes = own["lane"].to_numpy()
@@ -78,7 +85,10 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
         speed = own["speed"].to_numpy(dtype=np.float64)[last]
         if speed < STANDING:
             waiting += 1
-            at_end += bool(front[last] >= end - AT_END)
+            then = ramp_rows[ramp_rows["time"].to_numpy() == own["time"].to_numpy()[last]]
+            others_x = then["x"].to_numpy(dtype=np.float64)
+            first = not np.any((others_x > x[last]) & (others_x < end))
+            at_end += bool(first and front[last] >= end - AT_END)
         else:
             unfinished += 1
     seen, reached = merged + waiting, merged + at_end

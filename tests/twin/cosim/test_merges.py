@@ -108,9 +108,9 @@ def test_the_merges_section_counts_outcomes():
     end = 144.8
     frame = {"id": [], "tid": [], "time": [], "x": [], "lane": [], "speed": []}
 
-    def add(i, lanes, xs, speeds):
+    def add(i, lanes, xs, speeds, t0=0.0):
         for k, (lane, x, v) in enumerate(zip(lanes, xs, speeds, strict=True)):
-            for name, value in zip(frame, (i, i, 0.1 * k, x, lane, v), strict=True):
+            for name, value in zip(frame, (i, i, t0 + 0.1 * k, x, lane, v), strict=True):
                 frame[name].append(value)
 
     add(0, [-5, -5, -4], [100.0, 110.0, 120.0], [10.0] * 3)  # merged in time
@@ -118,22 +118,24 @@ def test_the_merges_section_counts_outcomes():
     add(2, [-5, -5], [100.0, 106.0], [2.0, 0.0])  # standing on the ramp, short of its end
     add(3, [-5, -5], [20.0, 30.0], [10.0, 10.0])  # on its way when the run ended
     add(4, [-3, -3], [20.0, 30.0], [10.0, 10.0])  # never on the ramp
-    add(5, [-5, -5], [128.0, 132.0], [1.5, 0.2])  # standing at the end: front 136 m
+    add(5, [-5, -5], [128.0, 132.0], [1.5, 0.2], t0=1.0)  # standing at the end: front 136 m
+    # standing in the ramp's queue behind it, its front 129.5 m: near the end, not at it
+    add(7, [-5, -5], [124.0, 125.5], [1.5, 0.2], t0=1.0)
     # left the window on the ramp, back in it in lane -4 far on: merged out of sight
     frame["time"] += [0.0, 0.1, 30.0]
     for name, values in (("id", [6] * 3), ("tid", [6] * 3), ("x", [40.0, 41.0, 400.0]),
                          ("lane", [-5, -5, -4]), ("speed", [10.0, 10.0, 25.0])):  # fmt: skip
         frame[name] += values
 
-    section = merge_section(pd.DataFrame(frame), np.full(7, 4.0), [end])
+    section = merge_section(pd.DataFrame(frame), np.full(8, 4.0), [end])
     assert section == {
-        "ramp_vehicles": 6, "merged": 2, "before_taper_end": 1, "waiting": 2,
-        "waiting_at_end": 1, "unfinished": 2, "completed_share": 0.25,
+        "ramp_vehicles": 7, "merged": 2, "before_taper_end": 1, "waiting": 3,
+        "waiting_at_end": 1, "unfinished": 2, "completed_share": 0.2,
         "in_time_share": pytest.approx(1 / 3, abs=1e-6),
     }  # fmt: skip
-    assert merge_section(pd.DataFrame(frame), np.full(7, 4.0), []) is None
+    assert merge_section(pd.DataFrame(frame), np.full(8, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
-        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(7, 4.0), [end])
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(8, 4.0), [end])
 
 
 def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
