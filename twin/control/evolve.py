@@ -48,6 +48,7 @@ resumes where it stopped (the same command again) and ends with the same weights
 one that was not interrupted.
 """
 
+import hashlib
 import json
 import math
 import time
@@ -230,7 +231,7 @@ def evolve(out: str | Path, config: EvolveConfig, *, progress: bool = True) -> M
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    settings = _settings(config)
+    settings = _identity(config)
     state = _resume(out, settings) or _fresh(config)
     envs = {}
     held = config.heldout_episodes
@@ -375,6 +376,16 @@ def _settings(config: EvolveConfig) -> dict:
     return out
 
 
+def _identity(config: EvolveConfig) -> dict:
+    """:func:`_settings` as a checkpoint keeps them: the start file by its weights (a
+    SHA-256 of their bytes), not by the path it was given as (the same file named
+    relative to another folder resumes; another file's weights do not)."""
+    out = _settings(config)
+    if out.pop("start") is not None:
+        out["start_sha256"] = hashlib.sha256(_start_weights(config).tobytes()).hexdigest()
+    return out
+
+
 def _fresh(config: EvolveConfig) -> dict:
     theta = initial_weights(config.seed, config.hidden)
     if config.start is not None:
@@ -417,8 +428,10 @@ def _resume(out: Path, settings: dict) -> dict | None:
     try:
         with np.load(path, allow_pickle=False) as data:
             # a training from before these settings had them at their defaults
-            saved = {"smoothing": 0.0, "jerk_from": "measured", "start": None}
+            saved = {"smoothing": 0.0, "jerk_from": "measured"}
             saved |= json.loads(str(data["settings"]))
+            if saved.pop("start", None) is not None:  # its path, before start_sha256
+                saved["start"] = "a file named by its path"
             rng = np.random.default_rng()
             rng.bit_generator.state = json.loads(str(data["rng"]))
             state = {

@@ -114,3 +114,28 @@ def test_a_training_starts_from_a_policy_files_weights(calibrated_wave_store, tm
         _fresh(EvolveConfig(hidden=(8,), data=data, start=path))
     with pytest.raises(TrainingError, match="--start"):
         _fresh(EvolveConfig(hidden=(4,), data=data, start=tmp_path / "missing.json"))
+
+
+def test_a_training_from_a_file_resumes_by_its_weights_not_its_path(tmp_path, monkeypatch):
+    import shutil
+
+    from twin.control.evolve import _identity, _resume, _save
+
+    start = MLPPolicy(np.random.default_rng(2).standard_normal(n_weights((4,))), (4,))
+    path = start.save(tmp_path / "start.json")
+    config = EvolveConfig(hidden=(4,), start=path)
+    theta = start.weights
+    rng = np.random.default_rng(0)
+    _save(tmp_path, _identity(config), theta, theta, theta, 3, rng, [])
+    monkeypatch.chdir(tmp_path)  # the same file, named relative to another folder
+    assert _resume(tmp_path, _identity(EvolveConfig(hidden=(4,), start="start.json")))
+    shutil.copy(path, tmp_path / "copy.json")  # or copied
+    assert (
+        _resume(tmp_path, _identity(EvolveConfig(hidden=(4,), start="copy.json")))["generation"]
+        == 3
+    )
+    other = MLPPolicy(start.weights + 1.0, (4,)).save(tmp_path / "other.json")
+    with pytest.raises(TrainingError, match="other settings \\(start_sha256\\)"):
+        _resume(tmp_path, _identity(EvolveConfig(hidden=(4,), start=other)))
+    with pytest.raises(TrainingError, match="start_sha256"):  # from scratch: another
+        _resume(tmp_path, _identity(EvolveConfig(hidden=(4,))))
