@@ -39,6 +39,12 @@ def register(commands) -> None:
         "strategy of the MLP speed policy on the vector env",
     )  # fmt: skip
     add_data(p, "store (default: embedded:morning)")
+    p.add_argument(
+        "--also-data", action="append", default=[], metavar="STORE",
+        help="es: another morning whose training split it trains on too (repeatable; a "
+        "generation's episodes are dealt out over --data and these in turn; held-out scores "
+        "stay on --data)",
+    )  # fmt: skip
     p.add_argument("--iterations", type=int, default=30, help="ars: random-search iterations")
     p.add_argument("--directions", type=int, default=8, help="ars: perturbations per iteration")
     p.add_argument("--top", type=int, default=4, help="ars: best directions kept per iteration")
@@ -110,11 +116,13 @@ def register(commands) -> None:
 
 
 def _train(args) -> int:
-    from twin.control.train import TrainConfig, train
+    from twin.control.train import TrainConfig, TrainingError, train
 
     check_seed(args.seed)
     if args.algorithm == "es":
         return _evolve(args)
+    if args.also_data:
+        raise TrainingError("--also-data trains the MLP: use it with --algorithm es")
     config = TrainConfig(
         iterations=args.iterations,
         directions=args.directions,
@@ -138,9 +146,16 @@ def _train(args) -> int:
 def _evolve(args) -> int:
     from twin.control.evolve import EvolveConfig, evolve
     from twin.control.train import TrainingError
+    from twin.core.errors import DataFormatError, StoreError
 
     if args.world != "kinematic":
         raise TrainingError("--algorithm es trains on the vector env: the kinematic world")
+    for store in args.also_data:  # a bad store is named before any training
+        try:
+            open_data(store, progress=False)
+        except (StoreError, DataFormatError) as error:
+            message = str(error).removeprefix(f"--data {Path(store)}").lstrip(": ")
+            raise TrainingError(f"--also-data {store}: {message}") from None
     try:
         hidden = tuple(int(h) for h in str(args.hidden).split(","))
     except ValueError:
@@ -151,7 +166,8 @@ def _evolve(args) -> int:
         learning_rate=args.learning_rate, hidden=hidden, heldout_every=args.heldout_every,
         heldout_episodes=args.heldout_episodes, obs_noise=args.obs_noise,
         latency_steps=args.latency_steps, smoothing=args.smoothing, jerk_from=args.jerk_from,
-        start=args.start, data=str(args.data or "embedded:morning"), seed=args.seed,
+        start=args.start, data=str(args.data or "embedded:morning"),
+        also=tuple(args.also_data), seed=args.seed,
     )  # fmt: skip
     policy = evolve(args.out, config, progress=not args.quiet)
     print(

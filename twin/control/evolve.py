@@ -16,10 +16,13 @@ One generation:
 
 1. draw ``episodes`` training episodes (congested cells of the recording before
    ``split_time``, the env's ``train`` split) and ``population`` perturbations
-   ``eps`` of the weights (standard normal);
+   ``eps`` of the weights (standard normal); with other mornings (``also``) the
+   episodes are dealt out over ``data`` and them in turn (episode ``e`` from morning
+   ``e mod mornings``);
 2. run the weights ``theta + sigma eps`` and ``theta - sigma eps`` of every pair on
    every episode of the generation: ``2 population episodes`` sub-envs of one vector
-   env (the same episodes for every member: their differences are the policy's);
+   env per morning (the same episodes for every member: their differences are the
+   policy's);
 3. score each run (:func:`score`), rank the members per episode (centred ranks in
    [-0.5, 0.5]) and average over the episodes;
 4. step ``theta`` with Adam along ``sum (rank+ - rank-) eps / (population sigma)``,
@@ -34,7 +37,8 @@ drivers' emergency braking) beneath the policy, as the twin drives it, and its t
 counts.
 
 Every ``heldout_every`` generations (and at the last) the current weights drive
-``heldout_episodes`` fixed episodes of the ``test`` split; the held-out score is their
+``heldout_episodes`` fixed episodes of the ``test`` split of ``data`` (not of
+``also``: the held-out score stays comparable between trainings); the score is their
 economy against ``human``'s on the same episodes [%] (the vector env's ``ego="human"``,
 the benchmark's pairing), with their comfort and safety figures.
 
@@ -98,7 +102,10 @@ class EvolveConfig:
         start: a policy file whose weights it starts from (its hidden layers must be
             these; its smoothing and jerk_from are replaced by these) instead of drawn
             weights that follow the leader.
-        data: the store (``embedded:morning`` by default).
+        data: the store (``embedded:morning`` by default): its training split, and
+            its test split for the held-out scores.
+        also: other stores whose training splits it trains on too (other mornings;
+            ``episodes`` must be at least one per morning).
         seed: the episodes', perturbations' and initial weights' seed.
     """
 
@@ -118,11 +125,15 @@ class EvolveConfig:
     jerk_from: str = "measured"
     start: str | None = None
     data: str = "embedded:morning"
+    also: tuple[str, ...] = ()
     seed: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "hidden", tuple(self.hidden))
         object.__setattr__(self, "data", str(self.data))  # a Path too
+        if isinstance(self.also, str | bytes):
+            raise TrainingError(f"also must be a list of stores, got {self.also!r}")
+        object.__setattr__(self, "also", tuple(str(a) for a in self.also))
         for name in ("generations", "population", "episodes", "heldout_every",
                      "heldout_episodes"):  # fmt: skip
             value = getattr(self, name)
@@ -142,11 +153,28 @@ class EvolveConfig:
             raise TrainingError(str(error)) from None
         if self.start is not None:
             object.__setattr__(self, "start", str(self.start))  # a Path too
+        if self.episodes < len(self.mornings):
+            raise TrainingError(
+                f"episodes ({self.episodes}) must be at least one per morning "
+                f"({len(self.mornings)}: data and also)"
+            )
+        if len(set(self.mornings)) < len(self.mornings):
+            raise TrainingError(f"a morning is named twice in data and also: {self.mornings}")
 
     @property
     def num_envs(self) -> int:
-        """Sub-envs of the vector env: every member on every episode."""
+        """Sub-envs of the vector envs together: every member on every episode."""
         return 2 * self.population * self.episodes
+
+    @property
+    def mornings(self) -> tuple[str, ...]:
+        """The stores it trains on: ``data``, then ``also``."""
+        return (self.data, *self.also)
+
+    def per_morning(self) -> list[int]:
+        """How many of a generation's episodes each morning gives (module doc)."""
+        n = len(self.mornings)
+        return [len(range(k, self.episodes, n)) for k in range(n)]
 
 
 def score(figures: dict) -> tuple[float, float]:
@@ -235,11 +263,13 @@ def evolve(out: str | Path, config: EvolveConfig, *, progress: bool = True) -> M
     state = _resume(out, settings) or _fresh(config)
     envs = {}
     held = config.heldout_episodes
-    kinds = {"train": ("train", config.num_envs, "agent"), "test": ("test", held, "agent"),
-             "human": ("test", held, "human")}  # fmt: skip
-    for name, (split, count, ego) in kinds.items():
+    kinds = {"test": (config.data, "test", held, "agent"),
+             "human": (config.data, "test", held, "human")}  # fmt: skip
+    for k, (data, count) in enumerate(zip(config.mornings, config.per_morning(), strict=True)):
+        kinds[("train", k)] = (data, "train", 2 * config.population * count, "agent")
+    for name, (data, split, count, ego) in kinds.items():
         envs[name] = VectorWaveDampeningEnv(
-            count, config.data, split=split, duration=config.duration, action="accel",
+            count, data, split=split, duration=config.duration, action="accel",
             obs_noise=config.obs_noise, latency_steps=config.latency_steps,
             seed=config.seed, safety=True, ego=ego,
         )  # fmt: skip
@@ -261,12 +291,13 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
     baseline = _heldout(envs["human"], start, heldout, config)
     for generation in range(state["generation"] + 1, config.generations + 1):
         tick = time.perf_counter()
-        episodes = _placeable(envs["train"], (int(k) for k in rng.integers(0, 2**31 - 1, 64)), per)
+        drawn = [
+            _placeable(envs[("train", k)], (int(e) for e in rng.integers(0, 2**31 - 1, 64)), count)
+            for k, count in enumerate(config.per_morning())
+        ]
         eps = rng.standard_normal((pairs, theta.size))
         members = np.concatenate([theta + config.sigma * eps, theta - config.sigma * eps])
-        thetas = np.repeat(members, per, axis=0)  # sub-env b: member b // per
-        runs = rollout(envs["train"], thetas, list(np.tile(episodes, 2 * pairs)), _actor(config),
-                       seed=episodes[0])  # fmt: skip
+        runs = _train_runs(envs, members, drawn, config)
         # a run with no economy (no fuel, a figure missing) ranks lowest
         mpg = np.nan_to_num([r["mpg"] for r in runs], nan=0.0).reshape(2 * pairs, per)
         median = np.median(mpg, axis=0)
@@ -304,6 +335,21 @@ def _generations(out, config, settings, state, envs, progress) -> MLPPolicy:
             _print(row, config)
     return MLPPolicy(theta, config.hidden, config.smoothing, config.jerk_from,
                      about=_about(config, rows[-1]))  # fmt: skip
+
+
+def _train_runs(envs, members: np.ndarray, drawn: list[list[int]], config) -> list[dict]:
+    """Every member (row of ``members``) on every episode drawn (``drawn[k]``: morning
+    ``k``'s), each morning's in one rollout of its vector env; the runs member by
+    member, each member's episodes morning by morning (run ``i per + e``: member ``i``,
+    episode ``e``)."""
+    by_morning = []
+    for k, episodes in enumerate(drawn):
+        thetas = np.repeat(members, len(episodes), axis=0)  # sub-env b: member b // count
+        runs = rollout(envs[("train", k)], thetas, list(np.tile(episodes, len(members))),
+                       _actor(config), seed=episodes[0])  # fmt: skip
+        by_morning.append([runs[i * len(episodes) : (i + 1) * len(episodes)]
+                           for i in range(len(members))])  # fmt: skip
+    return [run for i in range(len(members)) for runs in by_morning for run in runs[i]]
 
 
 def _placeable(env, candidates, count: int) -> list[int]:
@@ -373,6 +419,7 @@ def _settings(config: EvolveConfig) -> dict:
     out = asdict(config)
     out.pop("generations")
     out["hidden"] = list(config.hidden)
+    out["also"] = list(config.also)
     return out
 
 
@@ -428,7 +475,7 @@ def _resume(out: Path, settings: dict) -> dict | None:
     try:
         with np.load(path, allow_pickle=False) as data:
             # a training from before these settings had them at their defaults
-            saved = {"smoothing": 0.0, "jerk_from": "measured"}
+            saved = {"smoothing": 0.0, "jerk_from": "measured", "also": []}
             saved |= json.loads(str(data["settings"]))
             if saved.pop("start", None) is not None:  # its path, before start_sha256
                 saved["start"] = "a file named by its path"

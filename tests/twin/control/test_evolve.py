@@ -93,6 +93,11 @@ def test_twin_train_algorithm_es_from_the_command_line(calibrated_wave_store, tm
     assert "generation 1/1" in capsys.readouterr().out
     assert main([*args[:-2], "--hidden", "4,x", "--out", str(tmp_path / "bad")]) != 0
     assert "--hidden" in capsys.readouterr().err
+    missing = str(tmp_path / "no_such_morning")
+    assert main([*args[:-2], "--also-data", missing, "--out", str(tmp_path / "bad")]) != 0
+    assert "--also-data" in (err := capsys.readouterr().err) and "no_such_morning" in err
+    assert main(["train", "--also-data", missing, "--out", str(tmp_path / "bad")]) != 0
+    assert "--algorithm es" in capsys.readouterr().err
 
 
 def test_a_training_starts_from_a_policy_files_weights(calibrated_wave_store, tmp_path):
@@ -139,3 +144,35 @@ def test_a_training_from_a_file_resumes_by_its_weights_not_its_path(tmp_path, mo
         _resume(tmp_path, _identity(EvolveConfig(hidden=(4,), start=other)))
     with pytest.raises(TrainingError, match="start_sha256"):  # from scratch: another
         _resume(tmp_path, _identity(EvolveConfig(hidden=(4,))))
+
+
+def test_a_training_deals_its_episodes_over_other_mornings(
+    calibrated_wave_store, tmp_path, monkeypatch
+):
+    import twin.control.evolve as evolve_module
+
+    data = str(calibrated_wave_store.path)
+    other = tmp_path / "other_morning"
+    other.symlink_to(calibrated_wave_store.path, target_is_directory=True)
+    config = EvolveConfig(**{**_config(data, 1).__dict__, "episodes": 3, "also": (str(other),)})
+    assert config.mornings == (data, str(other)) and config.per_morning() == [2, 1]
+    seen = []
+    rollout = evolve_module.rollout
+
+    def spy(env, thetas, episodes, actor, seed):
+        seen.append((env.num_envs, len(episodes)))
+        return rollout(env, thetas, episodes, actor, seed)
+
+    monkeypatch.setattr(evolve_module, "rollout", spy)
+    policy = evolve(tmp_path / "out", config, progress=False)
+    # held out (human, then the policy) on data's 2 episodes; training: 2 pairs x 2
+    # episodes on data's vector env, 2 pairs x 1 on the other's
+    assert sorted(seen) == sorted([(2, 2), (8, 8), (4, 4), (2, 2)])
+    assert policy.about["config"]["also"] == [str(other)]
+    assert policy.about["env_steps"] == 4 * 3 * 30
+    with pytest.raises(TrainingError, match="at least one per morning"):
+        EvolveConfig(episodes=1, also=("elsewhere",))
+    with pytest.raises(TrainingError, match="named twice"):
+        EvolveConfig(data="a", also=("a",))
+    with pytest.raises(TrainingError, match="list of stores"):
+        EvolveConfig(also="elsewhere")
