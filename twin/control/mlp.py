@@ -73,6 +73,11 @@ COMMANDS_KEPT = 10
 GATE = 0.2
 #: [m] ... and by more than this.
 GATE_FLOOR = 2.0
+#: A leader's or follower's speed that jumps by more than this share of itself (6 sd of
+#: 5 % noise: a wrong restart lets the noise in) ...
+SPEED_GATE = 0.3
+#: [m/s] ... and by more than this is another vehicle's too (one appearing far ahead).
+SPEED_GATE_FLOOR = 3.0
 #: The inputs, in order (:func:`inputs`).
 INPUTS = (
     "speed",
@@ -185,10 +190,12 @@ class Actor:
       gaps by the speed differences), then moved towards the new observation by
       ``dt / (smoothing + dt)``: an exponential moving average of time constant
       ``smoothing`` with no lag behind its own acceleration, so its speed loop is not
-      slowed by the filter. A leader or follower gap that jumps by more than
-      :data:`GATE` of itself (at least :data:`GATE_FLOOR`), as at a cut-in or a lane
-      change, is another vehicle: that gap and its speed restart from the observation.
-      The first observation starts it.
+      slowed by the filter (its safety layer's braking included). A leader or
+      follower gap that jumps by more than :data:`GATE` of itself (at least
+      :data:`GATE_FLOOR`), or whose speed does by :data:`SPEED_GATE` (at least
+      :data:`SPEED_GATE_FLOOR`), as at a cut-in, a lane change or a leader appearing
+      far ahead, is another vehicle: that gap and its speed restart from the
+      observation. The first observation starts it.
     * ``jerk_from="command"``: its jerk limit counts from its own previous command
       (which it knows exactly) instead of the acceleration it measured (which noise and
       latency blur); the first decision counts from the measured one, and so does one
@@ -240,10 +247,11 @@ def predicted(estimate: np.ndarray) -> np.ndarray:
     """Filtered observations ``estimate`` (..., 18) carried one control step forward by
     what they say moves: its own speed by its measured acceleration, the leader's gap
     by the leader's speed less its own, the follower's by its own less the
-    follower's (the other values held)."""
+    follower's (the other values held). Its own speed is carried by the acceleration
+    as measured, the safety layer's braking too, and not below 0."""
     ahead = estimate.copy()
     speed, accel = estimate[..., 0], estimate[..., 1]
-    ahead[..., 0] = speed + np.clip(accel, *ACCEL_RANGE) * CONTROL_DT
+    ahead[..., 0] = np.maximum(speed + accel * CONTROL_DT, 0.0)  # the safety layer's too
     ahead[..., 2] += (estimate[..., 3] - speed) * CONTROL_DT
     ahead[..., 4] += (speed - estimate[..., 5]) * CONTROL_DT
     return ahead
@@ -253,14 +261,19 @@ def filtered(estimate: np.ndarray, obs: np.ndarray, smoothing: float) -> np.ndar
     """The filtered observations after observation ``obs`` (..., 18): ``estimate``
     carried forward (:func:`predicted`, with the new measured acceleration) and moved
     ``dt / (smoothing + dt)`` towards ``obs``; a gap (and its vehicle's speed) that
-    jumped past the gate (:class:`Actor`) restarts from ``obs``."""
+    jumped past the gate (:class:`Actor`), or whose vehicle's speed did, restarts from
+    ``obs``."""
     estimate = estimate.copy()
     estimate[..., 1] = obs[..., 1]
     ahead = predicted(estimate)
     out = ahead + CONTROL_DT / (smoothing + CONTROL_DT) * (obs - ahead)
     for gap, speed in ((2, 3), (4, 5)):
-        jumped = np.abs(obs[..., gap] - ahead[..., gap]) > np.maximum(
-            GATE * np.abs(ahead[..., gap]), GATE_FLOOR
+        jumped = (
+            np.abs(obs[..., gap] - ahead[..., gap])
+            > np.maximum(GATE * np.abs(ahead[..., gap]), GATE_FLOOR)
+        ) | (
+            np.abs(obs[..., speed] - ahead[..., speed])
+            > np.maximum(SPEED_GATE * np.abs(ahead[..., speed]), SPEED_GATE_FLOOR)
         )
         out[..., gap] = np.where(jumped, obs[..., gap], out[..., gap])
         out[..., speed] = np.where(jumped, obs[..., speed], out[..., speed])

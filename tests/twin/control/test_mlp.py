@@ -410,3 +410,24 @@ def test_predict_keeps_the_policys_memory_in_its_state():
     assert policy.predict(scenes[5])[0][0] == np.float32(policy.accel(scenes[5]))
     restarted, _ = policy.predict(scenes[5], state, episode_start=np.array([True]))
     assert restarted[0] == np.float32(policy.accel(scenes[5]))
+
+
+def test_the_filter_follows_the_safety_layers_hard_braking_and_stops_at_zero():
+    # braking at 8 m/s^2 (the safety layer, beyond the policy's own -3) from 20 m/s
+    def scene(k):  # the acceleration measured over the step before
+        speed, before = max(20.0 - 0.8 * k, 0.0), max(20.0 - 0.8 * (k - 1), 0.0)
+        return np.array([speed, (speed - before) / 0.1, 50.0, 20.0, 40.0, 20.0] + [20.0] * 12)
+
+    estimate = scene(0)
+    for k in range(1, 40):
+        estimate = filtered(estimate, scene(k), 2.0)
+        assert abs(estimate[0] - scene(k)[0]) < 0.5 and estimate[0] >= 0.0
+
+
+def test_a_leader_appearing_far_ahead_restarts_its_estimate():
+    none = np.array([20.0, 0.0, 200.0, 20.0, 200.0, 20.0] + [20.0] * 12)  # no leader
+    estimate = filtered(none.copy(), none, 2.0)
+    far = none.copy()
+    far[2:4] = [180.0, 10.0]  # a slow leader 180 m ahead: the gap moved 10 %
+    after = filtered(estimate, far, 2.0)
+    assert np.array_equal(after[2:4], far[2:4])
