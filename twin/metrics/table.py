@@ -191,8 +191,10 @@ METRICS: tuple[Metric, ...] = (
     Metric("merges_waiting", "count", "ramp vehicles that never merged and stood on the "
            "acceleration lane at their last row, waiting for a gap", ("merges", "waiting"),
            summary="sum", produced_by=WITH_RAMP),
-    Metric("merges_waiting_at_end", "count", "of those, the ones standing with their front "
-           "within 10 m of the taper's end: they reached their lane's end without merging",
+    Metric("merges_waiting_at_end", "count", "of those, the ones standing first in the "
+           "ramp lane with their front within 20 m of the taper's end (where a driver waits: "
+           "7.5 m and its standstill gap short of it): they reached their lane's end without "
+           "merging",
            ("merges", "waiting_at_end"), summary="sum", produced_by=WITH_RAMP),
     Metric("vehicles_off_road", "count", "vehicles that left the road",
            ("physics", "vehicles_off_road"), summary="sum"),
