@@ -17,8 +17,8 @@ One generation:
 1. draw ``episodes`` training episodes (congested cells of the recording before
    ``split_time``, the env's ``train`` split) and ``population`` perturbations
    ``eps`` of the weights (standard normal); with other mornings (``also``) the
-   episodes are dealt out over ``data`` and them in turn (episode ``e`` from morning
-   ``e mod mornings``);
+   episodes are dealt out over ``data`` and them in turn (morning ``k`` of ``n`` gives
+   as many as ``range(k, episodes, n)`` holds: 4 over 3 mornings are 2, 1 and 1);
 2. run the weights ``theta + sigma eps`` and ``theta - sigma eps`` of every pair on
    every episode of the generation: ``2 population episodes`` sub-envs of one vector
    env per morning (the same episodes for every member: their differences are the
@@ -158,7 +158,7 @@ class EvolveConfig:
                 f"episodes ({self.episodes}) must be at least one per morning "
                 f"({len(self.mornings)}: data and also)"
             )
-        if len(set(self.mornings)) < len(self.mornings):
+        if len({_same_file(m) for m in self.mornings}) < len(self.mornings):
             raise TrainingError(f"a morning is named twice in data and also: {self.mornings}")
 
     @property
@@ -175,6 +175,12 @@ class EvolveConfig:
         """How many of a generation's episodes each morning gives (module doc)."""
         n = len(self.mornings)
         return [len(range(k, self.episodes, n)) for k in range(n)]
+
+
+def _same_file(store: str) -> str:
+    """``store`` as the file it names (a link or another spelling of one path the
+    same), an embedded name as it is."""
+    return store if store.startswith("embedded:") else str(Path(store).resolve())
 
 
 def score(figures: dict) -> tuple[float, float]:
@@ -260,7 +266,7 @@ def evolve(out: str | Path, config: EvolveConfig, *, progress: bool = True) -> M
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     settings = _identity(config)
-    state = _resume(out, settings) or _fresh(config)
+    state = _resume(out, settings, config.start) or _fresh(config)
     envs = {}
     held = config.heldout_episodes
     kinds = {"test": (config.data, "test", held, "agent"),
@@ -463,8 +469,10 @@ def _start_weights(config: EvolveConfig) -> np.ndarray:
     return policy.weights.copy()
 
 
-def _resume(out: Path, settings: dict) -> dict | None:
-    """The state a checkpoint in ``out`` holds, or None where there is none.
+def _resume(out: Path, settings: dict, start: str | None = None) -> dict | None:
+    """The state a checkpoint in ``out`` holds, or None where there is none. A
+    checkpoint from before ``start_sha256`` named its start file by path: it resumes
+    where that path is the same file as ``start``.
 
     Raises:
         TrainingError: it is damaged, or of a training with other settings.
@@ -477,8 +485,10 @@ def _resume(out: Path, settings: dict) -> dict | None:
             # a training from before these settings had them at their defaults
             saved = {"smoothing": 0.0, "jerk_from": "measured", "also": []}
             saved |= json.loads(str(data["settings"]))
-            if saved.pop("start", None) is not None:  # its path, before start_sha256
-                saved["start"] = "a file named by its path"
+            old = saved.pop("start", None)  # its path, before start_sha256
+            if old is not None:
+                same = start is not None and Path(old).resolve() == Path(start).resolve()
+                saved["start_sha256"] = settings.get("start_sha256") if same else old
             rng = np.random.default_rng()
             rng.bit_generator.state = json.loads(str(data["rng"]))
             state = {

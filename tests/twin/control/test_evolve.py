@@ -146,14 +146,61 @@ def test_a_training_from_a_file_resumes_by_its_weights_not_its_path(tmp_path, mo
         _resume(tmp_path, _identity(EvolveConfig(hidden=(4,))))
 
 
+def test_a_checkpoint_that_named_its_start_by_path_resumes_with_that_file(tmp_path):
+    from twin.control.evolve import _identity, _resume, _save, _settings
+
+    start = MLPPolicy(np.random.default_rng(3).standard_normal(n_weights((4,))), (4,))
+    path = start.save(tmp_path / "start.json")
+    config = EvolveConfig(hidden=(4,), start=path)
+    old = _settings(config)  # as checkpoints were written before start_sha256
+    old.pop("also")
+    theta = start.weights
+    _save(tmp_path, old, theta, theta, theta, 2, np.random.default_rng(0), [])
+    assert _resume(tmp_path, _identity(config), config.start)["generation"] == 2
+    other = MLPPolicy(start.weights + 1.0, (4,)).save(tmp_path / "other.json")
+    moved = EvolveConfig(hidden=(4,), start=other)
+    with pytest.raises(TrainingError, match="start_sha256"):
+        _resume(tmp_path, _identity(moved), moved.start)
+
+
+def test_the_runs_are_member_by_member_each_members_episodes_morning_by_morning():
+    import twin.control.evolve as evolve_module
+
+    class Env:
+        def __init__(self, morning):
+            self.morning = morning
+
+    def fake(env, thetas, episodes, actor, seed):
+        return [{"member": float(t[0]), "morning": env.morning, "episode": e}
+                for t, e in zip(thetas, episodes, strict=True)]  # fmt: skip
+
+    config = EvolveConfig(population=2, episodes=3, also=("elsewhere",))
+    members = np.arange(4, dtype=float)[:, None] * np.ones((4, 3))
+    drawn = [[10, 11], [20]]  # morning 0 gives 2 episodes, morning 1 one
+    envs = {("train", 0): Env(0), ("train", 1): Env(1)}
+    original = evolve_module.rollout
+    evolve_module.rollout = fake
+    try:
+        runs = evolve_module._train_runs(envs, members, drawn, config)
+    finally:
+        evolve_module.rollout = original
+    assert [(r["member"], r["morning"], r["episode"]) for r in runs] == [
+        (i, k, e) for i in range(4) for k, e in ((0, 10), (0, 11), (1, 20))
+    ]
+
+
 def test_a_training_deals_its_episodes_over_other_mornings(
     calibrated_wave_store, tmp_path, monkeypatch
 ):
     import twin.control.evolve as evolve_module
 
     data = str(calibrated_wave_store.path)
-    other = tmp_path / "other_morning"
-    other.symlink_to(calibrated_wave_store.path, target_is_directory=True)
+    import shutil
+
+    other = tmp_path / "other_morning"  # a copy stands for another morning
+    shutil.copytree(calibrated_wave_store.path, other)
+    link = tmp_path / "link"
+    link.symlink_to(calibrated_wave_store.path, target_is_directory=True)
     config = EvolveConfig(**{**_config(data, 1).__dict__, "episodes": 3, "also": (str(other),)})
     assert config.mornings == (data, str(other)) and config.per_morning() == [2, 1]
     seen = []
@@ -174,5 +221,7 @@ def test_a_training_deals_its_episodes_over_other_mornings(
         EvolveConfig(episodes=1, also=("elsewhere",))
     with pytest.raises(TrainingError, match="named twice"):
         EvolveConfig(data="a", also=("a",))
+    with pytest.raises(TrainingError, match="named twice"):  # the same store by a link
+        EvolveConfig(data=data, episodes=2, also=(str(link),))
     with pytest.raises(TrainingError, match="list of stores"):
         EvolveConfig(also="elsewhere")

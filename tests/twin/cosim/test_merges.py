@@ -121,21 +121,23 @@ def test_the_merges_section_counts_outcomes():
     add(5, [-5, -5], [128.0, 132.0], [1.5, 0.2], t0=1.0)  # standing at the end: front 136 m
     # standing in the ramp's queue behind it, its front 129.5 m: near the end, not at it
     add(7, [-5, -5], [124.0, 125.5], [1.5, 0.2], t0=1.0)
+    # alone, waiting with a long standstill gap: its front 127.8 m, 17 m short of the end
+    add(8, [-5, -5], [122.0, 123.8], [1.5, 0.2], t0=5.0)
     # left the window on the ramp, back in it in lane -4 far on: merged out of sight
     frame["time"] += [0.0, 0.1, 30.0]
     for name, values in (("id", [6] * 3), ("tid", [6] * 3), ("x", [40.0, 41.0, 400.0]),
                          ("lane", [-5, -5, -4]), ("speed", [10.0, 10.0, 25.0])):  # fmt: skip
         frame[name] += values
 
-    section = merge_section(pd.DataFrame(frame), np.full(8, 4.0), [end])
+    section = merge_section(pd.DataFrame(frame), np.full(9, 4.0), [end])
     assert section == {
-        "ramp_vehicles": 7, "merged": 2, "before_taper_end": 1, "waiting": 3,
-        "waiting_at_end": 1, "unfinished": 2, "completed_share": 0.2,
-        "in_time_share": pytest.approx(1 / 3, abs=1e-6),
+        "ramp_vehicles": 8, "merged": 2, "before_taper_end": 1, "waiting": 4,
+        "waiting_at_end": 2, "unfinished": 2, "completed_share": pytest.approx(1 / 6, abs=1e-6),
+        "in_time_share": 0.25,
     }  # fmt: skip
-    assert merge_section(pd.DataFrame(frame), np.full(8, 4.0), []) is None
+    assert merge_section(pd.DataFrame(frame), np.full(9, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
-        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(8, 4.0), [end])
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(9, 4.0), [end])
 
 
 def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
