@@ -60,7 +60,8 @@ POLICIES = Path(__file__).with_name("policies")  # the policies the twin ships, 
 SHIPPED = POLICIES / "wave_ars.json"  # the linear policy the twin ships (``wave_ars``)
 #: The default of ``twin.rl:policy``: the MLP trained by ``twin train --algorithm es``
 #: (:mod:`twin.control.mlp`) and fine-tuned under observation noise and latency with a
-#: memory (``wave_es_mlp_robust``); the MLP it started from stays as ``wave_es_mlp``,
+#: memory, on the morning and two other mornings (``wave_es_mlp_robust``); the MLP it
+#: started from stays as ``wave_es_mlp``,
 #: the linear one as ``wave_ars``.
 DEFAULT = POLICIES / "wave_es_mlp_robust.json"
 
