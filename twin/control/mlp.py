@@ -224,8 +224,7 @@ class Actor:
                 self._estimate = obs.copy()
             else:
                 self._estimate = filtered(self._estimate, obs, self.smoothing)
-            seen = self._estimate.copy()
-            seen[..., 1] = obs[..., 1]  # the measured acceleration as it comes
+            seen = self._estimate  # its measured acceleration is the observation's
         speed_command = forward(theta, seen, self.hidden)
         if self.jerk_from == "command" and self._commands:
             wanted = np.clip(SPEED_GAIN * (speed_command - seen[..., 0]), *ACCEL_RANGE)
@@ -260,9 +259,9 @@ def predicted(estimate: np.ndarray) -> np.ndarray:
 def filtered(estimate: np.ndarray, obs: np.ndarray, smoothing: float) -> np.ndarray:
     """The filtered observations after observation ``obs`` (..., 18): ``estimate``
     carried forward (:func:`predicted`, with the new measured acceleration) and moved
-    ``dt / (smoothing + dt)`` towards ``obs``; a gap (and its vehicle's speed) that
-    jumped past the gate (:class:`Actor`), or whose vehicle's speed did, restarts from
-    ``obs``."""
+    ``dt / (smoothing + dt)`` towards ``obs`` (the measured acceleration is ``obs``'s);
+    a gap (and its vehicle's speed) that jumped past the gate (:class:`Actor`), or whose
+    vehicle's speed did, restarts from ``obs``."""
     estimate = estimate.copy()
     estimate[..., 1] = obs[..., 1]
     ahead = predicted(estimate)
@@ -277,6 +276,7 @@ def filtered(estimate: np.ndarray, obs: np.ndarray, smoothing: float) -> np.ndar
         )
         out[..., gap] = np.where(jumped, obs[..., gap], out[..., gap])
         out[..., speed] = np.where(jumped, obs[..., speed], out[..., speed])
+    out[..., 1] = obs[..., 1]  # the measured acceleration as it comes
     return out
 
 

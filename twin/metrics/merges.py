@@ -63,7 +63,8 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
     lane = vehicles["lane"].to_numpy()
     on_ramp = np.unique(vehicles["tid"].to_numpy()[lane == RAMP_LANE])
     rows = vehicles[vehicles["tid"].isin(on_ramp)].sort_values(["tid", "time"], kind="stable")
-    ramp_rows = vehicles[lane == RAMP_LANE]
+    ramp_time = vehicles["time"].to_numpy(dtype=np.float64)[lane == RAMP_LANE]
+    ramp_x = vehicles["x"].to_numpy(dtype=np.float64)[lane == RAMP_LANE]
     merged = before_end = waiting = at_end = unfinished = 0
     for _, own in rows.groupby("tid", sort=True):
         lanes = own["lane"].to_numpy()
@@ -85,8 +86,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
         speed = own["speed"].to_numpy(dtype=np.float64)[last]
         if speed < STANDING:
             waiting += 1
-            then = ramp_rows[ramp_rows["time"].to_numpy() == own["time"].to_numpy()[last]]
-            others_x = then["x"].to_numpy(dtype=np.float64)
+            others_x = ramp_x[ramp_time == own["time"].to_numpy(dtype=np.float64)[last]]
             first = not np.any((others_x > x[last]) & (others_x < end))
             at_end += bool(first and front[last] >= end - AT_END)
         else:
