@@ -10,6 +10,10 @@ however many times it was spawned):
   ``SEEN_GAP`` s of its row before, on lane -5; ``before_taper_end`` of them where its
   front was short of the taper's end then (the ramp under it: the one whose end is the
   first at or beyond its back);
+* ``entered_past_end``: it merged, but the stretch of rows it merged in (rows no more
+  than ``SEEN_GAP`` s apart) began on lane -5 with its front already past the taper's
+  end: spawned there from a recording whose merge was that late, its merge was not the
+  twin's to make in time; counted apart, in neither ``merged`` nor the shares;
 * ``waiting``: it never merged and stands (below ``STANDING`` m/s) on lane -5 at its
   last row: waiting for a gap, at the lane's end or beside a standing queue;
   ``waiting_at_end`` of them first in its lane (no vehicle on lane -5 ahead of it and
@@ -65,7 +69,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
     rows = vehicles[vehicles["tid"].isin(on_ramp)].sort_values(["tid", "time"], kind="stable")
     ramp_time = vehicles["time"].to_numpy(dtype=np.float64)[lane == RAMP_LANE]
     ramp_x = vehicles["x"].to_numpy(dtype=np.float64)[lane == RAMP_LANE]
-    merged = before_end = waiting = at_end = unfinished = 0
+    merged = before_end = waiting = at_end = unfinished = entered_late = 0
     for _, own in rows.groupby("tid", sort=True):
         lanes = own["lane"].to_numpy()
         x = own["x"].to_numpy(dtype=np.float64)
@@ -78,6 +82,11 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
             times = own["time"].to_numpy(dtype=np.float64)
             if times[k] - times[k - 1] > SEEN_GAP:  # out of the window as it merged
                 unfinished += 1
+                continue
+            breaks = np.flatnonzero(np.diff(times[:k]) > SEEN_GAP)
+            start = breaks[-1] + 1 if breaks.size else 0  # where this stretch began
+            if lanes[start] == RAMP_LANE and front[start] > end:
+                entered_late += 1
                 continue
             merged += 1
             before_end += bool(front[k] <= end)
@@ -99,6 +108,7 @@ def merge_section(vehicles: pd.DataFrame, lengths: np.ndarray, ends) -> dict | N
         "waiting": waiting,
         "waiting_at_end": at_end,
         "unfinished": unfinished,
+        "entered_past_end": entered_late,
         "completed_share": round(before_end / seen, 6) if seen else None,
         "in_time_share": round(before_end / reached, 6) if reached else None,
     }

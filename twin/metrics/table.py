@@ -196,6 +196,10 @@ METRICS: tuple[Metric, ...] = (
            "7.5 m and its standstill gap short of it): they reached their lane's end without "
            "merging",
            ("merges", "waiting_at_end"), summary="sum", produced_by=WITH_RAMP),
+    Metric("merges_entered_past_end", "count", "ramp vehicles that merged, spawned on the "
+           "acceleration lane with their front already past its taper's end (their "
+           "recording merged that late): not in merges nor the shares",
+           ("merges", "entered_past_end"), summary="sum", produced_by=WITH_RAMP),
     Metric("vehicles_off_road", "count", "vehicles that left the road",
            ("physics", "vehicles_off_road"), summary="sum"),
     Metric("ended_early", "count", "1 where the episode ended before its length (the ego "

@@ -739,10 +739,12 @@ def _merge_words(m: dict) -> str:
         return ""
     seen = m["merges"]["sum"] + m["merges_waiting"]["sum"]
     reached = m["merges"]["sum"] + m["merges_waiting_at_end"]["sum"]
+    entered = m.get("merges_entered_past_end", {}).get("sum") or 0
+    late = f" ({entered:g} more spawned past the end)" if entered else ""
     return (f"; merges before the taper's end {m['merges_before_taper_end']['sum']:g} of "
             f"{seen:g} (ramp vehicles {m['ramp_vehicles']['sum']:g}, waiting "
             f"{m['merges_waiting']['sum']:g}), of {reached:g} that merged or reached the "
-            f"lane's end")  # fmt: skip
+            f"lane's end{late}")  # fmt: skip
 
 
 def _seam_words(m: dict) -> str:

@@ -17,6 +17,7 @@ from twin.calibration.merge_positions import QUANTILES
 from twin.core import i24
 from twin.core.ramps import RAMP_LANE, segment_ramps
 from twin.cosim.config import CosimConfig
+from twin.cosim.core.drivers import MID_MERGE
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
 from twin.data.recording import load_recording, replay
@@ -94,7 +95,8 @@ def test_a_ramp_vehicle_with_no_gap_waits_on_its_lane(built_map, tmp_path):
     )
     assert merges == {
         "ramp_vehicles": 1, "merged": 0, "before_taper_end": 0, "waiting": 1,
-        "waiting_at_end": 0, "unfinished": 0, "completed_share": 0.0, "in_time_share": None,
+        "waiting_at_end": 0, "unfinished": 0, "entered_past_end": 0, "completed_share": 0.0,
+        "in_time_share": None,
     }  # fmt: skip
     own = rows[rows["tid"] == store.tid_of(f"{1:024x}")]
     assert (own["lane"] == RAMP_LANE).all()
@@ -123,21 +125,26 @@ def test_the_merges_section_counts_outcomes():
     add(7, [-5, -5], [124.0, 125.5], [1.5, 0.2], t0=1.0)
     # alone, waiting with a long standstill gap: its front 127.8 m, 17 m short of the end
     add(8, [-5, -5], [122.0, 123.8], [1.5, 0.2], t0=5.0)
+    # spawned on the ramp with its front past the end (front 146 m), merged at once: the
+    # recording's late merge, counted apart; once the same spawned after a gap
+    add(9, [-5, -4], [142.0, 143.0], [5.0, 5.0])
+    add(10, [-5, -5], [60.0, 61.0], [10.0, 10.0])
+    add(10, [-5, -4], [142.0, 143.0], [5.0, 5.0], t0=20.0)
     # left the window on the ramp, back in it in lane -4 far on: merged out of sight
     frame["time"] += [0.0, 0.1, 30.0]
     for name, values in (("id", [6] * 3), ("tid", [6] * 3), ("x", [40.0, 41.0, 400.0]),
                          ("lane", [-5, -5, -4]), ("speed", [10.0, 10.0, 25.0])):  # fmt: skip
         frame[name] += values
 
-    section = merge_section(pd.DataFrame(frame), np.full(9, 4.0), [end])
+    section = merge_section(pd.DataFrame(frame), np.full(11, 4.0), [end])
     assert section == {
-        "ramp_vehicles": 8, "merged": 2, "before_taper_end": 1, "waiting": 4,
-        "waiting_at_end": 2, "unfinished": 2, "completed_share": pytest.approx(1 / 6, abs=1e-6),
-        "in_time_share": 0.25,
+        "ramp_vehicles": 10, "merged": 2, "before_taper_end": 1, "waiting": 4,
+        "waiting_at_end": 2, "unfinished": 2, "entered_past_end": 2,
+        "completed_share": pytest.approx(1 / 6, abs=1e-6), "in_time_share": 0.25,
     }  # fmt: skip
-    assert merge_section(pd.DataFrame(frame), np.full(9, 4.0), []) is None
+    assert merge_section(pd.DataFrame(frame), np.full(11, 4.0), []) is None
     with pytest.raises(ValueError, match="tid"):
-        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(9, 4.0), [end])
+        merge_section(pd.DataFrame(frame).drop(columns="tid"), np.full(11, 4.0), [end])
 
 
 def test_a_recorded_ramp_vehicle_makes_its_recorded_changes_after_its_merge(
@@ -238,4 +245,50 @@ def test_a_change_out_of_a_lane_that_ends_crosses_into_lane_4_before_the_end(bui
     docs.append(ramp_vehicle(1, 40.0, 10.0, merge_x=130.0))
     sim, _, _, merges, _ = _run(built_map, tmp_path, docs, lane=-1, speed=0.0, courtesy=0.0)
     assert merges["merged"] == merges["before_taper_end"] == 1
+    assert not sim.counters.collisions
+
+
+def crossing_vehicle(n: int, x: float, speed: float, y: float, cross_x: float):
+    """A westbound document on the ramp at back ``x`` [m] at T0, at constant ``speed``,
+    ``y`` [m] across (inside lane -5's band) until ``cross_x``, in lane -4 after."""
+    doc = vehicle(n, RAMP_LANE, x, speed, seconds=40.0)
+    x_m = (i24.SEGMENT_END_MM * i24.FEET_PER_MILE - np.asarray(doc["x_position"])) * i24.FT
+    lane_4 = 4.5 * i24.LANE_WIDTH_FT
+    doc["y_position"] = np.where(x_m < cross_x, y / i24.FT, lane_4).tolist()
+    return doc
+
+
+def test_a_ramp_vehicle_spawned_crossing_into_lane_4_goes_on_with_its_merge(built_map, tmp_path):
+    # recorded halfway across near the taper's end (its front 4 m short of it), with a
+    # vehicle in lane -4 8 m behind closing at 3.4 m/s (room for it to brake behind, not
+    # the gap a merge decision takes): spawned there, it merges on from where it is, in
+    # time, never pulled back out to its lane's centre first (which made it cross past
+    # the end)
+    y = 5.0 * i24.LANE_WIDTH + 0.15  # just inside lane -5's band
+    x = RAMP.x_end - 8.5
+    docs = [crossing_vehicle(1, x, 3.5, y, cross_x=RAMP.x_end + 5.0)]
+    docs.append(vehicle(2, -4, x - 7.9 - 4.572, 6.9))
+    sim, store, rows, merges, _ = _run(built_map, tmp_path, docs, t_max=10.0)
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")].sort_values("time")
+    assert own["lane"].iloc[0] == RAMP_LANE
+    assert own["y"].max() <= y + 1e-6
+    assert merges["merged"] == merges["before_taper_end"] == 1
+    assert not sim.counters.collisions
+
+
+def test_a_ramp_vehicle_spawned_crossing_with_no_room_in_lane_4_waits_for_a_gap(
+    built_map, tmp_path
+):
+    # a quarter lane inside its lane's centre 40 m short of the end (the taper's
+    # pavement still 1.6 m wide), with a vehicle in lane -4 closing on it fast from 6 m
+    # behind (not beside it: it fits where it is): too close for the merge to go on at
+    # once, it is spawned in its lane and merges when there is a gap
+    y = 5.5 * i24.LANE_WIDTH - MID_MERGE - 0.05
+    x = RAMP.x_end - 40.0
+    docs = [crossing_vehicle(1, x, 3.5, y, cross_x=RAMP.x_end + 5.0)]
+    docs.append(vehicle(2, -4, x - 6.0 - 4.572, 12.0))
+    sim, store, rows, _, _ = _run(built_map, tmp_path, docs, t_max=10.0)
+    own = rows[rows["tid"] == store.tid_of(f"{1:024x}")].sort_values("time")
+    assert own["time"].iloc[0] == 0.0
+    assert (own[own["time"] <= 1.5]["lane"] == RAMP_LANE).all()
     assert not sim.counters.collisions

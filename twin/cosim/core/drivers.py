@@ -20,12 +20,19 @@ import numpy as np
 
 from twin.calibration.following import CELL, CalibrationDataError
 from twin.calibration.merge_positions import MERGE_LEAD, merge_table
-from twin.core.i24 import HOV_LANE, LANE_WIDTH
+from twin.core.i24 import HOV_LANE, LANE_WIDTH, N_LANES
 from twin.core.jit import kernel, normal, uniform
-from twin.core.ramps import SPAN_MARGIN
+from twin.core.ramps import RAMP_LANE, SPAN_MARGIN
 from twin.traffic.drivers import CLIP_SD
-from twin.traffic.kernels.lane_change import FIRST_DECISION_STREAM, clear_target
+from twin.traffic.kernels.lane_change import (
+    DURATION_STREAM,
+    FIRST_DECISION_STREAM,
+    clear_target,
+    path_length,
+)
+from twin.traffic.kernels.longitudinal import lane_end_gap
 from twin.traffic.kernels.models import GIPPS
+from twin.traffic.kernels.steering import centre_y
 
 # The random streams of the draws made at a spawn (numpy integers: a kernel called with
 # a Python int constant is compiled once per value)
@@ -43,6 +50,11 @@ BIN_EVENTS = 65536  # events of one strategic draw: one per position bin
 #: [m] the stretch of a lane whose mean speed is the traffic state a strategic target is
 #: drawn in: the calibration's
 STATE_CELL = CELL
+#: [m] a vehicle spawned on an on-ramp's acceleration lane with its centre this far or
+#: more inside the lane's centre line (toward lane -4), past the ramp's gore, is
+#: crossing into lane -4 in its recording (a quarter of a lane: more than a driver
+#: wanders inside its lane): it is spawned with that change under way (:func:`merging`)
+MID_MERGE = 0.25 * LANE_WIDTH
 
 BehaviourArrays = namedtuple(
     "BehaviourArrays",
@@ -222,6 +234,49 @@ def merge_target(b, i, core, seed, x):
     drivers.strategic[b, i] = 1  # LEFT
     drivers.strategic_from[b, i] = x_from
     drivers.strategic_by[b, i] = x_by
+
+
+@kernel(inline=True)
+def crossing(core, centre_x, y):
+    """Whether a vehicle on an on-ramp's acceleration lane (lane -5) at centre x, y [m]
+    is crossing into lane -4 in its recording: :data:`MID_MERGE` inside its lane's
+    centre, between the ramp's gore and just past its end (``CoreSettings.merges``)."""
+    if centre_y(np.int64(RAMP_LANE)) - y < MID_MERGE:
+        return False
+    merges = core.settings.merges
+    for k in range(merges.shape[0]):
+        if merges[k, 1] <= centre_x <= merges[k, 3] + SPAN_MARGIN:
+            return True
+    return False
+
+
+@kernel
+def merging(b, i, core, seed, x, y):
+    """Slot ``i``, spawned at back x, y [m] on an on-ramp's acceleration lane where its
+    recording crosses into lane -4 (:func:`crossing`), goes on with that change: a
+    merge under way from where it is, not pulled back to its lane's centre first (near
+    the taper's end that pull-back made it cross past the end). Its path is the share of
+    an urgent merge's (:func:`twin.traffic.kernels.lane_change.path_length`, drawn as
+    the traffic manager draws one, no longer than twice the distance to where its lane
+    ends) that the crossing still has ahead; its merge target is met."""
+    drivers, ts, bo = core.traffic.drivers, core.traffic.settings, core.bodies
+    draw = uniform(seed, DURATION_STREAM, drivers.key[b, i], drivers.changes[b, i])
+    drivers.changes[b, i] += 1
+    duration = ts.lane_change_low + (ts.lane_change_high - ts.lane_change_low) * draw
+    length = bo.length[b, i]
+    whole = path_length(max(bo.speed[b, i], 0.0), duration, True, ts.urgent_path)
+    end = lane_end_gap(ts.lane_ends, np.int64(RAMP_LANE), x, length)
+    if math.isfinite(end):
+        whole = min(whole, max(2.0 * end, ts.urgent_path))
+    target = np.int64(-N_LANES)
+    ahead = min(max((y - centre_y(target)) / LANE_WIDTH, 0.0), 1.0)
+    drivers.lane_from[b, i], drivers.lane[b, i] = RAMP_LANE, target
+    drivers.start_x[b, i] = x + 0.5 * length
+    drivers.start_y[b, i] = y
+    drivers.path_length[b, i] = max(ahead * whole, 1.0)
+    drivers.mandatory[b, i] = True
+    drivers.requested[b, i] = 0
+    clear_target(drivers.strategic, drivers.strategic_from, drivers.strategic_by, b, i)
 
 
 @kernel(inline=True)

@@ -379,7 +379,14 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
         behaviour.first_target(b, i, core, seed, x)
     if dr.ctrl[b, i] == traffic.DRIVER and lane == RAMP_LANE:
-        behaviour.merge_target(b, i, core, seed, x)
+        # crossing into lane -4 in its recording, with room there: the merge goes on
+        if behaviour.crossing(core, x + 0.5 * bo.length[b, i], y) and not _near(
+            b, core, x, centre_y(np.int64(-N_LANES)), speed, bo.length[b, i], bo.width[b, i],
+            cs.clearance, cs.clearance_at_rest, cs.spawn_decel, np.int64(i), np.bool_(False),
+        ):  # fmt: skip
+            behaviour.merging(b, i, core, seed, x, y)
+        else:
+            behaviour.merge_target(b, i, core, seed, x)
     table = core.table
     h = entry(table.key, table.flags, table.slot, b, r, np.bool_(True))
     if h >= 0:
