@@ -181,3 +181,19 @@ def test_a_crawling_recording_yields_to_a_standing_body_in_time(cosim):
     sim.run()
     assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0
+
+
+def test_a_recording_appears_ahead_of_a_body_only_where_the_body_can_stop_behind_it(cosim):
+    # a recorded vehicle whose track begins (1 s in) in the front ghost cell 1 m ahead
+    # of a body 8 m/s faster (a recording handed back long ago, or the next fragment of
+    # a track): it is held back until the body has gone by or can stop behind it, not
+    # drawn where the body must run into it
+    body_x = EGO_X + 147.0
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 20.0), vehicle(2, -2, body_x, 20.0),
+         vehicle(3, -2, body_x + 20.0 + 15 * i24.FT + 1.0 - 12.0, 12.0, start=1.0)],
+        world="kinematic", t_max=6.0,
+    )  # fmt: skip
+    sim.run()
+    assert int(sim.state.episodes.held[0]) >= 1
+    assert sim.counters.contacts == 0
