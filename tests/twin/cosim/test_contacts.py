@@ -32,23 +32,28 @@ def batch():
     return run, shared, config.dt
 
 
-def _cutting_in(n, lane_from, lane_to, x, speed, at, over=1.0):
+def _cutting_in(n, lane_from, lane_to, x, speed, at, over=1.0, back_after=None):
     """A constant-speed document that moves from ``lane_from`` to ``lane_to`` over
-    ``over`` seconds from T0 + ``at``."""
+    ``over`` seconds from T0 + ``at`` (and back, where ``back_after`` [s] is given,
+    that long after it began)."""
     doc = vehicle(n, lane_from, x, speed)
     t = np.asarray(doc["timestamp"])
     y0, y1 = ((-lane + 0.5) * i24.LANE_WIDTH_FT for lane in (lane_from, lane_to))
     share = np.clip((t - (T0 + at)) / over, 0.0, 1.0)
+    if back_after is not None:
+        share -= np.clip((t - (T0 + at + back_after)) / over, 0.0, 1.0)
     doc["y_position"] = (y0 + share * (y1 - y0)).tolist()
     return doc
 
 
 def test_a_ghost_cutting_in_onto_a_body_is_one_contact_with_its_roles(cosim):
     # a body at the visible window's front edge (150 m ahead of the ego, both at
-    # 20 m/s) and a recorded vehicle just beyond it, a ghost, that cuts into its lane
+    # 20 m/s) and a recorded vehicle just beyond it, a ghost, that swerves into its lane
+    # and back (a recording that stays in the next lane becomes a body before it cuts
+    # in, test below; one that swerves back does not announce a change)
     sim = cosim(
         [vehicle(1, -2, EGO_X, 20.0), vehicle(2, -2, EGO_X + 147.0, 20.0),
-         _cutting_in(3, -3, -2, EGO_X + 151.0, 20.0, at=1.0)],
+         _cutting_in(3, -3, -2, EGO_X + 151.0, 20.0, at=1.0, back_after=1.5)],
         world="kinematic", t_max=4.0,
     )  # fmt: skip
     sim.run()
@@ -196,4 +201,20 @@ def test_a_recording_appears_ahead_of_a_body_only_where_the_body_can_stop_behind
     )  # fmt: skip
     sim.run()
     assert int(sim.state.episodes.held[0]) >= 1
+    assert sim.counters.contacts == 0
+
+
+def test_a_recording_cutting_in_ahead_of_a_body_that_cannot_stop_becomes_a_body(cosim):
+    # a recorded vehicle crawling in lane -3 in the front ghost cell cuts into lane -2
+    # (over 3 s from 1 s in), crossing the line 10 m ahead of a body at 20 m/s there (a
+    # contact): announced by its recording, it becomes a body before it cuts in, and
+    # changes lanes when the traffic lets it, not in front of a body that cannot stop
+    body_x = EGO_X + 147.0
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 20.0), vehicle(2, -2, body_x, 20.0),
+         _cutting_in(3, -3, -2, body_x + 60.0, 2.0, at=1.0, over=3.0)],
+        world="kinematic", t_max=6.0,
+    )  # fmt: skip
+    sim.run()
+    assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0

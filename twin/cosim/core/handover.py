@@ -29,7 +29,7 @@ from twin.cosim.core.layout import (
     WAITING,
 )
 from twin.cosim.core.room import CROWD_DECEL, spawn_room
-from twin.data.recording import window
+from twin.data.recording import replay, window
 from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import clear_target
@@ -46,6 +46,13 @@ REAR_MARGIN = 50.0
 #: braking this hard, ``spawn_clearance`` apart (else it stays a ghost: a contact with a
 #: ghost if they touch, counted)
 YIELD_DECEL = 6.0
+#: [s], [m] a recording moving across its lane (its centre this far off the lane's)
+#: that is in the next lane this long from now is changing into it: where it would be
+#: too close to a body there, it becomes a body (:func:`_yields`) and its change is the
+#: traffic's, not a recorded cut-in in front of a body that does not know of it (a
+#: body at 23 m/s ran into a recording cutting in at 2 m/s, preset E)
+ANNOUNCE_S = 2.0
+ANNOUNCE_Y = 0.3
 #: [m/s^2] a recording appears ahead of a body only where the body can stop behind it,
 #: the clearance at rest apart, braking this hard (an emergency stop)
 APPEAR_DECEL = 8.0
@@ -163,13 +170,17 @@ def hand_back(b, core):
     at this same time) are handed to them; they are ghosts at the reload. Returns how
     many."""
     bo, sl, ep = core.bodies, core.slots, core.episodes
+    t = ep.t0[b] + ep.step[b] * core.settings.dt
     back = 0
     for i in range(bo.top[b]):
         if not (bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i)):
             continue
-        # as a ghost it would crowd the body ahead and be taken back at once
-        if not crowds(b, core, bo.x[b, i], bo.y[b, i], bo.speed[b, i], bo.length[b, i],
-                      bo.width[b, i], i):  # fmt: skip
+        # as a ghost it would crowd the body ahead, or cut in too close to a body, and be
+        # taken back at once
+        x, y, speed = bo.x[b, i], bo.y[b, i], bo.speed[b, i]
+        length, width = bo.length[b, i], bo.width[b, i]
+        if not (crowds(b, core, x, y, speed, length, width, i)
+                or _cuts_in(b, core, sl.r[b, i], t, x, y, speed, length, width, i)):  # fmt: skip
             _drawn_now(b, core, core.slots.r[b, i])
             remove(b, core, i)
             back += 1
@@ -627,7 +638,9 @@ def _yields(b, core, k, t, m):
     in lane -4 beside it, it would be that close to a body: its merge is then the
     traffic core's (gap acceptance, lane -4 making room), not a recorded cut-in in front
     of a body that does not know of it; it is handed back once merged and on its
-    recording (:func:`twin.cosim.core.relax.settled`)."""
+    recording (:func:`twin.cosim.core.relax.settled`). So does one changing into the
+    next through lane (:func:`_changing_into`) where it would be that close to a body
+    there: its change is the traffic's too."""
     sn, rec = core.snap, core.rec
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
@@ -636,10 +649,8 @@ def _yields(b, core, k, t, m):
         return False
     cs = core.settings
     crowds = _crowds_sorted(b, core, m, x, y, speed, length, width)
-    if not crowds and lane_of(y) == RAMP_LANE:
-        crowds = _near(b, core, x, centre_y(np.int64(-N_LANES)), speed, length, width,
-                       cs.clearance, cs.clearance, YIELD_DECEL, np.int64(-1),
-                       np.bool_(False))  # fmt: skip
+    if not crowds:
+        crowds = _cuts_in(b, core, r, t, x, y, speed, length, width, np.int64(-1))
     if not crowds:
         return False
     # too close to stop behind it: it stays a ghost (a contact with a ghost); the room is
@@ -657,6 +668,36 @@ def _yields(b, core, k, t, m):
     relax.target(b, core, slot, t)
     core.episodes.yielded[b] += 1
     return True
+
+
+@kernel
+def _cuts_in(b, core, r, t, x, y, speed, length, width, skip):
+    """Whether recording ``r`` at back x, y [m] and ``speed`` [m/s] at unix ``t`` [s],
+    on an on-ramp's acceleration lane or changing into the next through lane
+    (:func:`_changing_into`), would be too close to a body (not slot ``skip``) in the
+    lane it goes to, were it there now: the room at YIELD_DECEL with the whole
+    clearance at any speed."""
+    lane = lane_of(y)
+    into = np.int64(-N_LANES) if lane == RAMP_LANE else _changing_into(core, r, t, y, lane)
+    if into == 0:
+        return False
+    cs = core.settings
+    return _near(b, core, x, centre_y(into), speed, length, width, cs.clearance,
+                 cs.clearance, YIELD_DECEL, skip, np.bool_(False))  # fmt: skip
+
+
+@kernel(inline=True)
+def _changing_into(core, r, t, y, lane):
+    """The through lane recording ``r``, at ``y`` [m] in ``lane`` at unix ``t`` [s] and
+    moving across it (ANNOUNCE_Y off its centre), is in ANNOUNCE_S from now where that
+    is the next lane over; 0 otherwise."""
+    if not -N_LANES <= lane <= -1 or abs(y - centre_y(lane)) < ANNOUNCE_Y:
+        return np.int64(0)
+    present, _, y_later, _ = replay(core.rec, np.int64(r), t + ANNOUNCE_S)
+    later = lane_of(y_later) if present else 0
+    if -N_LANES <= later <= -1 and abs(later - lane) == 1:
+        return np.int64(later)
+    return np.int64(0)
 
 
 @kernel
