@@ -175,12 +175,13 @@ def hand_back(b, core):
     for i in range(bo.top[b]):
         if not (bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i)):
             continue
-        # as a ghost it would crowd the body ahead, or cut in too close to a body, and be
-        # taken back at once
+        # as a ghost it would crowd the body ahead, or its recording would cut in too
+        # close to a body, and be taken back at once
         x, y, speed = bo.x[b, i], bo.y[b, i], bo.speed[b, i]
         length, width = bo.length[b, i], bo.width[b, i]
         if not (crowds(b, core, x, y, speed, length, width, i)
-                or _cuts_in(b, core, sl.r[b, i], t, x, y, speed, length, width, i)):  # fmt: skip
+                or _cuts_in(b, core, sl.r[b, i], t, sl.rec_x[b, i], sl.rec_y[b, i],
+                            sl.rec_speed[b, i], length, width, i)):  # fmt: skip
             _drawn_now(b, core, core.slots.r[b, i])
             remove(b, core, i)
             back += 1
@@ -397,10 +398,12 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     if dr.ctrl[b, i] == traffic.DRIVER and cs.targets:
         behaviour.first_target(b, i, core, seed, x)
     if dr.ctrl[b, i] == traffic.DRIVER and lane == RAMP_LANE:
-        # crossing into lane -4 in its recording, with room there: the merge goes on
+        # crossing into lane -4 in its recording, with room there (the room that makes a
+        # ramp ghost a body, :func:`_cuts_in`, so that one made a body for want of it
+        # does not merge at once): the merge goes on
         if behaviour.crossing(core, x + 0.5 * bo.length[b, i], y) and not _near(
             b, core, x, centre_y(np.int64(-N_LANES)), speed, bo.length[b, i], bo.width[b, i],
-            cs.clearance, cs.clearance_at_rest, cs.spawn_decel, np.int64(i), np.bool_(False),
+            cs.clearance, cs.clearance, YIELD_DECEL, np.int64(i), np.bool_(False),
         ):  # fmt: skip
             behaviour.merging(b, i, core, seed, x, y)
         else:
