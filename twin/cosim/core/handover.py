@@ -249,8 +249,8 @@ def may_appear(b, core, x, y, speed, length, width):
     return not (
         _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
               cs.spawn_decel, np.int64(-1), np.bool_(True))
-        or _near(b, core, x, y, speed, length, width, cs.clearance_at_rest,
-                 cs.clearance_at_rest, np.inf, np.int64(-1), np.bool_(False))
+        # on a body's footprint, or where one behind could not stop (the clearance at
+        # rest apart, which alone is the footprint test)
         or _near(b, core, x, y, speed, length, width, cs.clearance_at_rest,
                  cs.clearance_at_rest, APPEAR_DECEL, np.int64(-1), np.bool_(False))
     )  # fmt: skip
