@@ -59,7 +59,9 @@ class TrafficConfig:
             were done in time (docs: Cooperation).
         urgent_path: [m] the shortest path of an urgent (strategic) lane change: a
             driver who must leave its lane noses across a queue in about three car
-            lengths, where a discretionary change keeps a path made for 5 m/s.
+            lengths, where a discretionary change keeps a path made for 5 m/s. A
+            longer vehicle's is at least 2.5 of its own lengths, so that its yawed
+            front stays inside the target lane.
         seed: random seed of the drivers' draws.
     """
 

@@ -5,6 +5,7 @@ import pytest
 
 from tests.twin.traffic.conftest import make_manager, point_mass_manager, run, spawn
 from tests.twin.traffic.test_manager import point_states
+from twin.core.i24 import LANE_WIDTH, lane_center
 from twin.physics.kinematic import KinematicWorld
 from twin.traffic.kernels.lane_change import GIVE_UP
 from twin.traffic.kernels.longitudinal import urgency
@@ -221,6 +222,39 @@ def test_an_urgent_change_gets_across_a_crawling_queue(kinematic, built_map):
 def test_with_a_path_made_for_5_m_s_the_same_change_finds_no_room(kinematic, built_map):
     # 5 m/s x 6 s, as a discretionary change's
     assert not _merges_in_the_queue(kinematic, built_map, urgent_path=30.0)
+
+
+def _sweep_of_an_urgent_semi(world, built_map, **settings):
+    """A semi (20.5 m) crawling at 2 m/s alone in lane -3 that must move left within
+    60 m, lane -2 empty: how far its footprint reaches past lane -2's far line [m] (> 0
+    into lane -1), and whether it got into lane -2."""
+    manager = make_manager(built_map, dt=0.1, decision_period=0.1, seed=2, **settings)
+    semi = spawn(world, manager, 1, -3, 150.0, 2.0, vehicle_class=4)
+    manager.set_desired_speed(semi, np.full(1, 2.0))
+    params = world.params_of(semi)
+    centre = 150.0 + 0.5 * params.length[0]
+    manager.set_strategic(semi, 1, centre, centre + 60.0)
+    road = built_map.road.heading(1)
+    reach = []
+
+    def each_step(states):
+        yaw = np.angle(np.exp(1j * (states.heading[0] - road)))
+        half = 0.5 * params.length[0] * abs(np.sin(yaw)) + 0.5 * params.width[0] * np.cos(yaw)
+        reach.append(lane_center(-2) - 0.5 * LANE_WIDTH - (states.y[0] - half))
+
+    record = run(world, manager, 30.0, each_step=each_step)
+    assert record.contacts == 0
+    return max(reach), bool(record.lane[-1, 0] == -2)
+
+
+def test_a_long_vehicles_urgent_change_keeps_its_front_inside_the_target_lane(
+    kinematic, built_map
+):
+    # its shortest path is 2.5 of its lengths (51 m), not a car's 15 m: along that its
+    # yawed front swept 0.46 m into lane -1
+    reach, changed = _sweep_of_an_urgent_semi(kinematic, built_map)
+    assert changed
+    assert reach < 0.0
 
 
 def _overtaker_kept_out(zones, x_from=None):

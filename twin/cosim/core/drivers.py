@@ -29,6 +29,7 @@ from twin.traffic.kernels.lane_change import (
     FIRST_DECISION_STREAM,
     clear_target,
     path_length,
+    shortest_urgent,
 )
 from twin.traffic.kernels.longitudinal import lane_end_gap
 from twin.traffic.kernels.models import GIPPS
@@ -264,10 +265,10 @@ def merging(b, i, core, seed, x, y):
     drivers.changes[b, i] += 1
     duration = ts.lane_change_low + (ts.lane_change_high - ts.lane_change_low) * draw
     length = bo.length[b, i]
-    whole = path_length(max(bo.speed[b, i], 0.0), duration, True, ts.urgent_path)
+    whole = path_length(max(bo.speed[b, i], 0.0), duration, True, ts.urgent_path, length)
     end = lane_end_gap(ts.lane_ends, np.int64(RAMP_LANE), x, length)
     if math.isfinite(end):
-        whole = min(whole, max(2.0 * end, ts.urgent_path))
+        whole = min(whole, max(2.0 * end, shortest_urgent(ts.urgent_path, length)))
     target = np.int64(-N_LANES)
     ahead = min(max((y - centre_y(target)) / LANE_WIDTH, 0.0), 1.0)
     drivers.lane_from[b, i], drivers.lane[b, i] = RAMP_LANE, target

@@ -32,6 +32,11 @@ from twin.traffic.kernels.longitudinal import (
 from twin.traffic.kernels.neighbours import around
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
+# An urgent path is at least this many of the vehicle's lengths: along a shorter one the
+# yawed front of a long vehicle sweeps past the target lane's far line (a 20.5 m truck
+# following a 15 m path exactly would reach 1.7 m into the lane beyond; at 2.5 lengths
+# its front corner stays 0.2 m inside, as a 4.5 m car's does 0.75 m inside at 15 m)
+URGENT_PATH_LENGTHS = 2.5
 GIVE_UP = 150.0  # [m] past strategic_by a strategic change is no longer tried
 # The random streams of the next decision and the manoeuvre time (numpy integers: a
 # kernel called with a Python int constant is compiled once per value)
@@ -41,11 +46,19 @@ FIRST_DECISION_STREAM = np.int64(0x46)
 
 
 @kernel(inline=True)
-def path_length(speed, duration, urgent, urgent_path):
-    """[m] a lane-change path at ``speed`` [m/s] lasting ``duration`` [s]: made for at
-    least MIN_SPEED_PATH, or, ``urgent``, at least ``urgent_path`` long."""
+def shortest_urgent(urgent_path, length):
+    """[m] the shortest path of an urgent change of a vehicle ``length`` [m] long:
+    ``urgent_path``, and at least URGENT_PATH_LENGTHS of its own length."""
+    return max(urgent_path, URGENT_PATH_LENGTHS * length)
+
+
+@kernel(inline=True)
+def path_length(speed, duration, urgent, urgent_path, length):
+    """[m] a lane-change path at ``speed`` [m/s] lasting ``duration`` [s] of a vehicle
+    ``length`` [m] long: made for at least MIN_SPEED_PATH, or, ``urgent``, at least
+    :func:`shortest_urgent` long."""
     if urgent:
-        return max(speed * duration, urgent_path)
+        return max(speed * duration, shortest_urgent(urgent_path, length))
     return max(speed, MIN_SPEED_PATH) * duration
 
 
@@ -163,7 +176,7 @@ def _choose(b, i, x, urge, t, n):
     gap_now = sx[b, ahead] - x - length if ahead >= 0 else math.inf
     lead_now = sspeed[b, ahead] if ahead >= 0 else 0.0
     room = gap_now + lead_now * 0.5 * high >= 0.5 * path_length(
-        speed, high, urgent, settings.urgent_path
+        speed, high, urgent, settings.urgent_path, length
     ) + (MIN_LANE_CHANGE_GAP)
     # its old lane's follower now (this step's car following; an obstacle's 0) and
     # once it has left
@@ -239,12 +252,12 @@ def _start(b, seed, t, i, choice, centre, y, urgent):
     drivers.lane[b, i] = drivers.lane[b, i] + choice
     drivers.start_x[b, i] = centre
     drivers.start_y[b, i] = y
-    path = path_length(sc.sspeed[b, i], duration, urgent, settings.urgent_path)
-    # out of a lane that ends (an on-ramp's): crossing the line (half-way) before its end
     length = sc.slength[b, i]
+    path = path_length(sc.sspeed[b, i], duration, urgent, settings.urgent_path, length)
+    # out of a lane that ends (an on-ramp's): crossing the line (half-way) before its end
     end = lane_end_gap(settings.lane_ends, drivers.lane_from[b, i], centre - 0.5 * length,
                        length)  # fmt: skip
     if math.isfinite(end):
-        path = min(path, max(2.0 * end, settings.urgent_path))
+        path = min(path, max(2.0 * end, shortest_urgent(settings.urgent_path, length)))
     drivers.path_length[b, i] = path
     drivers.requested[b, i] = 0
