@@ -11,9 +11,10 @@ from tests.twin.cosim.scenes import EGO_X, T0, tid_of, vehicle
 from twin.core import i24
 from twin.core.jit import kernel
 from twin.cosim.config import CosimConfig
-from twin.cosim.core import handover, layout
+from twin.cosim.core import handover, layout, relax
 from twin.cosim.core.batch import Batch, Shared
 from twin.data.embedded import embedded_store
+from twin.metrics.handover import handover_section
 
 EPISODES = 6
 
@@ -171,21 +172,29 @@ def test_a_recorded_queue_ahead_of_a_body_is_drawn_for_it_to_brake_for(cosim):
     assert sim.counters.contacts == 0  # the body braked for it (or went round it)
 
 
-def test_a_crawling_recording_yields_to_a_standing_body_in_time(cosim):
+@pytest.mark.parametrize("crawl", [1.5, 1.0])
+def test_a_crawling_recording_yields_to_a_standing_body_in_time(cosim, crawl):
     # a queue standing behind the (held) ego down to the visible window's rear edge,
-    # its recordings crawling on at 1.5 m/s, and in the ghost cell behind it a recorded
-    # vehicle crawling into its last body: it becomes a body behind it while it can
-    # still stop there (the yield's room at rest is the crowding test's; at the whole
-    # clearance a crawling vehicle crowding a body was always too close: a contact)
-    queue = [vehicle(2 + k, -2, EGO_X - 6.6 * (k + 1), 1.5, seconds=60.0) for k in range(23)]
+    # its recordings crawling on, and in the ghost cell behind it recorded vehicles
+    # crawling into its last body: each becomes a body behind it while it can still
+    # stop there (the yield's room at rest is the crowding test's; at the whole
+    # clearance a crawling vehicle crowding a body was always too close: a contact; at
+    # 1 m/s the crowding room without the second it closes was crossed in a step, from
+    # crowding to too close: a contact). Made bodies inside their car following's
+    # standstill gap, they brake no harder than stopping short needs.
+    queue = [vehicle(2 + k, -2, EGO_X - 6.6 * (k + 1), crawl, seconds=60.0) for k in range(23)]
     sim = cosim(
         [vehicle(1, -2, EGO_X, 0.0, seconds=60.0), *queue,
-         vehicle(99, -2, EGO_X - 185.0, 1.5, seconds=60.0)],
+         vehicle(99, -2, EGO_X - 185.0, crawl, seconds=60.0)],
         world="kinematic", t_max=35.0,
     )  # fmt: skip
     sim.run()
     assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0
+    out = handover_section(sim.log.vehicles(), sim.log.windows(), sim.traffic,
+                           sim.config.road, sim.t0, sim.config.dt, sim.limits)["relaxing"]  # fmt: skip
+    assert out["vehicles"] >= 1
+    assert out["accel_min_mps2"] >= relax.ACCEL_LOW - 1e-6
 
 
 def test_a_recording_appears_ahead_of_a_body_only_where_the_body_can_stop_behind_it(cosim):

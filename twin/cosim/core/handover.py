@@ -28,7 +28,7 @@ from twin.cosim.core.layout import (
     TABLE_FULL,
     WAITING,
 )
-from twin.cosim.core.room import CROWD_DECEL, spawn_room
+from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room
 from twin.data.recording import replay, window
 from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
@@ -211,9 +211,10 @@ def remove(b, core, i):
 
 
 @kernel(inline=True)
-def _clear_of(clearance, at_rest, decel, x, y, speed, length, width, bx, by, bv, blength,
-              bwidth):  # fmt: skip
-    """Whether a spawn at (x, y) is clear of one body (its x, y, speed, size)."""
+def _clear_of(clearance, at_rest, decel, horizon, x, y, speed, length, width, bx, by, bv,
+              blength, bwidth):  # fmt: skip
+    """Whether a spawn at (x, y) is clear of one body (its x, y, speed, size): the room
+    of :func:`spawn_room`, and what the rear one closes in ``horizon`` [s] more."""
     if abs(by - y) >= 0.5 * (bwidth + width) + LATERAL_MARGIN:
         return True
     if bx >= x:
@@ -222,7 +223,9 @@ def _clear_of(clearance, at_rest, decel, x, y, speed, length, width, bx, by, bv,
     else:
         gap = x - (bx + blength)
         closing, rear = bv * bv - speed * speed, bv
-    return gap >= spawn_room(clearance, at_rest, decel, rear, closing)
+    return gap >= spawn_room(clearance, at_rest, decel, rear, closing) + horizon * max(
+        rear - (bv if bx >= x else speed), 0.0
+    )
 
 
 @kernel
@@ -232,7 +235,7 @@ def fits(b, core, x, y, speed, length, width):
     a body changing lanes holds its new lane too."""
     cs = core.settings
     return not _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-                     cs.spawn_decel, np.int64(-1), np.bool_(False))  # fmt: skip
+                     cs.spawn_decel, 0.0, np.int64(-1), np.bool_(False))  # fmt: skip
 
 
 @kernel
@@ -248,37 +251,38 @@ def may_appear(b, core, x, y, speed, length, width):
     cs = core.settings
     return not (
         _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-              cs.spawn_decel, np.int64(-1), np.bool_(True))
+              cs.spawn_decel, 0.0, np.int64(-1), np.bool_(True))
         # on a body's footprint, or where one behind could not stop (the clearance at
         # rest apart, which alone is the footprint test)
         or _near(b, core, x, y, speed, length, width, cs.clearance_at_rest,
-                 cs.clearance_at_rest, APPEAR_DECEL, np.int64(-1), np.bool_(False))
+                 cs.clearance_at_rest, APPEAR_DECEL, 0.0, np.int64(-1), np.bool_(False))
     )  # fmt: skip
 
 
 @kernel
 def crowds(b, core, x, y, speed, length, width, skip):
     """Whether a vehicle at back x, y [m] moving at ``speed`` [m/s] is closer than
-    :func:`spawn_room` at :data:`CROWD_DECEL` to a body ahead of it (not slot ``skip``)
-    among those it overlaps laterally, as :func:`fits` asks: a recording so close
-    behind a simulated body would soon run into it."""
+    :func:`spawn_room` at :data:`CROWD_DECEL`, plus what it closes on it in
+    :data:`CROWD_AHEAD`, to a body ahead of it (not slot ``skip``) among those it
+    overlaps laterally, as :func:`fits` asks: a recording so close behind a simulated
+    body would soon run into it."""
     cs = core.settings
     return _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-                 CROWD_DECEL, skip, np.bool_(True))  # fmt: skip
+                 CROWD_DECEL, CROWD_AHEAD, skip, np.bool_(True))  # fmt: skip
 
 
 @kernel
-def _near(b, core, x, y, speed, length, width, c, rest, decel, skip, ahead_only):
+def _near(b, core, x, y, speed, length, width, c, rest, decel, horizon, skip, ahead_only):
     """Whether a body (not slot ``skip``; only those ahead of back ``x`` where
     ``ahead_only``) is closer than :func:`spawn_room` at clearances ``c``, ``rest`` [m]
-    and deceleration ``decel`` [m/s^2] to a vehicle at back x, y [m] and ``speed``
-    [m/s], among those it overlaps laterally; a body changing lanes holds its new lane
-    too."""
+    and deceleration ``decel`` [m/s^2], plus what the rear one closes in ``horizon``
+    [s], to a vehicle at back x, y [m] and ``speed`` [m/s], among those it overlaps
+    laterally; a body changing lanes holds its new lane too."""
     bo = core.bodies
     for j in range(bo.top[b]):
         if not bo.valid[b, j] or j == skip or (ahead_only and bo.x[b, j] < x):
             continue
-        if _body_near(b, core, j, x, y, speed, length, width, c, rest, decel):
+        if _body_near(b, core, j, x, y, speed, length, width, c, rest, decel, horizon):
             return True
     return False
 
@@ -315,37 +319,38 @@ def _crowds_sorted(b, core, m, x, y, speed, length, width):
             lo = mid + 1
         else:
             hi = mid
-    near = x + length + max(cs.clearance, cs.clearance_at_rest) + 1.0  # a metre for rounding
+    near = x + length + max(cs.clearance, cs.clearance_at_rest) + speed * CROWD_AHEAD + 1.0
+    # (a metre for rounding)
     own_stop = near + speed * speed / (2.0 * CROWD_DECEL)
     for k in range(lo, m):
         j = order[b, k]
         if bx[b, j] >= near and stop[b, k] >= own_stop:
             break  # neither close nor stopping short, nor any body ahead of it
         if _body_near(b, core, j, x, y, speed, length, width, cs.clearance,
-                      cs.clearance_at_rest, CROWD_DECEL):  # fmt: skip
+                      cs.clearance_at_rest, CROWD_DECEL, CROWD_AHEAD):  # fmt: skip
             return True
     return False
 
 
 @kernel(inline=True)
-def _body_near(b, core, j, x, y, speed, length, width, c, rest, decel):
+def _body_near(b, core, j, x, y, speed, length, width, c, rest, decel, horizon):
     """Whether body ``j`` is closer than :func:`spawn_room` to a vehicle at back x, y
     (:func:`_near`), in its lane or, changing lanes, in its new one or, from an on-ramp's
     acceleration lane, in the one it leaves (which its drivers still follow it in)."""
     bo, dr = core.bodies, core.traffic.drivers
     bv = max(bo.speed[b, j], 0.0)
     bx, blength, bwidth = bo.x[b, j], bo.length[b, j], bo.width[b, j]
-    if not _clear_of(c, rest, decel, x, y, speed, length, width, bx, bo.y[b, j], bv, blength,
-                     bwidth):  # fmt: skip
+    if not _clear_of(c, rest, decel, horizon, x, y, speed, length, width, bx, bo.y[b, j], bv,
+                     blength, bwidth):  # fmt: skip
         return True
     if dr.lane_from[b, j] == dr.lane[b, j]:
         return False
-    if not _clear_of(c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane[b, j]),
-                     bv, blength, bwidth):  # fmt: skip
+    if not _clear_of(c, rest, decel, horizon, x, y, speed, length, width, bx,
+                     centre_y(dr.lane[b, j]), bv, blength, bwidth):  # fmt: skip
         return True
     return dr.lane_from[b, j] == RAMP_LANE and not _clear_of(
-        c, rest, decel, x, y, speed, length, width, bx, centre_y(dr.lane_from[b, j]), bv,
-        blength, bwidth,
+        c, rest, decel, horizon, x, y, speed, length, width, bx, centre_y(dr.lane_from[b, j]),
+        bv, blength, bwidth,
     )  # fmt: skip
 
 
@@ -403,7 +408,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
         # does not merge at once): the merge goes on
         if behaviour.crossing(core, x + 0.5 * bo.length[b, i], y) and not _near(
             b, core, x, centre_y(np.int64(-N_LANES)), speed, bo.length[b, i], bo.width[b, i],
-            cs.clearance, cs.clearance, YIELD_DECEL, np.int64(i), np.bool_(False),
+            cs.clearance, cs.clearance, YIELD_DECEL, 0.0, np.int64(i), np.bool_(False),
         ):  # fmt: skip
             behaviour.merging(b, i, core, seed, x, y)
         else:
@@ -661,7 +666,7 @@ def _yields(b, core, k, t, m):
     # a while, still far enough back to yield (at the whole clearance at any speed, a
     # crawling recording crowds a standing body only once already too close to it)
     if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-             YIELD_DECEL, np.int64(-1), np.bool_(False)):  # fmt: skip
+             YIELD_DECEL, 0.0, np.int64(-1), np.bool_(False)):  # fmt: skip
         return False
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:
@@ -686,7 +691,7 @@ def _cuts_in(b, core, r, t, x, y, speed, length, width, skip):
         return False
     cs = core.settings
     return _near(b, core, x, centre_y(into), speed, length, width, cs.clearance,
-                 cs.clearance, YIELD_DECEL, skip, np.bool_(False))  # fmt: skip
+                 cs.clearance, YIELD_DECEL, 0.0, skip, np.bool_(False))  # fmt: skip
 
 
 @kernel(inline=True)

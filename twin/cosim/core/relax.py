@@ -45,9 +45,10 @@ import math
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
-from twin.cosim.core.room import CROWD_DECEL, spawn_room
+from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room
 from twin.data.recording import replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
+from twin.traffic.kernels.longitudinal import lane_end_gap, required_decel
 from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
@@ -175,15 +176,45 @@ def track(b, core):
         if law < 0.0 and _crowded_by_ghost(b, core, i):
             law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
         following = accel[b, i]
-        floor = min(following, ACCEL_LOW)  # behind a body or a ghost: as hard as needed
+        floor = ACCEL_LOW
+        if following < ACCEL_LOW:
+            # behind a body or a ghost: as hard as stopping short of it needs, not as hard
+            # as its car following says (inside its standstill gap, where a recording that
+            # crowded a body becomes one, IDM asks for far more than stopping takes)
+            floor = min(max(following, -_stopping_decel(b, core, i)), ACCEL_LOW)
         accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
+
+
+@kernel
+def _stopping_decel(b, core, i):
+    """[m/s^2] >= 0 slot ``i`` needs to stop the clearance at rest short of what is
+    ahead of it in the lanes it occupies (a leader braking as it brakes now, or its
+    lane's end), a step's travel first (:func:`required_decel`); inf where that room is
+    used up."""
+    bo, dr, sc, ts = core.bodies, core.traffic.drivers, core.traffic.scratch, core.traffic.settings
+    v, x, length = max(bo.speed[b, i], 0.0), bo.x[b, i], bo.length[b, i]
+    margin, dt = core.settings.clearance_at_rest, core.settings.dt
+    need = 0.0
+    for lane in (dr.lane[b, i], dr.lane_from[b, i]):
+        ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
+                          lane, x)  # fmt: skip
+        if ahead >= 0:
+            gap = sc.sx[b, ahead] - x - length
+            lead_decel = max(-sc.saccel[b, ahead], 0.0)
+            need = max(need, required_decel(gap, v, max(sc.sspeed[b, ahead], 0.0), lead_decel,
+                                            margin, dt))  # fmt: skip
+    if dr.lane_from[b, i] == dr.lane[b, i]:
+        end = lane_end_gap(ts.lane_ends, dr.lane[b, i], x, length)
+        need = max(need, required_decel(end, v, 0.0, 0.0, margin, dt))
+    return need
 
 
 @kernel
 def _crowded_by_ghost(b, core, i):
     """Whether the ghost just behind slot ``i`` in a lane it occupies is closer than
     :func:`twin.cosim.core.room.spawn_room` with the whole clearance at any speed and
-    the braking distances at :data:`CROWD_DECEL`."""
+    the braking distances at :data:`CROWD_DECEL`, plus what it closes in
+    :data:`CROWD_AHEAD`."""
     bo, dr, sc = core.bodies, core.traffic.drivers, core.traffic.scratch
     n = bo.valid.shape[1]  # owners from n on are ghosts
     v = max(bo.speed[b, i], 0.0)
@@ -195,6 +226,7 @@ def _crowded_by_ghost(b, core, i):
         gap = bo.x[b, i] - sc.sx[b, behind] - sc.slength[b, behind]
         vg = max(sc.sspeed[b, behind], 0.0)
         clearance = core.settings.clearance  # the whole clearance, at rest too
-        if gap < spawn_room(clearance, clearance, CROWD_DECEL, vg, vg * vg - v * v):
+        room = spawn_room(clearance, clearance, CROWD_DECEL, vg, vg * vg - v * v)
+        if gap < room + CROWD_AHEAD * max(vg - v, 0.0):
             return True
     return False

@@ -8,6 +8,11 @@ CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs
 #: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
 #: with the braking distances at this deceleration (it would have to brake harder)
 CROWD_DECEL = 2.0
+#: [s] and closer than that plus what it closes on the body in this time: at a crawl the
+#: room at CROWD_DECEL is hardly more than the clearance at rest, which a recording
+#: creeping at 0.5 m/s into a standing body crossed in a step, from crowding it to too
+#: close to stop behind it (a contact: preset E, recorded)
+CROWD_AHEAD = 1.0
 
 
 @kernel(inline=True)
