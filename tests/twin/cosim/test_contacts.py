@@ -191,8 +191,9 @@ def test_a_crawling_recording_yields_to_a_standing_body_in_time(cosim, crawl):
     sim.run()
     assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0
-    out = handover_section(sim.log.vehicles(), sim.log.windows(), sim.traffic,
-                           sim.config.road, sim.t0, sim.config.dt, sim.limits)["relaxing"]  # fmt: skip
+    config = sim.config
+    out = handover_section(sim.log.vehicles(), sim.log.windows(), sim.traffic, config.road,
+                           sim.t0, config.dt, sim.limits)["relaxing"]  # fmt: skip
     assert out["vehicles"] >= 1
     assert out["accel_min_mps2"] >= relax.ACCEL_LOW - 1e-6
 

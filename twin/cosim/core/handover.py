@@ -383,6 +383,7 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     place(b, i, bo, cs.profile)
     sl.r[b, i], sl.tid[b, i] = r, tid
     sl.just_spawned[b, i] = True
+    sl.born[b, i] = ep.step[b]
     sl.spawn_speed[b, i] = speed
     sl.off_road[b, i] = False
     sl.av[b, i] = False

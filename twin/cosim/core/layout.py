@@ -43,7 +43,7 @@ Slots = namedtuple(
     "Slots",
     "r tid base_speed av just_spawned spawn_speed off_road tgt_lane tgt_draws plan_next "
     "plan_end tgt_on order listed by_back by_back_listed by_back_stop relaxing rec_on rec_x "
-    "rec_y rec_speed rec_accel changing",
+    "rec_y rec_speed rec_accel changing born",
 )
 Episodes = namedtuple(
     "Episodes",
@@ -115,7 +115,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         order=per_slot(np.int64, -1), listed=per_slot(bool), by_back=per_slot(np.int64, -1),
         by_back_listed=per_slot(bool), by_back_stop=per_slot(), relaxing=per_slot(bool),
         rec_on=per_slot(bool), rec_x=per_slot(), rec_y=per_slot(), rec_speed=per_slot(),
-        rec_accel=per_slot(), changing=per_slot(bool),
+        rec_accel=per_slot(), changing=per_slot(bool), born=per_slot(np.int64),
     )  # fmt: skip
     zeros = np.zeros(b, np.int64)
     episodes = Episodes(

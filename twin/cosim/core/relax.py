@@ -45,10 +45,9 @@ import math
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
-from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room
+from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room, stopping_decel
 from twin.data.recording import replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
-from twin.traffic.kernels.longitudinal import lane_end_gap, required_decel
 from twin.traffic.kernels.neighbours import around
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
@@ -181,32 +180,8 @@ def track(b, core):
             # behind a body or a ghost: as hard as stopping short of it needs, not as hard
             # as its car following says (inside its standstill gap, where a recording that
             # crowded a body becomes one, IDM asks for far more than stopping takes)
-            floor = min(max(following, -_stopping_decel(b, core, i)), ACCEL_LOW)
+            floor = min(max(following, -stopping_decel(b, core, i)), ACCEL_LOW)
         accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
-
-
-@kernel
-def _stopping_decel(b, core, i):
-    """[m/s^2] >= 0 slot ``i`` needs to stop the clearance at rest short of what is
-    ahead of it in the lanes it occupies (a leader braking as it brakes now, or its
-    lane's end), a step's travel first (:func:`required_decel`); inf where that room is
-    used up."""
-    bo, dr, sc, ts = core.bodies, core.traffic.drivers, core.traffic.scratch, core.traffic.settings
-    v, x, length = max(bo.speed[b, i], 0.0), bo.x[b, i], bo.length[b, i]
-    margin, dt = core.settings.clearance_at_rest, core.settings.dt
-    need = 0.0
-    for lane in (dr.lane[b, i], dr.lane_from[b, i]):
-        ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
-                          lane, x)  # fmt: skip
-        if ahead >= 0:
-            gap = sc.sx[b, ahead] - x - length
-            lead_decel = max(-sc.saccel[b, ahead], 0.0)
-            need = max(need, required_decel(gap, v, max(sc.sspeed[b, ahead], 0.0), lead_decel,
-                                            margin, dt))  # fmt: skip
-    if dr.lane_from[b, i] == dr.lane[b, i]:
-        end = lane_end_gap(ts.lane_ends, dr.lane[b, i], x, length)
-        need = max(need, required_decel(end, v, 0.0, 0.0, margin, dt))
-    return need
 
 
 @kernel

@@ -1,8 +1,12 @@
 """The room a vehicle needs to a body in its lane, shared by the hand-overs
 (:mod:`twin.cosim.core.handover`: spawns, recordings that appear or crowd a body) and
-the relaxing vehicles (:mod:`twin.cosim.core.relax`: a ghost crowding one from behind)."""
+the relaxing vehicles (:mod:`twin.cosim.core.relax`: a ghost crowding one from behind);
+and the braking a body needs to stop short of what is ahead of it, which bounds the
+braking of relaxing and of newly spawned bodies (:mod:`twin.cosim.core.settle`)."""
 
 from twin.core.jit import kernel
+from twin.traffic.kernels.longitudinal import lane_end_gap, required_decel
+from twin.traffic.kernels.neighbours import around
 
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 #: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
@@ -23,3 +27,27 @@ def spawn_room(clearance, at_rest, decel, rear_speed, closing):
     v_front^2; :func:`twin.cosim.cosimulator.spawn_room`)."""
     share = min(max(rear_speed / CLEARANCE_SPEED, 0.0), 1.0)
     return at_rest + share * (clearance - at_rest) + max(closing, 0.0) / (2.0 * decel)
+
+
+@kernel
+def stopping_decel(b, core, i):
+    """[m/s^2] >= 0 slot ``i`` needs to stop the clearance at rest short of what is
+    ahead of it in the lanes it occupies (a leader braking as it brakes now, or its
+    lane's end), a step's travel first (:func:`required_decel`); inf where that room is
+    used up."""
+    bo, dr, sc, ts = core.bodies, core.traffic.drivers, core.traffic.scratch, core.traffic.settings
+    v, x, length = max(bo.speed[b, i], 0.0), bo.x[b, i], bo.length[b, i]
+    margin, dt = core.settings.clearance_at_rest, core.settings.dt
+    need = 0.0
+    for lane in (dr.lane[b, i], dr.lane_from[b, i]):
+        ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
+                          lane, x)  # fmt: skip
+        if ahead >= 0:
+            gap = sc.sx[b, ahead] - x - length
+            lead_decel = max(-sc.saccel[b, ahead], 0.0)
+            need = max(need, required_decel(gap, v, max(sc.sspeed[b, ahead], 0.0), lead_decel,
+                                            margin, dt))  # fmt: skip
+    if dr.lane_from[b, i] == dr.lane[b, i]:
+        end = lane_end_gap(ts.lane_ends, dr.lane[b, i], x, length)
+        need = max(need, required_decel(end, v, 0.0, 0.0, margin, dt))
+    return need

@@ -31,7 +31,7 @@ from collections import namedtuple
 
 from twin.core.jit import kernel
 from twin.core.ramps import RAMP_LANE, on_ramp
-from twin.cosim.core import relax
+from twin.cosim.core import relax, settle
 from twin.cosim.core.drivers import update_targets
 from twin.cosim.core.handover import (
     despawn_outside,
@@ -189,6 +189,7 @@ def decisions(b, core):
     relax.note_changes(b, core)
     decide(b, step, step * cs.dt, ep.seed[b], core.traffic)
     relax.track(b, core)
+    settle.settle(b, core)
     speed, before = core.bodies.speed, ep.speed_prev
     for i in range(core.bodies.top[b]):
         before[b, i] = speed[b, i]
