@@ -292,3 +292,27 @@ def test_a_ramp_vehicle_spawned_crossing_with_no_room_in_lane_4_waits_for_a_gap(
     assert own["time"].iloc[0] == 0.0
     assert (own[own["time"] <= 1.5]["lane"] == RAMP_LANE).all()
     assert not sim.counters.collisions
+
+
+def test_a_ramp_recording_over_the_line_beside_a_body_closing_on_it_becomes_a_body(
+    built_map, tmp_path
+):
+    # in the front ghost cell a ramp recording crawls at 1 m/s 1.6 m inside its lane's
+    # centre (its side 0.2 m from a lane -4 car's) and crosses into lane -4 2 s on; a
+    # body in lane -4 comes up behind it at 9 m/s from 20 m back. Once it would be too
+    # close in lane -4 it becomes a body (its merge the traffic's), although the body
+    # behind it could no longer stop for it: a body behind is no reason to stay a ghost
+    # (as one, it crossed into lane -4 in front of the body: a collision)
+    ego_x = -40.0  # the visible window ends at 110 m, the ramp's taper at 145 m
+    x = 125.0
+    docs = [crossing_vehicle(1, x, 1.0, 5.0 * i24.LANE_WIDTH + 0.2, cross_x=x + 2.0),
+            vehicle(2, -4, x - 4.7 - 20.0, 9.0),
+            vehicle(999, -2, ego_x, 2.0, seconds=60.0)]  # fmt: skip
+    store = make_store(tmp_path, docs)
+    config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=6.0,
+                         world="kinematic")  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        assert int(sim.state.episodes.yielded[0]) >= 1
+        assert not sim.counters.collisions

@@ -639,7 +639,8 @@ def _yields(b, core, k, t, m):
     crowds a body ahead of it (:func:`crowds`: a simulated vehicle that lags its own
     recording, which the recording behind it does not know of) and so becomes a
     simulated vehicle there, relaxing (:mod:`twin.cosim.core.relax`): spawned at its
-    recorded state where it can stop behind every body braking at :data:`YIELD_DECEL`,
+    recorded state where it can stop behind every body ahead of it braking at
+    :data:`YIELD_DECEL` and is not on a body's footprint,
     it follows the body ahead and is handed back to its recording once on it with room
     ahead. Counted in ``Episodes.yielded``. ``m``: the bodies in ``slots.by_back[b]``.
 
@@ -662,12 +663,19 @@ def _yields(b, core, k, t, m):
         crowds = _cuts_in(b, core, r, t, x, y, speed, length, width, np.int64(-1))
     if not crowds:
         return False
-    # too close to stop behind it: it stays a ghost (a contact with a ghost); the room is
-    # the crowding test's at a harder braking, so that a vehicle crowding a body is, for
-    # a while, still far enough back to yield (at the whole clearance at any speed, a
-    # crawling recording crowds a standing body only once already too close to it)
+    # too close to stop behind a body ahead of it: it stays a ghost (a contact with a
+    # ghost); the room is the crowding test's at a harder braking, so that a vehicle
+    # crowding a body is, for a while, still far enough back to yield (at the whole
+    # clearance at any speed, a crawling recording crowds a standing body only once
+    # already too close to it). A body behind it is no reason to stay a ghost (it did not
+    # see the ghost either: a ramp recording already over the line beside a body closing
+    # fast on it stayed a ghost and was run into, preset E), unless their footprints are
+    # within the clearance at rest: a body is not spawned onto another.
     if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
-             YIELD_DECEL, 0.0, np.int64(-1), np.bool_(False)):  # fmt: skip
+             YIELD_DECEL, 0.0, np.int64(-1), np.bool_(True)) or _near(
+        b, core, x, y, speed, length, width, cs.clearance_at_rest, cs.clearance_at_rest,
+        math.inf, 0.0, np.int64(-1), np.bool_(False),
+    ):  # fmt: skip
         return False
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:
