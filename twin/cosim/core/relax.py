@@ -45,7 +45,13 @@ import math
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
-from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room, stopping_decel
+from twin.cosim.core.room import (
+    CROWD_AHEAD,
+    CROWD_DECEL,
+    follows_what_is_ahead,
+    spawn_room,
+    stopping_decel,
+)
 from twin.data.recording import replay
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
@@ -175,12 +181,13 @@ def track(b, core):
         if law < 0.0 and _crowded_by_ghost(b, core, i):
             law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
         following = accel[b, i]
-        floor = ACCEL_LOW
-        if following < ACCEL_LOW:
-            # behind a body or a ghost: as hard as stopping short of it needs, not as hard
-            # as its car following says (inside its standstill gap, where a recording that
-            # crowded a body becomes one, IDM asks for far more than stopping takes)
-            floor = min(max(following, -stopping_decel(b, core, i)), ACCEL_LOW)
+        floor = min(following, ACCEL_LOW)  # behind a body or a ghost: as hard as needed
+        if following < ACCEL_LOW and follows_what_is_ahead(b, core, i, following):
+            # as hard as stopping short of it needs, not as hard as its car following says
+            # (inside its standstill gap, where a recording that crowded a body becomes
+            # one, IDM asks for far more than stopping takes)
+            need = stopping_decel(b, core, i, core.settings.clearance_at_rest)
+            floor = min(max(following, -need), ACCEL_LOW)
         accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
 
 

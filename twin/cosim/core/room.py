@@ -4,8 +4,10 @@ the relaxing vehicles (:mod:`twin.cosim.core.relax`: a ghost crowding one from b
 and the braking a body needs to stop short of what is ahead of it, which bounds the
 braking of relaxing and of newly spawned bodies (:mod:`twin.cosim.core.settle`)."""
 
+import math
+
 from twin.core.jit import kernel
-from twin.traffic.kernels.longitudinal import lane_end_gap, required_decel
+from twin.traffic.kernels.longitudinal import cf, lane_end_gap, required_decel
 from twin.traffic.kernels.neighbours import around
 
 CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
@@ -30,14 +32,13 @@ def spawn_room(clearance, at_rest, decel, rear_speed, closing):
 
 
 @kernel
-def stopping_decel(b, core, i):
-    """[m/s^2] >= 0 slot ``i`` needs to stop the clearance at rest short of what is
-    ahead of it in the lanes it occupies (a leader braking as it brakes now, or its
-    lane's end), a step's travel first (:func:`required_decel`); inf where that room is
-    used up."""
+def stopping_decel(b, core, i, margin):
+    """[m/s^2] >= 0 slot ``i`` needs to stop ``margin`` [m] short of what is ahead of it
+    in the lanes it occupies (a leader braking as it brakes now, or its lane's end), a
+    step's travel first (:func:`required_decel`); inf where that room is used up."""
     bo, dr, sc, ts = core.bodies, core.traffic.drivers, core.traffic.scratch, core.traffic.settings
     v, x, length = max(bo.speed[b, i], 0.0), bo.x[b, i], bo.length[b, i]
-    margin, dt = core.settings.clearance_at_rest, core.settings.dt
+    dt = core.settings.dt
     need = 0.0
     for lane in (dr.lane[b, i], dr.lane_from[b, i]):
         ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
@@ -51,3 +52,27 @@ def stopping_decel(b, core, i):
         end = lane_end_gap(ts.lane_ends, dr.lane[b, i], x, length)
         need = max(need, required_decel(end, v, 0.0, 0.0, margin, dt))
     return need
+
+
+@kernel
+def follows_what_is_ahead(b, core, i, accel):
+    """Whether ``accel`` [m/s^2], slot ``i``'s command, asks no more braking than its car
+    following behind what is ahead of it in the lanes it occupies (the vehicles and
+    ghosts there, its lane's end): not a cooperating driver's dropping back for a
+    merge, nor a controller's own braking, which :func:`stopping_decel` does not see."""
+    bo, dr, sc, ts = core.bodies, core.traffic.drivers, core.traffic.scratch, core.traffic.settings
+    v, x, length = max(bo.speed[b, i], 0.0), bo.x[b, i], bo.length[b, i]
+    n = bo.valid.shape[1]
+    lowest = math.inf
+    for lane in (dr.lane[b, i], dr.lane_from[b, i]):
+        ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
+                          lane, x)  # fmt: skip
+        gap, v_lead = math.inf, v
+        if ahead >= 0:
+            gap, v_lead = sc.sx[b, ahead] - x - length, sc.sspeed[b, ahead]
+        if dr.lane_from[b, i] == dr.lane[b, i]:
+            end = lane_end_gap(ts.lane_ends, lane, x, length)
+            if end < gap:
+                gap, v_lead = end, 0.0
+        lowest = min(lowest, cf(ts.model, dr.cf, ts.obstacle_cf, b, n, i, v, v_lead, gap))
+    return accel >= lowest - 1e-6

@@ -12,14 +12,17 @@ their recordings braked gently; one such stop was run into by the recording behi
 
 For :data:`SETTLE_S` after its spawn, and while the body ahead of it is that new, a
 driven body (its driver's command: the traffic manager's, or a ``human`` controller's)
-brakes beyond its driver's comfortable deceleration only as hard as stopping short of
-what is ahead needs (:func:`twin.cosim.core.room.stopping_decel`, the clearance at rest
-apart) and never while that need is below it; an emergency (the traffic manager's
-emergency braking) is left as it is. A controller's command (an AV's) is its own.
+brakes beyond its driver's comfortable deceleration only as hard as stopping its
+standstill gap short of what is ahead needs (:func:`twin.cosim.core.room.stopping_decel`),
+where that braking is its car following's behind what is ahead; an emergency (the
+traffic manager's emergency braking), a cooperating driver's dropping back for a merge
+(stopped short of a gap the merging driver could take, it held a ramp vehicle and the
+queue behind both for 100 s on SUMO's on-ramp morning) and a controller's command (an
+AV's) are left as they are.
 """
 
 from twin.core.jit import kernel
-from twin.cosim.core.room import stopping_decel
+from twin.cosim.core.room import follows_what_is_ahead, stopping_decel
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.models import GIPPS
 from twin.traffic.kernels.neighbours import around
@@ -31,6 +34,12 @@ SETTLE_S = 3.0  # [s] how long a spawned body, and the one behind it, settles in
 def _comfortable_decel(model, params, b, i):
     """[m/s^2] > 0 driver ``i``'s comfortable deceleration (IDM's ``b``, Gipps' ``decel``)."""
     return params[b, i, 2] if model == GIPPS else params[b, i, 4]
+
+
+@kernel(inline=True)
+def _min_gap(model, params, b, i):
+    """[m] driver ``i``'s gap at a standstill (IDM's ``s0``, Gipps' ``min_gap``)."""
+    return params[b, i, 4] if model == GIPPS else params[b, i, 2]
 
 
 @kernel
@@ -67,4 +76,7 @@ def settle(b, core):
         comfortable = _comfortable_decel(model, params, b, i)
         if accel[b, i] >= -comfortable or not _new(b, core, i, steps):
             continue
-        accel[b, i] = max(accel[b, i], -max(comfortable, stopping_decel(b, core, i)))
+        if not follows_what_is_ahead(b, core, i, accel[b, i]):
+            continue  # dropping back for a merge: as its cooperation says
+        need = stopping_decel(b, core, i, _min_gap(model, params, b, i))
+        accel[b, i] = max(accel[b, i], -max(comfortable, need))
