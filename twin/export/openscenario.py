@@ -435,20 +435,24 @@ def _piece_events(
 ) -> None:
     """The events of one stay of a vehicle on the map: added at its first vertex (if it
     was not there at time 0, or came back), following its polyline, deleted after its
-    last vertex (if it leaves before the end)."""
+    last vertex (if it leaves before the end). A stay of one row (a ghost first drawn
+    in the run's last step) is the vehicle added there, with no polyline to follow
+    (one needs two vertices)."""
     times = piece["time"].to_numpy()
-    trajectory = xosc.Trajectory(f"{name} {k}", False)
-    trajectory.add_shape(
-        xosc.Polyline(
-            [round(float(t), DIGITS) for t in times],
-            [_position(xosc, row) for _, row in piece.iterrows()],
+    event = None
+    if len(times) > 1:
+        trajectory = xosc.Trajectory(f"{name} {k}", False)
+        trajectory.add_shape(
+            xosc.Polyline(
+                [round(float(t), DIGITS) for t in times],
+                [_position(xosc, row) for _, row in piece.iterrows()],
+            )
         )
-    )
-    follow = xosc.FollowTrajectoryAction(
-        trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute, 1.0, 0.0
-    )
-    event = xosc.Event(f"{name} follows {k}", xosc.Priority.parallel)
-    event.add_action(f"{name} follow {k}", follow)
+        follow = xosc.FollowTrajectoryAction(
+            trajectory, xosc.FollowingMode.position, xosc.ReferenceContext.absolute, 1.0, 0.0
+        )
+        event = xosc.Event(f"{name} follows {k}", xosc.Priority.parallel)
+        event.add_action(f"{name} follow {k}", follow)
     if added:
         appear = xosc.Event(f"{name} appears {k}", xosc.Priority.parallel)
         appear.add_action(
@@ -456,10 +460,12 @@ def _piece_events(
         )
         appear.add_trigger(_at(xosc, f"{name} on the map {k}", float(times[0])))
         maneuver.add_event(appear)
-        event.add_trigger(_after(xosc, f"{name} added {k}", f"{name} add {k}"))
-    else:
+        if event is not None:
+            event.add_trigger(_after(xosc, f"{name} added {k}", f"{name} add {k}"))
+    elif event is not None:
         event.add_trigger(_at(xosc, f"{name} starts {k}", 0.0))
-    maneuver.add_event(event)
+    if event is not None:
+        maneuver.add_event(event)
     if leaves:
         leave = xosc.Event(f"{name} leaves {k}", xosc.Priority.parallel)
         leave.add_action(f"{name} delete {k}", xosc.DeleteEntityAction(name))

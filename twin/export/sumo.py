@@ -8,9 +8,10 @@ twin's result.
   with the HOV lane's double solid line as SUMO's lane-change permissions (only
   emergency vehicles cross; netconvert does not read OpenDRIVE's ``laneChange``);
 - ``routes.rou.xml``: every recorded vehicle of the run (the ego, the visible
-  vehicles and the ghosts), departing at the time, lane, position and speed the run
-  first had it (without SUMO's insertion checks: recorded queues are tighter than its
-  safe gaps), on its carriageway's edge, with a vehicle type of its own size;
+  vehicles and the ghosts) but one first seen in its last step, departing at the time,
+  lane, position and speed the run first had it (without SUMO's insertion checks:
+  recorded queues are tighter than its safe gaps), on its carriageway's edge, with a
+  vehicle type of its own size;
 - ``twin.fcd.xml``: the twin's trajectories in SUMO's floating-car-data format
   (every vehicle at 10 Hz: front bumper x, y, z, angle, speed, lane and position);
 - ``i24.sumocfg``: SUMO's configuration of the episode (``sumo -c i24.sumocfg``).
@@ -125,7 +126,7 @@ def export_run(run: Path, out: Path, bundle) -> dict:
             raise ExportError(f"netconvert failed: {done.stderr.strip()[-500:]}")
         _hov_line(folder.tmp / "i24.net.xml")
         edges = edges_of(folder.tmp / "i24.net.xml", road_model)
-        vehicles = _routes(rows, edges, folder.tmp / "routes.rou.xml")
+        vehicles = _routes(rows, edges, folder.tmp / "routes.rou.xml", config.t_max)
         samples = _fcd(rows, road_model, edges, folder.tmp / "twin.fcd.xml")
         _config(config.t_max, folder.tmp / "i24.sumocfg")
     return {"folder": str(out), "vehicles": vehicles, "fcd_samples": samples,
@@ -150,8 +151,10 @@ def _hov_line(net: Path) -> None:
     tree.write(net, encoding="utf-8", xml_declaration=True)
 
 
-def _routes(rows: pd.DataFrame, edges: dict[Road, list[Edge]], path: Path) -> int:
+def _routes(rows: pd.DataFrame, edges: dict[Road, list[Edge]], path: Path, duration: float) -> int:
     first = rows.sort_values(["time", "record_id"]).groupby("record_id", sort=False).head(1)
+    # a vehicle first seen in the run's last step would depart as SUMO's run ends
+    first = first[first["time"] < duration - 1e-6]
     first = first.sort_values(["time", "record_id"], kind="stable")
     root = ET.Element("routes")
     for chain in edges.values():  # from each edge to the carriageway's end

@@ -111,7 +111,8 @@ def test_vehicles_depart_and_are_logged_on_the_edge_and_lane_under_them(built_ma
          "y": [5.5 * LANE_WIDTH, 4.5 * LANE_WIDTH, 4.5 * LANE_WIDTH], "heading": [0.0] * 3,
          "role": ["ghost"] * 3}
     )  # fmt: skip
-    export._routes(rows, edges, tmp_path / "routes.rou.xml")
+    late = rows.iloc[[1]].assign(time=8.0, record_id="late")  # first seen as the run ends
+    export._routes(pd.concat([rows, late]), edges, tmp_path / "routes.rou.xml", 8.0)
     root = ET.parse(tmp_path / "routes.rou.xml").getroot()
     routes = {r.get("id"): r.get("edges").split() for r in root.findall("route")}
     got = {}
