@@ -68,6 +68,7 @@ class TrafficManager:
         self._ids = np.empty(0, np.int64)
         self._row = np.empty(0, np.int64)  # the kernels' episode of each vehicle
         self._length = np.empty(0)
+        self._width = np.empty(0)
         self._wheelbase = np.empty(0)
         self._mu = np.empty(0)
         self._d = state.drivers(len(ROADS), 0)
@@ -192,6 +193,7 @@ class TrafficManager:
         self._ids = np.concatenate([self._ids, ids])
         self._row = np.concatenate([self._row, (road > 0).astype(np.int64)])
         self._length = np.concatenate([self._length, params.length])
+        self._width = np.concatenate([self._width, params.width])
         self._wheelbase = np.concatenate(
             [self._wheelbase, params.mounts[:, 0, 0] - params.mounts[:, 2, 0]]
         )
@@ -217,7 +219,7 @@ class TrafficManager:
         keep = np.ones(self._ids.size, dtype=bool)
         keep[self._index(ids)] = False
         self._d = state.Drivers(*(field[:, keep] for field in self._d))
-        for name in ("_ids", "_row", "_length", "_wheelbase", "_mu"):
+        for name in ("_ids", "_row", "_length", "_width", "_wheelbase", "_mu"):
             setattr(self, name, getattr(self, name)[keep])
         for i in np.atleast_1d(ids):
             self._controllers.pop(int(i), None)
@@ -488,7 +490,7 @@ class TrafficManager:
             valid=valid, top=np.full(rows, n, np.int64), x=both(states.x), y=both(states.y),
             yaw=both(yaw),
             speed=both(states.speed), lane=both(states.lane, np.int64), length=both(self._length),
-            wheelbase=both(self._wheelbase), mu=both(self._mu),
+            width=both(self._width), wheelbase=both(self._wheelbase), mu=both(self._mu),
         )  # fmt: skip
         by_road = [np.flatnonzero(obstacles.road == road) for road in ROADS]
         g = max(1, max(k.size for k in by_road))

@@ -4,7 +4,8 @@ and emergency braking whatever the leader or the boundary does."""
 import numpy as np
 import pytest
 
-from tests.twin.traffic.conftest import make_manager, run, spawn
+from tests.twin.traffic.conftest import PointMasses, make_manager, point_mass_manager, run, spawn
+from twin.core.i24 import LANE_WIDTH, lane_center
 from twin.traffic.controller_api import EgoCommand
 from twin.traffic.scene import Obstacles
 
@@ -131,3 +132,28 @@ def test_no_collision_between_managed_vehicles_whatever_the_ghosts_do(world, bui
     assert rec.contacts == 0
     gaps = rec.x[:, :-1] - rec.x[:, 1:] - world.params_of(ids[1:]).length
     assert gaps.min() > 0.5
+
+
+def _behind_a_body_reaching_across(reach):
+    """The command of a car in lane -4 at 12 m/s, 45 m behind a car standing in lane -3,
+    off its centre and yawed 0.17 rad toward lane -4 (a change it gave up), its
+    footprint reaching ``reach`` [m] past the line into lane -4; and of the same car
+    beside one standing straight at its lane's centre."""
+    manager, params = point_mass_manager(np.array([-3, -4]), 0)
+    manager.add([0, 1], 1, [-3, -4], params, desired_speed=30.0)
+    length, width = params.length[0], params.width[0]
+    yaw = 0.17
+    half = 0.5 * (length * np.sin(yaw) + width * np.cos(yaw))
+    line = lane_center(-3) + 0.5 * LANE_WIDTH
+    y = np.array([line + reach - half, lane_center(-4)])
+    states = PointMasses(np.array([0, 1]), np.array([150.0, 100.0]), y, np.array([-3, -4]),
+                         np.array([0.0, 12.0]), np.array([yaw, 0.0]))  # fmt: skip
+    return float(manager.step(states).accel[1])
+
+
+def test_a_body_reaching_into_a_lane_is_ahead_of_that_lanes_drivers():
+    # physics, SUMO's on-ramp morning, episode 30: a ramp car gave up its merge and
+    # stood at the taper's end yawed, its tail 0.8 m into lane -4; the bus behind in
+    # lane -4 saw no one ahead and drove into it
+    assert _behind_a_body_reaching_across(0.8) < -1.0  # brakes for it
+    assert _behind_a_body_reaching_across(0.3) > 0.0  # short of FOOTPRINT_REACH: free road

@@ -176,7 +176,7 @@ def vehicles(bo) -> traffic.Vehicles:
     """The traffic kernels' view of the bodies (the same arrays)."""
     return traffic.Vehicles(
         valid=bo.valid, top=bo.top, x=bo.x, y=bo.y, yaw=bo.yaw, speed=bo.speed, lane=bo.lane,
-        length=bo.length, wheelbase=bo.wheelbase, mu=bo.mu,
+        length=bo.length, width=bo.width, wheelbase=bo.wheelbase, mu=bo.mu,
     )  # fmt: skip
 
 

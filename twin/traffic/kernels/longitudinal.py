@@ -128,8 +128,11 @@ def follow(b, t):
         entry_lane = -group[b, e] - 1
         # the lane's end, nearer than its leader, is a standing obstacle to a driver in
         # it; no longer to one changing out of it (from a stop at the end, a driver
-        # noses into the next lane past where the taper closes)
-        if lane_from[b, o] == lane_to[b, o]:
+        # noses into the next lane past where the taper closes), nor to one whose
+        # footprint only reaches into it
+        if lane_from[b, o] == lane_to[b, o] and (
+            entry_lane == lane_to[b, o] or entry_lane == body_lane[b, o]
+        ):
             end = lane_end_gap(settings.lane_ends, entry_lane, sx[b, o], slength[b, o])
             if end < gap:
                 gap, v_lead, lead_decel = end, 0.0, 0.0

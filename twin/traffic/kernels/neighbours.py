@@ -3,9 +3,12 @@ keyed (lane, x), and binary searches in it. Lane -5 (an on-ramp's acceleration
 lane, :mod:`twin.core.ramps`) is a lane as the others are.
 
 A vehicle occupies every lane it is in: the lane it drives to, during a lane change
-the lane it leaves, and the lane its body is in; an obstacle its lane. Each occupied
-lane is an entry; entries are sorted by ``group * LANE_KEY + x`` with ``group`` 0..4
-for lanes -1..-5, and the leader of an entry is the next entry of its group.
+the lane it leaves, the lane its body is in, and any lane its footprint reaches more
+than :data:`FOOTPRINT_REACH` into (a body standing yawed across a line, as one that
+gave up a change at a lane's end does: the drivers of that lane see it ahead of them);
+an obstacle its lane. Each occupied lane is an entry; entries are sorted by
+``group * LANE_KEY + x`` with ``group`` 0..4 for lanes -1..-5, and the leader of an
+entry is the next entry of its group.
 
 Owners number the vehicles' slots ``0..N-1`` and the obstacles ``N + g``; the step's
 values of both (x, length, speed, last command) are gathered in the scratch's ``sx``,
@@ -16,10 +19,18 @@ The vehicles' entries keep last step's order and are put right by an insertion s
 come sorted by x, are merged in.
 """
 
+import math
+
+from twin.core.i24 import LANE_WIDTH
 from twin.core.jit import kernel
 
 LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x
 N_GROUPS = 5  # lanes -1..-4 and an on-ramp's acceleration lane, -5
+# [m] how far past a lane's line a footprint reaches before the body occupies that lane
+# too: short of the 0.53 m a 2.6 m wide truck keeps to each line of a 3.66 m lane, so
+# that a body reaching that far is ahead of the drivers of that lane before it touches
+# one; longer than a body driving along its lane off its centre reaches
+FOOTPRINT_REACH = 0.4
 
 
 @kernel(inline=True)
@@ -28,6 +39,36 @@ def group_of(lane):
     if -N_GROUPS <= lane <= -1:
         return -lane - 1
     return -1
+
+
+@kernel(inline=True)
+def lanes_occupied(vehicles, drivers, b, o):
+    """The lanes vehicle ``o`` occupies (module doc), as bits ``1 << (-lane - 1)``: its
+    driver's lane and the lane it leaves, its body's lane, and the lanes its footprint
+    (length and width about the centre, turned by its yaw) reaches more than
+    :data:`FOOTPRINT_REACH` into."""
+    bits = 0
+    for which in range(3):
+        if which == 0:
+            lane = drivers.lane[b, o]
+        elif which == 1:
+            lane = drivers.lane_from[b, o]
+        else:
+            lane = vehicles.lane[b, o]
+        if group_of(lane) >= 0:
+            bits |= 1 << (-lane - 1)
+    yaw = vehicles.yaw[b, o]
+    half = 0.5 * (vehicles.length[b, o] * abs(math.sin(yaw))
+                  + vehicles.width[b, o] * abs(math.cos(yaw)))  # fmt: skip
+    # lane -k lies between y = k and k + 1 lane widths: the footprint, less the reach
+    # at each side, must cross into it
+    low = (vehicles.y[b, o] - half + FOOTPRINT_REACH) / LANE_WIDTH
+    high = (vehicles.y[b, o] + half - FOOTPRINT_REACH) / LANE_WIDTH
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return bits
+    for k in range(max(math.floor(low), 1), min(math.ceil(high) - 1, N_GROUPS) + 1):
+        bits |= 1 << (k - 1)
+    return bits
 
 
 @kernel
@@ -59,14 +100,14 @@ def sort_entries(b, t):
     """Rebuild episode ``b``'s sorted entries (module doc) from the vehicles' lanes and
     the obstacles; :func:`gather` first."""
     vehicles, obstacles, drivers, sc = t.vehicles, t.obstacles, t.drivers, t.scratch
-    valid, body_lane = vehicles.valid, vehicles.lane
-    lane_to, lane_from = drivers.lane, drivers.lane_from
+    valid = vehicles.valid
     marks, order_owner, order_lane = sc.marks, sc.order_owner, sc.order_lane
     key, sx = sc.entry_key, sc.sx
     n = valid.shape[1]
     top = vehicles.top[b]
+    # the lanes each vehicle occupies in the high bits, those already entered in the low
     for i in range(top):
-        marks[b, i] = 0
+        marks[b, i] = lanes_occupied(vehicles, drivers, b, i) << N_GROUPS if valid[b, i] else 0
     # last step's vehicle entries that still hold, in their order
     m = 0
     for k in range(sc.order_count[b]):
@@ -74,7 +115,7 @@ def sort_entries(b, t):
         bit = 1 << (-lane - 1)
         if o >= top or not valid[b, o] or marks[b, o] & bit:
             continue
-        if lane == lane_to[b, o] or lane == lane_from[b, o] or lane == body_lane[b, o]:
+        if (marks[b, o] >> N_GROUPS) & bit:
             order_owner[b, m], order_lane[b, m] = o, lane
             marks[b, o] |= bit
             m += 1
@@ -82,19 +123,11 @@ def sort_entries(b, t):
     for o in range(top):
         if not valid[b, o]:
             continue
-        for which in range(3):
-            if which == 0:
-                lane = lane_to[b, o]
-            elif which == 1:
-                lane = lane_from[b, o]
-            else:
-                lane = body_lane[b, o]
-            if group_of(lane) < 0:
+        for grp in range(N_GROUPS):
+            bit = 1 << grp
+            if marks[b, o] & bit or not (marks[b, o] >> N_GROUPS) & bit:
                 continue
-            bit = 1 << (-lane - 1)
-            if marks[b, o] & bit:
-                continue
-            order_owner[b, m], order_lane[b, m] = o, lane
+            order_owner[b, m], order_lane[b, m] = o, -grp - 1
             marks[b, o] |= bit
             m += 1
     sc.order_count[b] = m

@@ -10,7 +10,7 @@ while the vehicles' ``valid`` is true.
   shared): ``valid``, and ``top`` (B,) one past the highest valid slot (the kernels
   look no further); ``x`` [m] back centre and ``y`` [m] in the road frame; ``yaw``
   [rad] against the direction of travel; ``speed`` [m/s]; ``lane``, the lane the body
-  is in (0 off the lanes); ``length``, ``wheelbase`` [m]; ``mu``, the tyres' grip.
+  is in (0 off the lanes); ``length``, ``width``, ``wheelbase`` [m]; ``mu``, the tyres' grip.
 * ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``.
 * ``Drivers`` (B, N): the traffic manager's state of each vehicle (module
   :mod:`twin.traffic.kernels.decide` says what each field is); ``mandatory``, whether
@@ -30,8 +30,9 @@ from numba.experimental import structref
 
 from twin.core.jit import StructType, kernel, packing, register_struct
 from twin.traffic.kernels.models import N_PARAMS
+from twin.traffic.kernels.neighbours import N_GROUPS
 
-Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length wheelbase mu")
+Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length width wheelbase mu")
 Obstacles = namedtuple("Obstacles", "count lane x length speed")
 Drivers = namedtuple(
     "Drivers",
@@ -81,12 +82,12 @@ def drivers(b: int, n: int) -> Drivers:
 
 def scratch(b: int, n: int, g: int) -> Scratch:
     """The working arrays of ``b`` episodes of ``n`` slots and ``g`` obstacles."""
-    e = 3 * n + g
+    e = N_GROUPS * n + g
     return Scratch(
         entry_count=np.zeros(b, np.int64), entry_owner=np.zeros((b, e), np.int64),
         entry_group=np.zeros((b, e), np.int64), entry_key=np.zeros((b, e)),
-        order_count=np.zeros(b, np.int64), order_owner=np.zeros((b, 3 * n), np.int64),
-        order_lane=np.zeros((b, 3 * n), np.int64), marks=np.zeros((b, n), np.int64),
+        order_count=np.zeros(b, np.int64), order_owner=np.zeros((b, N_GROUPS * n), np.int64),
+        order_lane=np.zeros((b, N_GROUPS * n), np.int64), marks=np.zeros((b, n), np.int64),
         sx=np.zeros((b, n + g)), slength=np.zeros((b, n + g)), sspeed=np.zeros((b, n + g)),
         saccel=np.zeros((b, n + g)), cf_accel=np.zeros((b, n)), need=np.zeros((b, n)),
         emergency=np.zeros((b, n), bool), command=np.zeros((b, n)), steer=np.zeros((b, n)),
