@@ -228,3 +228,32 @@ def test_a_recording_cutting_in_ahead_of_a_body_that_cannot_stop_becomes_a_body(
     sim.run()
     assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0
+
+
+@kernel(nrt=True)
+def _may_appear(b, core, x, y, speed, length, width):
+    return handover.may_appear(b, core, x, y, speed, length, width)
+
+
+def test_a_recording_does_not_appear_on_the_tail_of_a_yawed_body(batch):
+    # physics, SUMO's on-ramp morning, episode 18: a body yawed 0.29 rad in a lane
+    # change reached 1.6 m to the side of its centre; a recording appeared as a ghost
+    # 2.4 m beside it, clear of it as if it drove straight, and on its tail
+    run, _, _ = batch
+    bo, b = run.state.bodies, 0
+    length, width = 4.7, 1.83
+    tried = 0
+    for j in np.flatnonzero(bo.valid[b]):
+        beside = bo.y[b, j] + 0.5 * (bo.width[b, j] + width) + handover.LATERAL_MARGIN + 0.05
+        x = bo.x[b, j] - 2.0  # alongside its tail
+        yaw = bo.yaw[b, j]
+        try:
+            bo.yaw[b, j] = 0.0
+            if not _may_appear(b, run.core, x, beside, 4.7, length, width):
+                continue  # another body there
+            bo.yaw[b, j] = 0.29
+            assert not _may_appear(b, run.core, x, beside, 4.7, length, width)
+            tried += 1
+        finally:
+            bo.yaw[b, j] = yaw
+    assert tried >= 5
