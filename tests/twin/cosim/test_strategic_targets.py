@@ -119,7 +119,7 @@ def test_the_state_is_the_mean_speed_of_the_lane_around_the_vehicle_ghosts_inclu
             valid=np.array([valid]), top=np.array([n]), x=np.array([x], float),
             y=np.zeros((1, n)), yaw=np.zeros((1, n)), speed=np.array([speed], float),
             lane=np.array([lane], np.int64), length=np.full((1, n), 4.5),
-            wheelbase=np.full((1, n), 2.8), mu=np.ones((1, n)),
+            width=np.full((1, n), 1.8), wheelbase=np.full((1, n), 2.8), mu=np.ones((1, n)),
         )  # fmt: skip
 
     traffic = namedtuple("Traffic", "vehicles obstacles")
