@@ -257,3 +257,50 @@ def test_a_recording_does_not_appear_on_the_tail_of_a_yawed_body(batch):
         finally:
             bo.yaw[b, j] = yaw
     assert tried >= 5
+
+
+@kernel(nrt=True)
+def _hand_back(b, core):
+    return handover.hand_back(b, core)
+
+
+def test_a_body_is_not_handed_to_a_recording_that_would_crowd_the_body_ahead():
+    # physics, preset D by other drivers, episode 3: a recording crawling at 0.84 m/s
+    # 0.84 m behind a relaxing body at 0.63 m/s crowded it and became a body; braking
+    # hard in its first step, to 0.80 m/s, it crowded no more, was handed back, and its
+    # recording was taken back at the reload: spawned and handed back every step for
+    # seconds, never holding back, until the recording was too close to yield and ran
+    # into the body as a ghost. A relaxing body is handed back only where the ghost it
+    # becomes, its recording, would not crowd the body ahead.
+    store = embedded_store("morning")
+    config = CosimConfig(world="kinematic", t_max=20.0)
+    shared = Shared.make(store, default_map(), config)
+    t_first, _ = store.time_range(config.road)
+    run = Batch(shared, episodes=1)
+    run.reset(0, lane=-2, x=700.0, time=t_first + 300.0, seed=0)
+    for _ in range(50):
+        run.step()
+    state, b = run.state, 0
+    bo, sl, dr, ep = state.bodies, state.slots, state.drivers, state.episodes
+    others = [j for j in np.flatnonzero(bo.valid[b]) if j != ep.ego[b]]
+    front, rear = others[0], others[1]
+    for j in others[2:]:  # out of the way: the two are alone in their ghost cell
+        bo.x[b, j] = ep.windows[b, 2] - 1.0
+    sl.relaxing[b, others[2:]] = False
+    lane, gap, length = -3, 0.84, float(bo.length[b, rear])
+    x, y = ep.windows[b, 1] - 30.0, float(i24.lane_center(lane))  # the rear ghost cell
+    for j, xj, v in ((rear, x, 0.80), (front, x + length + gap, 0.63)):
+        bo.x[b, j], bo.y[b, j], bo.yaw[b, j], bo.speed[b, j] = xj, y, 0.0, v
+        dr.lane[b, j] = dr.lane_from[b, j] = lane
+    sl.relaxing[b, rear], sl.rec_on[b, rear] = True, True
+    sl.rec_x[b, rear], sl.rec_y[b, rear] = x, y
+    ep.speed_prev[b, rear] = 0.80
+    # its recording 0.04 m/s faster than the body, as the body was a step ago: as a
+    # ghost it would crowd the body ahead; it stays a body
+    sl.rec_speed[b, rear] = 0.84
+    _hand_back(b, run.core)
+    assert bo.valid[b, rear] and sl.relaxing[b, rear]
+    # its recording as slow as the body: clear of the body ahead, handed back
+    sl.rec_speed[b, rear] = 0.80
+    _hand_back(b, run.core)
+    assert not bo.valid[b, rear]

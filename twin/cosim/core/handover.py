@@ -175,19 +175,32 @@ def hand_back(b, core):
     for i in range(bo.top[b]):
         if not (bo.valid[b, i] and sl.relaxing[b, i] and relax.settled(b, core, i)):
             continue
-        # as a ghost it would crowd the body ahead, or its recording would cut in too
-        # close to a body, and be taken back at once
-        x, y, speed = bo.x[b, i], bo.y[b, i], bo.speed[b, i]
-        length, width = bo.length[b, i], bo.width[b, i]
-        if not (crowds(b, core, x, y, speed, length, width, i)
-                or _cuts_in(b, core, sl.r[b, i], t, sl.rec_x[b, i], sl.rec_y[b, i],
-                            sl.rec_speed[b, i], length, width, i)):  # fmt: skip
+        if not _crowds_as_ghost(b, core, i, t):
             _drawn_now(b, core, core.slots.r[b, i])
             remove(b, core, i)
             back += 1
     ep.handed_back[b] += back
     ep.despawned[b] += back
     return back
+
+
+@kernel
+def _crowds_as_ghost(b, core, i, t):
+    """Whether relaxing slot ``i``, a ghost at unix ``t`` [s], would crowd a body ahead
+    of it or cut in too close to one, and be taken back at once (:func:`_yields`): the
+    ghost it would be, at its recording's position and speed (:func:`relax.target`
+    read this step), not the body's. A body just spawned from a recording crawling
+    close behind another brakes hard in its first step; judged at its own speed it
+    crowded no more, was handed back, and its recording, which does not brake, was
+    taken back at the reload: a vehicle spawned and handed back every step for
+    seconds, never holding back, until its recording was too close to yield and drove
+    into the body ahead as a ghost (physics, preset D by other drivers, episode 3)."""
+    sl = core.slots
+    x, y, speed = sl.rec_x[b, i], sl.rec_y[b, i], sl.rec_speed[b, i]
+    length, width = core.bodies.length[b, i], core.bodies.width[b, i]
+    return crowds(b, core, x, y, speed, length, width, i) or _cuts_in(
+        b, core, sl.r[b, i], t, x, y, speed, length, width, i
+    )
 
 
 @kernel
