@@ -22,7 +22,9 @@ closes the distance to its recorded trajectory within physical limits:
   :data:`HAND_BACK_Y` across, with the recording in a ghost cell, and its speed a step
   ago (the last one drawn of it) within :data:`HAND_BACK_SPEED` of its recording's now
   too: the step it becomes a ghost it moves by at most that much, and its speed
-  changes by at most that much (not that plus the step's own change of speed);
+  changes by at most that much (not that plus the step's own change of speed); and
+  only where its recording, the ghost it becomes, would not crowd a body ahead
+  (:func:`twin.cosim.core.handover.hand_back`);
 * it is removed once it is outside the windows, unless its recording is in a ghost
   cell (it would appear there, away from the vehicle), once its recording ends or
   leaves the lanes, and when it leaves the road; a vehicle whose recording is absent
