@@ -184,10 +184,14 @@ def track(b, core):
             law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
         following = accel[b, i]
         floor = min(following, ACCEL_LOW)  # behind a body or a ghost: as hard as needed
-        if following < ACCEL_LOW and follows_what_is_ahead(b, core, i, following):
-            # as hard as stopping short of it needs, not as hard as its car following says
-            # (inside its standstill gap, where a recording that crowded a body becomes
-            # one, IDM asks for far more than stopping takes)
+        if following < ACCEL_LOW and (
+            core.traffic.scratch.emergency[b, i] or follows_what_is_ahead(b, core, i, following)
+        ):
+            # as hard as stopping short of it needs, not as hard as its car following (or
+            # the traffic manager's emergency braking, whose 1 m margin a recording that
+            # crowded a body is often inside when it becomes one: full braking from
+            # 0.5 m/s, 0.96 m behind a standing body, where 0.2 m/s^2 would do) says;
+            # inside its standstill gap IDM asks for far more than stopping takes
             need = stopping_decel(b, core, i, core.settings.clearance_at_rest)
             floor = min(max(following, -need), ACCEL_LOW)
         accel[b, i] = min(max(min(law, following), floor), ACCEL_HIGH)
