@@ -146,3 +146,44 @@ def desired_speeds(free: FreeFlow, min_count: int = 5) -> dict:
         if rows.sum() >= min_count:
             out[str(lane)] = speed_summary(free.speed[rows])
     return out
+
+
+def draw_parameters(distributions: dict, vehicle_class: np.ndarray, rng) -> np.ndarray:
+    """(n, k) fitted parameters for vehicles of coarse classes ``vehicle_class`` (n,),
+    each drawn from its class group's distribution in ``distributions`` ({group:
+    ParameterDistribution}; the pooled ``all`` where its group has none), the groups in
+    sorted order (the draws of the calibrated twin, reproducible by ``rng``)."""
+    names = next(iter(distributions.values())).names
+    groups = class_group(vehicle_class)
+    params = np.empty((len(groups), len(names)))
+    for group in np.unique(groups):
+        rows = groups == group
+        dist = distributions.get(group) or distributions["all"]
+        params[rows] = dist.draw(int(rows.sum()), rng)
+    return params
+
+
+def desired_speed_source(speeds: dict, car_following: dict, calibrated: bool) -> str:
+    """Where a calibrated driver's desired speed comes from: ``free_flow`` (the lane's
+    free-flow speeds, ``speeds`` of :func:`desired_speeds`), ``car_following`` (the drawn
+    parameters, where the car-following fits identified it: ``car_following`` is the
+    calibration's section, ``calibrated`` whether its distributions are driven) or
+    ``paper``: whichever estimate more vehicles back."""
+    free_count = speeds.get("all", {}).get("count", 0)
+    fitted_count = car_following.get("desired_speed_identified", 0) if calibrated else 0
+    if free_count >= fitted_count and free_count:
+        return "free_flow"
+    return "car_following" if fitted_count else "paper"
+
+
+def draw_desired_speeds(speeds: dict, lane: np.ndarray, rng) -> np.ndarray:
+    """(n,) [m/s] desired speeds for vehicles in ``lane`` (n,), drawn from the lane's
+    free-flow speeds (``speeds`` of :func:`desired_speeds`; the pooled ``all`` where the
+    lane has too few; an on-ramp's drivers lane -4's): normal, clipped at 2 sd, at least
+    1 m/s."""
+    z = np.clip(rng.standard_normal(len(lane)), -2.0, 2.0)
+    summary = {k: speeds.get(str(k)) or speeds["all"] for k in LANES}
+    mean = np.array([summary[k]["mean"] for k in LANES])
+    sd = np.array([summary[k]["sd"] for k in LANES])
+    at = np.minimum(-np.asarray(lane, dtype=np.int64) - 1, len(LANES) - 1)
+    return np.maximum(mean[at] + sd[at] * z, 1.0)

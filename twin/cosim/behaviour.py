@@ -39,7 +39,12 @@ import numpy as np
 
 from twin.calibration import following
 from twin.calibration.calibrate import calibration_model, read_calibration, read_fits
-from twin.calibration.distributions import ParameterDistribution, class_group
+from twin.calibration.distributions import (
+    ParameterDistribution,
+    desired_speed_source,
+    draw_desired_speeds,
+    draw_parameters,
+)
 from twin.calibration.yielding import cooperation
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
@@ -149,14 +154,7 @@ class Behaviour:
                 for group, d in car["distributions"].items()
             }
         self.speeds = section["desired_speed"]
-        free_count = self.speeds.get("all", {}).get("count", 0)
-        fitted_count = car.get("desired_speed_identified", 0) if self.distributions else 0
-        # the desired speed comes from whichever estimate more vehicles back
-        self.speed_source = (
-            "free_flow"
-            if free_count >= fitted_count and free_count
-            else ("car_following" if fitted_count else "paper")
-        )
+        self.speed_source = desired_speed_source(self.speeds, car, bool(self.distributions))
         flows = section.get("lane_flows")
         if self.name == "calibrated" and flows and flows.get("identified"):
             self.strategic_flows = flows
@@ -223,12 +221,7 @@ class Behaviour:
         out = {}
         if self.distributions:
             names = next(iter(self.distributions.values())).names
-            groups = class_group(vehicle_class)
-            params = np.empty((n, len(names)))
-            for group in np.unique(groups):
-                rows = groups == group
-                dist = self.distributions.get(group) or self.distributions["all"]
-                params[rows] = dist.draw(int(rows.sum()), self.rng)
+            params = draw_parameters(self.distributions, vehicle_class, self.rng)
             if self._fits is not None:
                 own = np.isin(tid, self._fits.index.to_numpy())
                 if own.any():
@@ -240,19 +233,11 @@ class Behaviour:
             if self.speed_source == "car_following":
                 out["desired_speed"] = params[:, names.index("desired_speed")]
         if self.speed_source == "free_flow":
-            out["desired_speed"] = self._desired_speeds(lane)
+            out["desired_speed"] = draw_desired_speeds(self.speeds, lane, self.rng)
         if self.threshold is not None:
             out["threshold"] = np.full(n, self.threshold)
             out["politeness"] = np.full(n, self.politeness)
         return out
-
-    def _desired_speeds(self, lane: np.ndarray) -> np.ndarray:
-        z = np.clip(self.rng.standard_normal(len(lane)), -2.0, 2.0)
-        summary = {k: self.speeds.get(str(k)) or self.speeds["all"] for k in (-1, -2, -3, -4)}
-        mean = np.array([summary[k]["mean"] for k in (-1, -2, -3, -4)])
-        sd = np.array([summary[k]["sd"] for k in (-1, -2, -3, -4)])
-        at = -np.asarray(lane, dtype=np.int64) - 1
-        return np.maximum(mean[at] + sd[at] * z, 1.0)
 
     def describe(self) -> str:
         if self.name == "paper":
