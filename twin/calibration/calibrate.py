@@ -56,6 +56,14 @@ from twin.calibration.lane_flows import (
     traffic_states,
 )
 from twin.calibration.merge_positions import describe_merges, merge_section
+from twin.calibration.model_choice import (
+    AUTO,
+    CANDIDATES,
+    choose,
+    describe_model_choice,
+    replay_score,
+)
+from twin.calibration.model_choice import summary as replay_summary
 from twin.calibration.yielding import describe_yielding, yielding_section
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
@@ -65,7 +73,6 @@ from twin.data.store import TrajectoryStore, damaged_file
 from twin.traffic.mobil import MOBILParams
 from twin.traffic.models import car_following_model
 from twin.traffic.models.base import CarFollowingModel
-from twin.traffic.models.idm import IDM
 
 CALIBRATION = "calibration.json"
 #: the threshold is refitted away from the strategic flows only where at least this
@@ -123,7 +130,7 @@ def calibrate(
     t_until: float | None = None,
     settings: CalibrationSettings = CalibrationSettings(),
     *,
-    model: CarFollowingModel = IDM,
+    model: CarFollowingModel | str = AUTO,
     progress: bool = False,
     following: dict | None = None,
 ) -> tuple[dict, dict]:
@@ -131,11 +138,17 @@ def calibrate(
     ``t_from`` and ``t_until`` (unix seconds; default: all of it), the drivers'
     car following as ``model``.
 
-    ``following``: another calibration document (of ``model``) whose drivers' car
-    following a road takes where its own window has too few accepted fits (a window
-    with no waves to fit them on: the same drivers on another morning). The lane
-    changes, their flows, the threshold (with those drivers), desired speeds and merges
-    are still fitted on this window; the road's ``car_following`` says ``taken_from``.
+    ``model`` ``"auto"`` (:data:`~twin.calibration.model_choice.AUTO`, the default): each of
+    :data:`~twin.calibration.model_choice.CANDIDATES` is fitted, and the one whose
+    drawn drivers replay the window's followers best drives
+    (:mod:`twin.calibration.model_choice`; the scores are kept as ``model_choice``).
+
+    ``following``: another calibration document (of ``model``, or of one candidate)
+    whose drivers' car following a road takes where its own window has too few
+    accepted fits (a window with no waves to fit them on: the same drivers on another
+    morning). The lane changes, their flows, the threshold (with those drivers),
+    desired speeds and merges are still fitted on this window; the road's
+    ``car_following`` says ``taken_from``.
 
     Returns:
         (the calibration document, {road: FollowerFits}).
@@ -154,6 +167,30 @@ def calibrate(
             "calibrate the drivers on (was every document of its day files rejected? "
             "twin data info says)"
         )
+    auto = isinstance(model, str)
+    if auto and model != AUTO:
+        raise ValueError(f"model must be a car-following model or {AUTO!r}, got {model!r}")
+    candidates = [car_following_model(n) for n in CANDIDATES] if auto else [model]
+    offered = _offered_models(following)
+    if following is not None and not offered & {m.name for m in candidates}:
+        raise CalibrationDataError(
+            f"the calibration to take car following from fitted {' and '.join(sorted(offered))}"
+            f", this one {' or '.join(m.name for m in candidates)} (--model "
+            f"{sorted(offered)[0]}, or calibrate that morning with --model auto)"
+        )
+    prepared = {road: _road_data(store, road, (t_from, t_until), settings) for road in roads}
+    fitted = {}  # model name -> {road: (car section, fits, distributions)}
+    for candidate in candidates:
+        fitted[candidate.name] = {
+            road.value: _car_following(
+                road, prepared[road], settings, candidate, progress,
+                _taken_following(following, road, candidate.name),
+                label=candidate.name if auto else "",
+            )
+            for road in roads
+        }  # fmt: skip
+    choice = _choose_model(prepared, fitted, candidates) if auto else None
+    model = car_following_model(choice["chosen"]) if auto else model
     doc = {
         "format": FORMAT,
         "version": VERSION,
@@ -163,22 +200,21 @@ def calibrate(
         "settings": _settings_dict(settings),
         "roads": {},
     }
-    if following is not None:
-        other = following.get("car_following_model", "idm")
-        if other != model.name:
-            raise CalibrationDataError(
-                f"the calibration to take car following from fitted {other}, this one "
-                f"{model.name} (--model {other})"
-            )
+    if choice is not None:
+        doc["model_choice"] = choice
     all_fits, problems = {}, []
     for road in roads:
-        taken = _taken_following(following, road)
-        section, fits = _calibrate_road(
-            store, road, (t_from, t_until), settings, model, progress, taken
-        )
+        car, fits, distributions = fitted[model.name][road.value]
+        section = _road_section(store, road, prepared[road], settings, model, car, distributions)
+        if auto:  # the others' drivers, for a morning that takes them (--following-from)
+            section["car_following_candidates"] = {
+                name: roads_fitted[road.value][0]
+                for name, roads_fitted in fitted.items()
+                if name != model.name
+            }
         doc["roads"][road.value] = section
         all_fits[road.value] = fits
-        reason = section["car_following"].get("not_calibrated")
+        reason = car.get("not_calibrated")
         if reason:
             problems.append(f"{road.value}: {reason}")
             if progress:
@@ -193,33 +229,66 @@ def calibrate(
     return doc, all_fits
 
 
-def _taken_following(following: dict | None, road: Road) -> dict | None:
-    """``following``'s calibrated car following of ``road``, or None."""
+def _offered_models(following: dict | None) -> set[str]:
+    """The car-following models a calibration document offers drivers of: the one it
+    fitted, and the candidates ``--model auto`` kept beside it."""
+    if following is None:
+        return set()
+    offered = {following.get("car_following_model", "idm")}
+    for section in following.get("roads", {}).values():
+        if isinstance(section, dict):
+            offered |= set(section.get("car_following_candidates") or {})
+    return offered
+
+
+def _taken_following(following: dict | None, road: Road, model: str) -> dict | None:
+    """``following``'s calibrated car following of ``road`` for the model named
+    ``model`` (the one it fitted, or a candidate ``--model auto`` kept), or None."""
     if following is None:
         return None
     road_section = following.get("roads", {}).get(road.value, {})
-    section = road_section.get("car_following")
+    if following.get("car_following_model", "idm") == model:
+        section = road_section.get("car_following")
+    else:
+        section = (road_section.get("car_following_candidates") or {}).get(model)
     if not isinstance(section, dict) or section.get("not_calibrated"):
         return None
     if not isinstance(section.get("distributions"), dict) or "all" not in section["distributions"]:
         raise CalibrationDataError(
-            f"the calibration to take car following from has no distributions of {road.value}"
+            f"the calibration to take car following from has no {model} distributions of "
+            f"{road.value}"
         )
     return {**section, "window": road_section.get("window")}
 
 
-def _calibrate_road(store, road, window, settings, model, progress, taken=None):
+@dataclass(frozen=True)
+class _RoadData:
+    """What a road's calibration reads from the recording, once for every model."""
+
+    grid: following.GridTraffic
+    runs: following.FollowingRuns
+    speeds: dict  # the desired_speed section (free flow)
+
+
+def _road_data(store, road, window, settings) -> _RoadData:
     grid = following.load_grid(store, road, *window)
     runs = following.following_runs(
         grid, min_duration=settings.min_run, max_duration=settings.max_run
     )
+    return _RoadData(grid, runs, desired_speeds(following.free_flow_speeds(grid)))
+
+
+def _car_following(road, data, settings, model, progress, taken=None, label=""):
+    """(the road's car_following section, its FollowerFits, {group: distribution}) of
+    ``model`` fitted to ``data``'s runs (``taken``: another calibration's, where too few
+    fits are accepted here)."""
+    runs = data.runs
     bar = None
     if progress:
         from twin.core.progress import progress_bar
 
-        bar = progress_bar(
-            total=max(np.unique(runs.tid).size, 1), desc=f"fit {road.value}", unit="veh"
-        )
+        what = f"fit {road.value}" + (f" ({label})" if label else "")
+        bar = progress_bar(total=max(np.unique(runs.tid).size, 1), desc=what, unit="veh")
 
     def advance(done, total):
         if bar is not None:
@@ -270,6 +339,50 @@ def _calibrate_road(store, road, window, settings, model, progress, taken=None):
                     f"the calibration to take car following from has malformed "
                     f"distributions of {road.value}: {error!r}"
                 ) from None
+    return car, fits, distributions
+
+
+def _choose_model(prepared: dict, fitted: dict, candidates: list) -> dict:
+    """``model_choice`` of the document: each candidate's replay of every road's
+    following runs (:mod:`~twin.calibration.model_choice`) and the one chosen. A
+    candidate is scored only where it drives every road some candidate calibrated."""
+    usable = {
+        name: {road for road, (car, *_) in roads.items() if not car.get("not_calibrated")}
+        for name, roads in fitted.items()
+    }
+    wanted = set().union(*usable.values())
+    scored = {}
+    for m in candidates:
+        missing = sorted(wanted - usable[m.name])
+        if missing or not wanted:
+            reasons = [
+                f"{road}: {car['not_calibrated']}"
+                for road, (car, *_) in fitted[m.name].items()
+                if car.get("not_calibrated")
+            ]
+            scored[m.name] = {"not_calibrated": "; ".join(reasons)}
+            continue
+        scores = {}
+        for road, data in prepared.items():
+            if road.value in wanted:
+                car, _, distributions = fitted[m.name][road.value]
+                scores[road.value] = replay_score(data.runs, m, distributions, data.speeds, car)
+        scored[m.name] = replay_summary(scores)
+    eligible = {n: c for n, c in scored.items() if "not_calibrated" not in c}
+    chosen = choose(eligible) if eligible else candidates[0].name
+    return {
+        "criterion": "median over the window's following runs of the spacing RMSE of "
+        "drivers drawn from each model's distributions, each replayed behind its "
+        "recorded leader",
+        "candidates": scored,
+        "chosen": chosen,
+    }
+
+
+def _road_section(store, road, data, settings, model, car, distributions) -> dict:
+    """The road's calibration with its car following ``car`` of ``model``: the desired
+    speeds, lane changes, their flows, MOBIL's threshold, merges and yielding."""
+    grid = data.grid
     driver = _median_driver(model, distributions.get("all"))
     changes = following.lane_changes(grid)
     # threshold_drivers "drawn": the threshold is fitted with drivers drawn as the
@@ -299,14 +412,14 @@ def _calibrate_road(store, road, window, settings, model, progress, taken=None):
         },
         "trajectories": int(np.unique(grid.tid).size),
         "car_following": car,
-        "desired_speed": desired_speeds(following.free_flow_speeds(grid)),
+        "desired_speed": data.speeds,
         "lane_changes": lane_change_rates(changes),
         "lane_flows": flows,
         "mobil": mobil,
         "merges": merge_section(with_ramps, road),
         "yielding": yielding_section(grid, with_ramps, model, driver),
     }
-    return section, fits
+    return section
 
 
 def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]:
@@ -506,6 +619,7 @@ def describe_calibration(doc: dict | None) -> str:
         return "calibration  none (run 'twin calibrate STORE')"
     model = calibration_model(doc)
     lines = [f"calibration  {doc['created']} by {doc['created_by']}, drivers {model.name}"]
+    lines += describe_model_choice(doc.get("model_choice"))
     for road, section in doc["roads"].items():
         window = section["window"]
         car = section["car_following"]

@@ -18,7 +18,8 @@ def register(commands) -> None:
         "calibrate",
         help="fit the drivers to a store's recording (writes STORE/calibration.json)",
         description="Fit the visible traffic's behaviour to the recording: car following "
-        "(IDM, or --model) per follower (replaying its recorded leader, fitted on spacing), "
+        "(IDM and Gipps, the one that replays the window best kept; or --model) per "
+        "follower (replaying its recorded leader, fitted on spacing), "
         "its distribution per "
         "class group, desired speeds per lane from free flow, the lane-change rates, their "
         "flows by lane pair, position and time (discretionary, or strategic: one way and "
@@ -38,9 +39,12 @@ def register(commands) -> None:
     add_car_following(
         p,
         "--model",
-        "idm",
-        "the car-following model fitted: %(choices)s (default idm); a calibrated run drives "
-        "it with --set traffic.car_following=MODEL",
+        "auto",
+        "the car-following model fitted: %(choices)s (default auto: each of idm and gipps is "
+        "fitted, and the one whose drivers, drawn from its fits, follow the window's "
+        "recorded leaders most like its followers did is kept; runs drive the model a "
+        "store's calibration fitted)",
+        extra=("auto",),
     )
     p.add_argument(
         "--threshold-drivers",
@@ -59,7 +63,8 @@ def register(commands) -> None:
         default=None,
         help="where this window has too few accepted car-following fits (no waves to fit "
         "them on), take the drivers' car following from this calibration (the same "
-        "drivers on another morning, fitted with the same --model); the lane changes, "
+        "drivers on another morning, fitted with the same --model, or with the model auto "
+        "chose); the lane changes, "
         "their flows, the threshold, desired speeds and merges are still fitted here "
         "(default: none, such a road is not calibrated)",
     )
@@ -80,9 +85,10 @@ def _calibrate(args) -> int:
     t_from, t_until = unix_time(args.t_from, "--from"), unix_time(args.t_until, "--until")
     if t_from is not None and t_until is not None and not t_from < t_until:
         raise UsageError(f"--from ({args.t_from}) must be before --until ({args.t_until})")
+    from twin.calibration.model_choice import AUTO
     from twin.traffic.models import car_following_model
 
-    model = car_following_model(args.model)
+    model = AUTO if args.model == AUTO else car_following_model(args.model)
     from twin.calibration.calibrate import CalibrationSettings
 
     settings = CalibrationSettings(threshold_drivers=args.threshold_drivers)
@@ -107,6 +113,7 @@ def _calibrate(args) -> int:
     print(f"written: {', '.join(map(str, [path, *pictures]))}")
     print(
         f"twin run on {store.path} now drives its visible vehicles calibrated (behaviour "
-        "auto); --behaviour paper drives as the paper does"
+        f"auto), as {doc['car_following_model']} drivers; --behaviour paper drives as the "
+        "paper does"
     )
     return 0

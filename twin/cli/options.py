@@ -31,13 +31,16 @@ def add_store(parser: argparse.ArgumentParser) -> None:
 
 
 class _ModelNames:
-    """The registered car-following models' names, read from the registry only when
-    argparse checks a value or writes a help (it imports numpy)."""
+    """The registered car-following models' names (and ``extra`` names), read from the
+    registry only when argparse checks a value or writes a help (it imports numpy)."""
+
+    def __init__(self, extra: tuple[str, ...] = ()):
+        self.extra = extra
 
     def _names(self) -> list[str]:
         from twin.traffic.models import MODELS
 
-        return sorted(MODELS)
+        return [*self.extra, *sorted(MODELS)]
 
     def __iter__(self):
         return iter(self._names())
@@ -46,10 +49,14 @@ class _ModelNames:
         return name in self._names()
 
 
-def add_car_following(parser: argparse.ArgumentParser, flag: str, default: str, help: str):
-    """A car-following model by its registered name (``help`` may say
-    ``%(choices)s``)."""
-    parser.add_argument(flag, choices=_ModelNames(), default=default, metavar="MODEL", help=help)
+def add_car_following(
+    parser: argparse.ArgumentParser, flag: str, default: str, help: str, extra=()
+):
+    """A car-following model by its registered name, or one of ``extra`` (``help`` may
+    say ``%(choices)s``)."""
+    parser.add_argument(
+        flag, choices=_ModelNames(tuple(extra)), default=default, metavar="MODEL", help=help
+    )
 
 
 def add_world(parser: argparse.ArgumentParser) -> None:

@@ -25,7 +25,9 @@ recording (``twin calibrate``).
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
 The calibrated behaviours drive the model the calibration fitted (``twin calibrate
---model``), which must be the run's ``traffic.car_following``.
+--model``; by default the one that replays the recording best), which the run's
+``traffic.car_following`` follows by default (``auto``, :func:`car_following_of`); a
+model named there must be the calibration's.
 
 ``auto`` (the default of ``twin run``) is :data:`AUTO_CHOICE` where the store has a
 calibration of the road for the run's car-following model, else ``paper``: the
@@ -33,7 +35,7 @@ behaviour ``twin eval`` found most faithful on data it was not calibrated on
 (``docs/results/behaviours_held_out.md`` gives the figures).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -49,6 +51,7 @@ from twin.calibration.yielding import cooperation
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
+from twin.traffic.models import AUTO as AUTO_MODEL
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")
 AUTO = "auto"
@@ -78,6 +81,26 @@ def resolve(name: str, store: TrajectoryStore, road: Road | str, car_following: 
         and calibration_model(doc).name == car_following
     )
     return AUTO_CHOICE if calibrated else "paper"
+
+
+def car_following_of(name: str, store: TrajectoryStore) -> str:
+    """The car-following model ``traffic.car_following`` = ``name`` stands for on
+    ``store``: ``auto`` is the model the store's calibration fitted (``twin calibrate``
+    chooses the one that replays the recording best), ``idm`` where it has none; others
+    are themselves."""
+    if name != AUTO_MODEL:
+        return name
+    doc = read_calibration(store)
+    return "idm" if doc is None else calibration_model(doc).name
+
+
+def with_car_following(config, store: TrajectoryStore):
+    """``config`` (a :class:`~twin.cosim.config.CosimConfig`) with its
+    ``traffic.car_following`` resolved on ``store`` (:func:`car_following_of`)."""
+    name = car_following_of(config.traffic.car_following, store)
+    if name == config.traffic.car_following:
+        return config
+    return replace(config, traffic=replace(config.traffic, car_following=name))
 
 
 def check_behaviour(name: str) -> str:

@@ -36,6 +36,7 @@ import numpy as np
 
 from mapgen.build import MapBundle
 from twin.core.i24 import HOV_LANE, N_LANES
+from twin.cosim.behaviour import with_car_following
 from twin.cosim.config import CosimConfig
 from twin.cosim.core import layout
 from twin.cosim.core import step as core_step
@@ -123,6 +124,7 @@ class Cosimulator:
         ego_kind: int | None = None,
         log: bool = True,
     ):
+        config = with_car_following(config, traffic.store)  # auto: the calibration's model
         self.config = config
         self.traffic = traffic
         self.road = config.road

@@ -36,7 +36,7 @@ from twin.core.atomic import atomic_file, remove_stale
 from twin.core.errors import StoreError, TwinError
 from twin.core.i24 import Road
 from twin.core.locks import output_lock
-from twin.cosim.behaviour import BEHAVIOURS, Behaviour
+from twin.cosim.behaviour import BEHAVIOURS, Behaviour, car_following_of
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.store import TrajectoryStore
 from twin.metrics import lane_flow_fidelity
@@ -215,11 +215,9 @@ def evaluate(
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise EvaluationError(f"--workers must be an integer >= 1, got {workers!r}")
     out = Path(out)
+    model = car_following_of(config.cosim.traffic.car_following, store)
     for behaviour in config.behaviours:  # fails early, naming 'twin calibrate'
-        Behaviour(
-            behaviour, store, Road.parse(config.road), config.seed,
-            config.cosim.traffic.car_following,
-        )  # fmt: skip
+        Behaviour(behaviour, store, Road.parse(config.road), config.seed, model)
     bundle = bundle or default_map(progress=progress)
     specs = draw_specs(config, store, bundle)
     _claim(out, config, store, bundle)  # checks --out before anything is made beside it

@@ -7,7 +7,7 @@ import numpy as np
 
 from twin.traffic.drivers import DriverDistribution
 from twin.traffic.mobil import MOBILParams
-from twin.traffic.models import car_following_model
+from twin.traffic.models import AUTO, car_following_model
 
 MOBIL_FIELDS = ("politeness", "threshold", "safe_decel", "keep_right")
 
@@ -21,7 +21,9 @@ class TrafficConfig:
         drivers: how the drivers' traits (the class table's terms) are drawn per
             vehicle.
         car_following: the drivers' model, by its name in :mod:`twin.traffic.models`
-            (``idm``, ``gipps``, ...).
+            (``idm``, ``gipps``, ...), or ``auto`` (the default): the model the store's
+            calibration fitted, ``idm`` where there is none (a manager without a store
+            drives ``idm``).
         mobil: MOBIL parameters every driver starts with.
         decision_interval: [s] mean time between a driver's lane-change decisions.
         decision_period: [s] lane-change decisions (MOBIL and forced changes) are taken
@@ -67,7 +69,7 @@ class TrafficConfig:
 
     dt: float = 0.01
     drivers: DriverDistribution = field(default_factory=DriverDistribution)
-    car_following: str = "idm"
+    car_following: str = AUTO
     mobil: MOBILParams = field(default_factory=MOBILParams)
     decision_interval: float = 1.0
     decision_period: float = 0.1
@@ -134,7 +136,8 @@ class TrafficConfig:
         if any(len(o) != 2 or not o[0] < o[1] for o in self.hov_openings):
             raise ValueError(f"hov_openings must be (x0, x1) with x0 < x1: {self.hov_openings}")
         check_mobil(self.mobil)
-        car_following_model(self.car_following)
+        if self.car_following != AUTO:
+            car_following_model(self.car_following)
 
 
 def check_mobil(params: MOBILParams) -> None:

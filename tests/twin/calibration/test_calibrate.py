@@ -87,6 +87,9 @@ def test_a_window_without_waves_takes_its_car_following_from_another_calibration
     ingest([day], tmp_path / "light", progress=False)
     other = read_calibration(calibrated_wave_store)
     other["roads"] = {"eastbound": other["roads"]["westbound"]}  # the light day's road
+    # a calibration of one model (--model idm): its drivers are the only ones to take
+    other["roads"]["eastbound"].pop("car_following_candidates", None)
+    assert other["car_following_model"] == "idm"
     path = tmp_path / "other.json"
     path.write_text(json.dumps(other))
     light = str(tmp_path / "light")
@@ -132,9 +135,10 @@ def test_calibration_is_deterministic(store):
     assert first == again
 
 
-def test_calibrate_model_gipps_is_driven_when_the_run_names_it(store, tmp_path, capsys):
+def test_calibrate_model_gipps_is_driven_by_the_runs(store, tmp_path, capsys):
     """``twin calibrate --model gipps``: the calibration says so, ``twin data info`` shows
-    it, and a calibrated run refuses to drive IDM with it until told Gipps."""
+    it, a calibrated run drives Gipps (``traffic.car_following`` auto, the default), and
+    one that names IDM is refused, naming the model to set."""
     args = ["calibrate", str(store.path), "--road", "westbound", "--model", "gipps", "--quiet"]
     assert main(args) == 0
     assert read_calibration(store)["car_following_model"] == "gipps"
@@ -144,8 +148,10 @@ def test_calibrate_model_gipps_is_driven_when_the_run_names_it(store, tmp_path, 
     assert "drivers gipps" in info and "tau " in info
     run = ["run", "--data", str(store.path), "--behaviour", "calibrated", "--duration", "2",
            "--quiet", "--out"]  # fmt: skip
-    assert main([*run, str(tmp_path / "idm")]) == 2
+    assert main([*run, str(tmp_path / "idm"), "--set", "traffic.car_following=idm"]) == 2
     assert "traffic.car_following=gipps" in capsys.readouterr().err
+    assert main([*run, str(tmp_path / "auto")]) == 0
+    assert "behaviour calibrated" in capsys.readouterr().out
     assert main([*run, str(tmp_path / "gipps"), "--set", "traffic.car_following=gipps"]) == 0
     assert "behaviour calibrated" in capsys.readouterr().out
 

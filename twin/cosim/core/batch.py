@@ -104,10 +104,11 @@ class Shared:
             BehaviourError: the behaviour needs a calibration the store lacks.
             ScenarioError: the map and the data do not overlap on the road.
         """
-        from twin.cosim.behaviour import Behaviour, resolve
+        from twin.cosim.behaviour import Behaviour, resolve, with_car_following
         from twin.data.empirical import EmpiricalTraffic
         from twin.traffic.models import car_following_model
 
+        config = with_car_following(config, store)  # auto: the calibration's model
         traffic = traffic or EmpiricalTraffic(store)
         road = config.road
         name = resolve(config.behaviour, store, road, config.traffic.car_following)

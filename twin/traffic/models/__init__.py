@@ -9,10 +9,23 @@ from twin.traffic.models.base import CarFollowingModel
 from twin.traffic.models.gipps import GIPPS
 from twin.traffic.models.idm import IDM, TEXTBOOK_IDM
 
-__all__ = ["GIPPS", "IDM", "MODELS", "TEXTBOOK_IDM", "CarFollowingModel", "car_following_model"]
+__all__ = [
+    "AUTO",
+    "GIPPS",
+    "IDM",
+    "MODELS",
+    "TEXTBOOK_IDM",
+    "CarFollowingModel",
+    "car_following_model",
+]
 
 #: Every model, by the name configurations and the command line use.
 MODELS: dict[str, CarFollowingModel] = {m.name: m for m in (IDM, TEXTBOOK_IDM, GIPPS)}
+#: Not a model: ``traffic.car_following``'s default, the model the store's calibration
+#: fitted (``idm`` where there is none; :func:`twin.cosim.behaviour.car_following_of`),
+#: and ``twin calibrate --model``'s, the model that replays the recording best
+#: (:mod:`twin.calibration.model_choice`).
+AUTO = "auto"
 
 
 def car_following_model(name: str) -> CarFollowingModel:
