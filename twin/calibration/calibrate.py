@@ -62,6 +62,7 @@ from twin.calibration.model_choice import (
     choose,
     describe_model_choice,
     replay_score,
+    score,
 )
 from twin.calibration.model_choice import summary as replay_summary
 from twin.calibration.yielding import describe_yielding, yielding_section
@@ -189,7 +190,7 @@ def calibrate(
             )
             for road in roads
         }  # fmt: skip
-    choice = _choose_model(prepared, fitted, candidates) if auto else None
+    choice = _choose_model(prepared, fitted, candidates, _model_of(following)) if auto else None
     model = car_following_model(choice["chosen"]) if auto else model
     doc = {
         "format": FORMAT,
@@ -229,12 +230,17 @@ def calibrate(
     return doc, all_fits
 
 
+def _model_of(following: dict | None) -> str | None:
+    """The car-following model a calibration document fitted (None for no document)."""
+    return None if following is None else following.get("car_following_model", "idm")
+
+
 def _offered_models(following: dict | None) -> set[str]:
     """The car-following models a calibration document offers drivers of: the one it
     fitted, and the candidates ``--model auto`` kept beside it."""
     if following is None:
         return set()
-    offered = {following.get("car_following_model", "idm")}
+    offered = {_model_of(following)}
     for section in following.get("roads", {}).values():
         if isinstance(section, dict):
             offered |= set(section.get("car_following_candidates") or {})
@@ -342,10 +348,13 @@ def _car_following(road, data, settings, model, progress, taken=None, label=""):
     return car, fits, distributions
 
 
-def _choose_model(prepared: dict, fitted: dict, candidates: list) -> dict:
+def _choose_model(prepared: dict, fitted: dict, candidates: list, fallback: str | None) -> dict:
     """``model_choice`` of the document: each candidate's replay of every road's
     following runs (:mod:`~twin.calibration.model_choice`) and the one chosen. A
-    candidate is scored only where it drives every road some candidate calibrated."""
+    candidate is scored only where it drives every road some candidate calibrated;
+    where none could be scored (no following run to replay), ``fallback`` (the model
+    of the calibration taken from) or the first candidate is kept, and a note says
+    so."""
     usable = {
         name: {road for road, (car, *_) in roads.items() if not car.get("not_calibrated")}
         for name, roads in fitted.items()
@@ -368,15 +377,24 @@ def _choose_model(prepared: dict, fitted: dict, candidates: list) -> dict:
                 car, _, distributions = fitted[m.name][road.value]
                 scores[road.value] = replay_score(data.runs, m, distributions, data.speeds, car)
         scored[m.name] = replay_summary(scores)
-    eligible = {n: c for n, c in scored.items() if "not_calibrated" not in c}
-    chosen = choose(eligible) if eligible else candidates[0].name
-    return {
+    eligible = {n: c for n, c in scored.items() if score(c) is not None}
+    names = [m.name for m in candidates]
+    note = None
+    if eligible:
+        chosen = choose(eligible)
+    else:
+        chosen = fallback if fallback in names else names[0]
+        note = f"no candidate could be scored on this window: {chosen} kept"
+    out = {
         "criterion": "median over the window's following runs of the spacing RMSE of "
         "drivers drawn from each model's distributions, each replayed behind its "
         "recorded leader",
         "candidates": scored,
         "chosen": chosen,
     }
+    if note:
+        out["note"] = note
+    return out
 
 
 def _road_section(store, road, data, settings, model, car, distributions) -> dict:

@@ -167,7 +167,8 @@ def describe_model_choice(choice: dict | None) -> list[str]:
         else:
             value = score(c)
             parts.append(f"{name} {value:.1f} m" if value is not None else f"{name} no runs")
-    return [
+    lines = [
         f"  model chosen: {choice['chosen']} (median spacing RMSE of its drawn drivers "
         f"replaying the window's followers: {', '.join(parts)})"
     ]
+    return lines + ([f"    {choice['note']}"] if choice.get("note") else [])

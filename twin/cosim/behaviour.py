@@ -83,21 +83,24 @@ def resolve(name: str, store: TrajectoryStore, road: Road | str, car_following: 
     return AUTO_CHOICE if calibrated else "paper"
 
 
-def car_following_of(name: str, store: TrajectoryStore) -> str:
-    """The car-following model ``traffic.car_following`` = ``name`` stands for on
-    ``store``: ``auto`` is the model the store's calibration fitted (``twin calibrate``
-    chooses the one that replays the recording best), ``idm`` where it has none; others
-    are themselves."""
-    if name != AUTO_MODEL:
-        return name
+def car_following_of(name: str, store: TrajectoryStore, behaviour: str, road: Road | str) -> str:
+    """The car-following model ``traffic.car_following`` = ``name`` stands for in a run
+    of ``behaviour`` on ``road`` of ``store``: ``auto`` is the model the store's
+    calibration of the road fitted (``twin calibrate`` chooses the one that replays the
+    recording best) where the behaviour drives calibrated drivers, else ``idm`` (the
+    paper's drivers; ``paper`` never reads the calibration); others are themselves."""
+    if name != AUTO_MODEL or behaviour == "paper":
+        return "idm" if name == AUTO_MODEL else name
     doc = read_calibration(store)
-    return "idm" if doc is None else calibration_model(doc).name
+    if doc is None or Road.parse(road).value not in doc["roads"]:
+        return "idm"
+    return calibration_model(doc).name
 
 
 def with_car_following(config, store: TrajectoryStore):
     """``config`` (a :class:`~twin.cosim.config.CosimConfig`) with its
     ``traffic.car_following`` resolved on ``store`` (:func:`car_following_of`)."""
-    name = car_following_of(config.traffic.car_following, store)
+    name = car_following_of(config.traffic.car_following, store, config.behaviour, config.road)
     if name == config.traffic.car_following:
         return config
     return replace(config, traffic=replace(config.traffic, car_following=name))

@@ -54,6 +54,7 @@ from twin.runners.episodes import (
 from twin.runners.failures import done, ran_rows, repeat_command, repeat_path
 from twin.runners.folders import claim
 from twin.traffic.baselines import BASELINES
+from twin.traffic.models import AUTO as AUTO_MODEL
 
 FORMAT = "i24-twin-eval"
 VERSION = 1
@@ -215,9 +216,11 @@ def evaluate(
     if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
         raise EvaluationError(f"--workers must be an integer >= 1, got {workers!r}")
     out = Path(out)
-    model = car_following_of(config.cosim.traffic.car_following, store)
+    road, model = Road.parse(config.road), config.cosim.traffic.car_following
     for behaviour in config.behaviours:  # fails early, naming 'twin calibrate'
-        Behaviour(behaviour, store, Road.parse(config.road), config.seed, model)
+        Behaviour(
+            behaviour, store, road, config.seed, car_following_of(model, store, behaviour, road)
+        )
     bundle = bundle or default_map(progress=progress)
     specs = draw_specs(config, store, bundle)
     _claim(out, config, store, bundle)  # checks --out before anything is made beside it
@@ -484,10 +487,14 @@ def controller_label(spec: str) -> str:
 
 def _identity(config: EvalConfig, store: TrajectoryStore, bundle) -> dict:
     calibration = read_calibration(store)
+    settings = _config_identity(config)
+    traffic = settings["cosim"]["traffic"]
+    if traffic["car_following"] == AUTO_MODEL:  # kept as the model it means here
+        traffic["car_following"] = car_following_of(AUTO_MODEL, store, "calibrated", config.road)
     return {
         "format": FORMAT,
         "version": VERSION,
-        "config": _config_identity(config),
+        "config": settings,
         "data": {
             "store": str(store.path),
             "roads": store.metadata.get("roads"),

@@ -22,8 +22,8 @@ class TrafficConfig:
             vehicle.
         car_following: the drivers' model, by its name in :mod:`twin.traffic.models`
             (``idm``, ``gipps``, ...), or ``auto`` (the default): the model the store's
-            calibration fitted, ``idm`` where there is none (a manager without a store
-            drives ``idm``).
+            calibration fitted where calibrated drivers drive, else ``idm`` (the paper's
+            behaviour, a store without a calibration, a manager without a store).
         mobil: MOBIL parameters every driver starts with.
         decision_interval: [s] mean time between a driver's lane-change decisions.
         decision_period: [s] lane-change decisions (MOBIL and forced changes) are taken

@@ -61,8 +61,12 @@ def test_auto_keeps_the_model_that_drove_the_recording(days):
 
 def test_a_run_drives_the_model_its_store_was_calibrated_with(days, tmp_path, capsys):
     store = days["gipps"]
-    assert car_following_of("auto", store) == "gipps"
-    assert car_following_of("idm", store) == "idm"
+    assert car_following_of("auto", store, "calibrated", "westbound") == "gipps"
+    assert car_following_of("auto", store, "auto", "westbound") == "gipps"
+    assert car_following_of("idm", store, "calibrated", "westbound") == "idm"
+    # the paper's drivers are IDM drivers, and a road not calibrated has the paper's
+    assert car_following_of("auto", store, "paper", "westbound") == "idm"
+    assert car_following_of("auto", store, "auto", "eastbound") == "idm"
     run = ["run", "--data", str(store.path), "--behaviour", "calibrated", "--duration", "2",
            "--time", "2022-11-30T06:43:00-06:00", "--world", "kinematic", "--quiet",
            "--out"]  # fmt: skip
@@ -74,7 +78,20 @@ def test_a_run_drives_the_model_its_store_was_calibrated_with(days, tmp_path, ca
 
 
 def test_a_store_without_a_calibration_drives_idm(wave_store):
-    assert car_following_of("auto", wave_store) == "idm"
+    assert car_following_of("auto", wave_store, "auto", "westbound") == "idm"
+
+
+def test_an_evaluation_keeps_the_model_auto_means_so_older_folders_resume(days, wave_store):
+    """eval.json holds the model ``auto`` stands for on the store, as folders made
+    before ``auto`` existed hold it (``idm``)."""
+    from twin.runners.evaluation import EvalConfig, _identity
+
+    class Bundle:
+        key = "map"
+
+    for store, model in ((wave_store, "idm"), (days["gipps"], "gipps")):
+        identity = _identity(EvalConfig(), store, Bundle())
+        assert identity["config"]["cosim"]["traffic"]["car_following"] == model
 
 
 def test_a_morning_without_waves_chooses_among_the_drivers_another_calibration_kept(

@@ -18,11 +18,12 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from twin.core.atomic import AtomicFolder, remove_stale
 from twin.core.locks import output_lock
+from twin.cosim.behaviour import with_car_following
 from twin.data.store import TrajectoryStore
 from twin.runners.dataset.assemble import assemble
 from twin.runners.dataset.config import (
@@ -88,6 +89,8 @@ def generate(
         raise DatasetError(f"--engine must be one of {ENGINES}, got {engine!r}")
     out = Path(out)
     config = resolved_renderer(config)
+    # auto: the model the store's calibration fitted, kept as such in config.toml
+    config = replace(config, cosim=with_car_following(config.cosim, store))
     bundle = bundle or default_map(progress=progress)
     specs = draw_episodes(config, store, bundle, episodes)
     claim_folder(out, config, store, bundle)  # checks --out before anything is made beside it
