@@ -247,9 +247,7 @@ def _sweep_of_an_urgent_semi(world, built_map, **settings):
     return max(reach), bool(record.lane[-1, 0] == -2)
 
 
-def test_a_long_vehicles_urgent_change_keeps_its_front_inside_the_target_lane(
-    kinematic, built_map
-):
+def test_a_long_vehicles_urgent_change_keeps_its_front_inside_the_target_lane(kinematic, built_map):
     # its shortest path is 2.5 of its lengths (51 m), not a car's 15 m: along that its
     # yawed front swept 0.46 m into lane -1
     reach, changed = _sweep_of_an_urgent_semi(kinematic, built_map)
@@ -280,3 +278,35 @@ def test_no_discretionary_change_into_a_lane_kept_out_of():
         _overtaker_kept_out([{"lane": -5, "x0": 0.0, "x1": 1.0}])
     with pytest.raises(ValueError, match="keep-out zone"):
         _overtaker_kept_out([{"lane": -2, "x0": 5.0, "x1": 1.0}])
+
+
+def _overtaker_beside_a_recording(gap, clearance=None):
+    """The lane the overtaker of :func:`_overtaker_kept_out` ends in with a recording
+    (an obstacle) in lane -2 ``gap`` [m] behind it at 15 m/s (it overtakes at 25 m/s, so
+    the recording would not have to brake for it); ``clearance``: the room
+    a change leaves in front of a recording (the cosimulation's spawn clearance)."""
+    from twin.traffic.scene import Obstacles
+
+    manager, params = point_mass_manager(np.full(2, -3), 0)
+    manager.add([0, 1], 1, -3, params, desired_speed=[30.0, 10.0])
+    if clearance is not None:
+        manager._settings[1] = manager._settings[1]._replace(
+            obstacle_clearance=clearance, obstacle_clearance_at_rest=0.3
+        )
+    # and one alongside it in lane -4, so that left is its only way past
+    ghost = Obstacles.make(1, [-2, -4], [100.0 - gap - 4.5, 100.0], 4.5, 15.0)
+    for _ in range(300):
+        states = point_states([0, 1], [100.0, 190.0], [-3, -3], [25.0, 10.0])
+        commands = manager.step(states, ghost)
+        if commands.changing[0]:
+            break
+    return int(commands.lane[0])
+
+
+def test_a_change_in_front_of_a_recording_leaves_it_the_room_to_be_made_a_body():
+    # a recording cannot brake for the change: it needs the room in which it can be made
+    # a simulated vehicle behind it (a ramp vehicle crossed 1.4 m ahead of one, slowed,
+    # and was run through); a driver would brake, so 1 m does for it
+    assert _overtaker_beside_a_recording(1.5) == -2  # the default: any new neighbour's 1 m
+    assert _overtaker_beside_a_recording(1.5, clearance=2.0) == -3
+    assert _overtaker_beside_a_recording(2.5, clearance=2.0) == -2

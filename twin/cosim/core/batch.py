@@ -145,8 +145,13 @@ class Shared:
         drive = config.traffic
         if drive.calibrated_yielding:
             drive = replace(drive, **beh.cooperation)
-        ts = traffic_settings(drive, mean, keep_out=zones, lane_ends=ends,
-                              controller=config.controller, action=action)  # fmt: skip
+        # a lane change in front of a recording leaves it a spawn's room, so that the
+        # recording can be made a body that brakes behind it
+        ts = traffic_settings(
+            drive, mean, keep_out=zones, lane_ends=ends, controller=config.controller,
+            action=action, obstacle_clearance=config.spawn_clearance,
+            obstacle_clearance_at_rest=config.spawn_clearance_at_rest,
+        )  # fmt: skip
         return cls(config, store, bundle, traffic, rec, params, beh, arrays, cs, ts, limits)
 
     def with_controllers(self, kind: int) -> "Shared":

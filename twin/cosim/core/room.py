@@ -7,10 +7,15 @@ braking of relaxing and of newly spawned bodies (:mod:`twin.cosim.core.settle`).
 import math
 
 from twin.core.jit import kernel
-from twin.traffic.kernels.longitudinal import cf, lane_end_gap, required_decel
+from twin.traffic.kernels.longitudinal import (  # noqa: F401 (spawn_room, CLEARANCE_SPEED: shared here)
+    CLEARANCE_SPEED,
+    cf,
+    lane_end_gap,
+    required_decel,
+    spawn_room,
+)
 from twin.traffic.kernels.neighbours import around
 
-CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
 #: [m/s^2] a recorded vehicle crowds a body ahead of it when closer than a spawn's room
 #: with the braking distances at this deceleration (it would have to brake harder)
 CROWD_DECEL = 2.0
@@ -19,16 +24,6 @@ CROWD_DECEL = 2.0
 #: creeping at 0.5 m/s into a standing body crossed in a step, from crowding it to too
 #: close to stop behind it (a contact: preset E, recorded)
 CROWD_AHEAD = 1.0
-
-
-@kernel(inline=True)
-def spawn_room(clearance, at_rest, decel, rear_speed, closing):
-    """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
-    ``at_rest`` for a rear vehicle at rest growing to ``clearance`` at CLEARANCE_SPEED,
-    plus the difference of braking distances at ``decel`` (``closing`` = v_rear^2 -
-    v_front^2; :func:`twin.cosim.cosimulator.spawn_room`)."""
-    share = min(max(rear_speed / CLEARANCE_SPEED, 0.0), 1.0)
-    return at_rest + share * (clearance - at_rest) + max(closing, 0.0) / (2.0 * decel)
 
 
 @kernel

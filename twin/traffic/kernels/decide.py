@@ -32,7 +32,7 @@ from twin.physics.vehicle import GRAVITY
 from twin.traffic.kernels import state
 from twin.traffic.kernels.controllers import acc_accel, follower_stopper_speed, speed_loop
 from twin.traffic.kernels.lane_change import change_lanes, expire
-from twin.traffic.kernels.longitudinal import cooperate, follow
+from twin.traffic.kernels.longitudinal import MIN_LANE_CHANGE_GAP, cooperate, follow
 from twin.traffic.kernels.models import MAX_ACCEL_COLUMN, MODEL_IDS
 from twin.traffic.kernels.neighbours import around, gather, sort_entries
 from twin.traffic.kernels.steering import finish_changes, steer
@@ -44,7 +44,7 @@ TrafficSettings = namedtuple(
     "lateral_gain path_preview max_lateral_accel cooperate_from yield_from cooperative_decel "
     "courtesy "
     "urgent_path "
-    "hov_openings keep_out lane_ends obstacle_cf "
+    "hov_openings keep_out lane_ends obstacle_cf obstacle_clearance obstacle_clearance_at_rest "
     "action_speed action_gain action_low action_high "
     "fs_desired fs_dx0 fs_decel fs_gain fs_max_accel fs_max_decel "
     "acc_desired acc_time_gap acc_min_gap acc_k1 acc_k2 acc_cruise_gain acc_max_accel "
@@ -54,7 +54,8 @@ TrafficSettings = namedtuple(
 
 def settings(
     config, obstacle_cf, *, keep_out=(), lane_ends=(), controller=None, action="accel",
-    action_range=(-3.0, 1.5), action_gain=1.0,
+    action_range=(-3.0, 1.5), action_gain=1.0, obstacle_clearance=MIN_LANE_CHANGE_GAP,
+    obstacle_clearance_at_rest=MIN_LANE_CHANGE_GAP,
 ) -> TrafficSettings:  # fmt: skip
     """The kernels' settings of a :class:`~twin.traffic.config.TrafficConfig`.
 
@@ -68,6 +69,11 @@ def settings(
             (default parameters where None).
         action: ``accel`` or ``speed``: what an ACTION vehicle's action is (a speed is
             tracked with ``action_gain`` [1/s] within ``action_range`` [m/s^2]).
+        obstacle_clearance, obstacle_clearance_at_rest: [m] the room a lane change
+            leaves in front of an obstacle (a recording, which does not brake for it) at
+            speed and at rest (:func:`~twin.traffic.kernels.longitudinal.room_behind`;
+            the cosimulation's spawn clearances, so that the recording can be made a
+            simulated vehicle behind it); by default the gap any new neighbour gets.
     """
     from twin.traffic.baselines import ControllerSettings
 
@@ -99,6 +105,8 @@ def settings(
         keep_out=zones.reshape(-1, 3),
         lane_ends=np.array(lane_ends, dtype=np.float64).reshape(-1, 2),
         obstacle_cf=np.asarray(obstacle_cf, dtype=np.float64),
+        obstacle_clearance=float(obstacle_clearance),
+        obstacle_clearance_at_rest=float(obstacle_clearance_at_rest),
         action_speed=action == "speed",
         action_gain=float(action_gain),
         action_low=float(action_range[0]),

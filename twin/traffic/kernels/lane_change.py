@@ -27,6 +27,7 @@ from twin.traffic.kernels.longitudinal import (
     accepted_decel,
     cf,
     lane_end_gap,
+    room_behind,
     urgency,
 )
 from twin.traffic.kernels.neighbours import around
@@ -224,7 +225,7 @@ def _choose(b, i, x, urge, t, n):
             and new_after >= -accepted
             and own_after >= -safe_decel
             and gap_ahead >= MIN_LANE_CHANGE_GAP
-            and gap_behind >= MIN_LANE_CHANGE_GAP
+            and gap_behind >= room_behind(t, b, n, t_behind, min(speed, v_ahead))
         )
         bias = drivers.keep_right[b, i] if step == RIGHT else -drivers.keep_right[b, i]
         others = (new_after - new_now) + (old_after - old_now)

@@ -53,6 +53,10 @@ MIN_SPEED_PATH = 5.0  # [m/s] lane-change paths are at least this speed times th
 MIN_ROOM = 0.1  # [m] the gap a cooperating driver judges when it overlaps the urgent one
 COURTESY_STREAM = np.int64(0x636F75)  # whether a driver is courteous: one draw per driver
 MIN_LANE_CHANGE_GAP = 1.0  # [m] bumper to bumper, to each of a lane change's new neighbours
+CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs the full clearance
+#: [s] a change in front of a recording leaves it also what it closes in this time (the
+#: cosimulation's crowding test looks as far ahead: the recording is made a body in time)
+ROOM_AHEAD = 1.0
 
 
 @kernel(inline=True)
@@ -180,6 +184,39 @@ def urgency(strategic, x_from, x_by, b, i, centre_x):
 
 
 @kernel(inline=True)
+def spawn_room(clearance, at_rest, decel, rear_speed, closing):
+    """[m] bumper-to-bumper room a spawn needs to a body in its lane: the clearance,
+    ``at_rest`` for a rear vehicle at rest growing to ``clearance`` at CLEARANCE_SPEED,
+    plus the difference of braking distances at ``decel`` (``closing`` = v_rear^2 -
+    v_front^2; :func:`twin.cosim.cosimulator.spawn_room`). The cosimulation's spawns and
+    hand-overs use it (:mod:`twin.cosim.core.room`), and so does a lane change in front
+    of an obstacle (:func:`room_behind`)."""
+    share = min(max(rear_speed / CLEARANCE_SPEED, 0.0), 1.0)
+    return at_rest + share * (clearance - at_rest) + max(closing, 0.0) / (2.0 * decel)
+
+
+@kernel(inline=True)
+def room_behind(t, b, n, back, speed):
+    """[m] the gap a lane change must leave in front of its new follower ``back``, the
+    changing vehicle to drive at ``speed`` [m/s] there (the lesser of its own and its
+    new leader's: it slows to the leader's): :data:`MIN_LANE_CHANGE_GAP` to a driver,
+    who brakes for it; to an obstacle (``back`` >= ``n``: a recording, which does not)
+    the room it needs to be made a simulated vehicle that brakes behind it once it
+    crowds the changing one: :func:`spawn_room` at the settings' ``obstacle_clearance``
+    and ``obstacle_clearance_at_rest`` with the difference of braking distances at
+    ``emergency_decel``, plus what it closes in :data:`ROOM_AHEAD`. Ramp vehicles that
+    started their change 1.4 and 2.0 m ahead of a recording, then slowed behind their
+    new leader, were run through (SUMO's on-ramp morning)."""
+    if back < n:
+        return MIN_LANE_CHANGE_GAP
+    s = t.settings
+    rear = t.scratch.sspeed[b, back]
+    room = spawn_room(s.obstacle_clearance, s.obstacle_clearance_at_rest, s.emergency_decel,
+                      rear, rear * rear - speed * speed)  # fmt: skip
+    return max(room + ROOM_AHEAD * max(rear - speed, 0.0), MIN_LANE_CHANGE_GAP)
+
+
+@kernel(inline=True)
 def yields(seed, key, urge, yield_from, courtesy):
     """Whether the driver of ``key`` drops back for an urgent change of urgency
     ``urge``: from ``yield_from``, if it is courteous (a share ``courtesy``, one draw
@@ -202,11 +239,13 @@ def accepted_decel(safe_decel, urge, emergency_decel):
 @kernel(inline=True)
 def takes(t, b, n, i, behind, urge, x, speed):
     """Whether urgent driver ``i`` at back ``x`` [m] and ``speed`` [m/s] could change in
-    front of ``behind`` now as it is: the gap to it at least
-    :data:`MIN_LANE_CHANGE_GAP` and its braking behind ``i`` no harder than the lane
+    front of ``behind`` now as it is: the gap to it at least :func:`room_behind` and its
+    braking behind ``i`` no harder than the lane
     change's test accepts at urgency ``urge`` (:mod:`twin.traffic.kernels.lane_change`)."""
     gap = x - t.scratch.sx[b, behind] - t.scratch.slength[b, behind]
-    return gap >= MIN_LANE_CHANGE_GAP and accepts(t, b, n, i, behind, urge, speed, gap)
+    return gap >= room_behind(t, b, n, behind, speed) and accepts(
+        t, b, n, i, behind, urge, speed, gap
+    )
 
 
 @kernel(inline=True)
@@ -237,6 +276,8 @@ def opening(t, b, n, i, front, back, urge, seed, yield_from, courtesy):
     # in the middle of it, at its front's speed: its own braking behind the front as the
     # change's test asks of it
     v = sc.sspeed[b, front]
+    if 0.5 * gap < room_behind(t, b, n, back, v):
+        return False
     own = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, i, v, v, 0.5 * gap)
     if own < -t.drivers.safe_decel[b, i]:
         return False
