@@ -21,9 +21,9 @@ Why a replay of drawn drivers, not the fit's own residual: a model is fitted on 
 followers that stop and go, and its drivers then drive the whole window, calm stretches
 included. On a lane-drop morning made by SUMO's Krauss drivers (a Gipps variant) in free
 flow, IDM's drivers, whose equilibrium gap near their desired speed is twice their
-desired gap, fall back from their leaders (pooled spacing RMSE 46 m against Gipps' 30 m;
-median run 24 m against 3 m) and the calibrated twin's ego ended 79 m off its
-recording with IDM, 11 m with Gipps. On mornings made by the synthesiser's IDM drivers
+desired gap, fall back from their leaders (median run 23 m against Gipps' 4 m) and the
+calibrated twin's ego ended 77 m off its recording with IDM, 11 m with Gipps (medians,
+physics world). On mornings made by the synthesiser's IDM drivers
 the replay keeps IDM. The figures are in ``docs/calibration.md``.
 """
 

@@ -52,6 +52,7 @@ from twin.core.errors import TwinError
 from twin.core.i24 import Road
 from twin.data.store import TrajectoryStore
 from twin.traffic.models import AUTO as AUTO_MODEL
+from twin.traffic.models import UNCALIBRATED
 
 BEHAVIOURS = ("paper", "calibrated", "recorded")
 AUTO = "auto"
@@ -89,11 +90,13 @@ def car_following_of(name: str, store: TrajectoryStore, behaviour: str, road: Ro
     calibration of the road fitted (``twin calibrate`` chooses the one that replays the
     recording best) where the behaviour drives calibrated drivers, else ``idm`` (the
     paper's drivers; ``paper`` never reads the calibration); others are themselves."""
-    if name != AUTO_MODEL or behaviour == "paper":
-        return "idm" if name == AUTO_MODEL else name
+    if name != AUTO_MODEL:
+        return name
+    if behaviour == "paper":
+        return UNCALIBRATED
     doc = read_calibration(store)
     if doc is None or Road.parse(road).value not in doc["roads"]:
-        return "idm"
+        return UNCALIBRATED
     return calibration_model(doc).name
 
 

@@ -41,7 +41,7 @@ from twin.traffic.kernels import state
 from twin.traffic.kernels.decide import decide_from_python
 from twin.traffic.kernels.decide import settings as kernel_settings
 from twin.traffic.kernels.models import N_PARAMS
-from twin.traffic.models import AUTO, car_following_model
+from twin.traffic.models import AUTO, UNCALIBRATED, car_following_model
 from twin.traffic.scene import NO_OBSTACLES, Commands, Obstacles
 
 ROADS = (-1, 1)  # the kernels' episode of each carriageway: row 0 westbound, row 1 eastbound
@@ -59,7 +59,7 @@ class TrafficManager:
 
     def __init__(self, config: TrafficConfig, road_heading: dict[int, float]):
         if config.car_following == AUTO:  # no store here, so no calibration to follow
-            config = replace(config, car_following="idm")
+            config = replace(config, car_following=UNCALIBRATED)
         self.config = config
         self.model = car_following_model(config.car_following)
         self.rng = np.random.default_rng(config.seed)

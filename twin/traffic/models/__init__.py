@@ -15,6 +15,7 @@ __all__ = [
     "IDM",
     "MODELS",
     "TEXTBOOK_IDM",
+    "UNCALIBRATED",
     "CarFollowingModel",
     "car_following_model",
 ]
@@ -26,6 +27,9 @@ MODELS: dict[str, CarFollowingModel] = {m.name: m for m in (IDM, TEXTBOOK_IDM, G
 #: and ``twin calibrate --model``'s, the model that replays the recording best
 #: (:mod:`twin.calibration.model_choice`).
 AUTO = "auto"
+#: What :data:`AUTO` stands for where there is no calibration to follow (the paper's
+#: drivers, a store without one, a manager without a store).
+UNCALIBRATED = IDM.name
 
 
 def car_following_model(name: str) -> CarFollowingModel:
