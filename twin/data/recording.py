@@ -113,6 +113,18 @@ def replay(rec, r, t):
     return True, xa + w * (xb - xa), float(y), max(float(v), 0.0)
 
 
+@kernel(inline=True)
+def mean_accel(rec, r, t, span):
+    """[m/s^2] trajectory ``r``'s mean acceleration over the ``span`` [s] from unix
+    time ``t`` (its speed's change over the span), or 0 where it is absent at either
+    end (a recording that ends soon foresees nothing)."""
+    here, _, _, v0 = replay(rec, r, t)
+    there, _, _, v1 = replay(rec, r, t + span)
+    if not (here and there) or span <= 0.0:
+        return 0.0
+    return (v1 - v0) / span
+
+
 @kernel
 def window(rec, t, x_lo, x_hi, out_r, out_x, out_y, out_v):
     """The trajectories present at ``t`` [s] with ``x_lo <= x <= x_hi`` [m], sorted by x:

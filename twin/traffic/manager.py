@@ -499,7 +499,7 @@ class TrafficManager:
         count = np.array([k.size for k in by_road], np.int64)
         ob = state.Obstacles(
             count=count, lane=np.zeros((rows, g), np.int64), x=np.zeros((rows, g)),
-            length=np.zeros((rows, g)), speed=np.zeros((rows, g)),
+            length=np.zeros((rows, g)), speed=np.zeros((rows, g)), accel=np.zeros((rows, g)),
         )  # fmt: skip
         self._obstacle_y = np.zeros((rows, g))
         for b, index in enumerate(by_road):
@@ -507,6 +507,7 @@ class TrafficManager:
             k = order.size
             ob.lane[b, :k], ob.x[b, :k] = obstacles.lane[order], obstacles.x[order]
             ob.length[b, :k], ob.speed[b, :k] = obstacles.length[order], obstacles.speed[order]
+            ob.accel[b, :k] = obstacles.accel[order]
             self._obstacle_y[b, :k] = (0.5 - obstacles.lane[order]) * LANE_WIDTH
         scratch = self._scratch_for(n, g)
         return state.Traffic(vehicles, ob, self._d, scratch, None, self._counters,

@@ -280,11 +280,12 @@ def test_no_discretionary_change_into_a_lane_kept_out_of():
         _overtaker_kept_out([{"lane": -2, "x0": 5.0, "x1": 1.0}])
 
 
-def _overtaker_beside_a_recording(gap, clearance=None):
+def _overtaker_beside_a_recording(gap, clearance=None, accel=0.0):
     """The lane the overtaker of :func:`_overtaker_kept_out` ends in with a recording
     (an obstacle) in lane -2 ``gap`` [m] behind it at 15 m/s (it overtakes at 25 m/s, so
     the recording would not have to brake for it); ``clearance``: the room
-    a change leaves in front of a recording (the cosimulation's spawn clearance)."""
+    a change leaves in front of a recording (the cosimulation's spawn clearance);
+    ``accel`` [m/s^2]: the recording's acceleration (its recorded one, to come)."""
     from twin.traffic.scene import Obstacles
 
     manager, params = point_mass_manager(np.full(2, -3), 0)
@@ -294,7 +295,7 @@ def _overtaker_beside_a_recording(gap, clearance=None):
             obstacle_clearance=clearance, obstacle_clearance_at_rest=0.3
         )
     # and one alongside it in lane -4, so that left is its only way past
-    ghost = Obstacles.make(1, [-2, -4], [100.0 - gap - 4.5, 100.0], 4.5, 15.0)
+    ghost = Obstacles.make(1, [-2, -4], [100.0 - gap - 4.5, 100.0], 4.5, 15.0, [accel, 0.0])
     for _ in range(300):
         states = point_states([0, 1], [100.0, 190.0], [-3, -3], [25.0, 10.0])
         commands = manager.step(states, ghost)
@@ -310,3 +311,13 @@ def test_a_change_in_front_of_a_recording_leaves_it_the_room_to_be_made_a_body()
     assert _overtaker_beside_a_recording(1.5) == -2  # the default: any new neighbour's 1 m
     assert _overtaker_beside_a_recording(1.5, clearance=2.0) == -3
     assert _overtaker_beside_a_recording(2.5, clearance=2.0) == -2
+
+
+def test_a_change_in_front_of_a_recording_foresees_it_speeding_up():
+    # a ramp vehicle left a recording at 9.9 m/s the 2.0 m that speed asked for; the
+    # recording went on speeding up at 0.6 m/s^2 and ran into it (SUMO's on-ramp
+    # morning): a recording is judged at the speed it reaches FORESEEN (3 s) later
+    assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=3.0) == -2  # 24 < 25 m/s
+    assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=4.0) == -3  # 27 > 25 m/s
+    assert _overtaker_beside_a_recording(20.0, clearance=2.0, accel=4.0) == -2  # room for it
+    assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=-3.0) == -2  # braking

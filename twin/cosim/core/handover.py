@@ -29,10 +29,11 @@ from twin.cosim.core.layout import (
     WAITING,
 )
 from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room
-from twin.data.recording import replay, window
+from twin.data.recording import mean_accel, replay, window
 from twin.physics.kernels import keep_sorted, place
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import clear_target
+from twin.traffic.kernels.longitudinal import FORESEEN
 from twin.traffic.kernels.steering import centre_y
 
 LATERAL_MARGIN = 0.5  # [m] two bodies closer than their half widths plus this share a lane
@@ -640,6 +641,8 @@ def enter_and_reload(b, core):
         gr[b, count], glane[b, count] = r, lane
         gx[b, count], gy[b, count] = sx[b, k], sy[b, k]
         gspeed[b, count], glength[b, count] = sspeed[b, k], length
+        # what its recording does next, for a lane change in front of it to foresee
+        gh.accel[b, count] = mean_accel(rec, r, t, FORESEEN)
         h = entry(keys, flags, tslot, b, r, np.bool_(True))
         if h >= 0:
             flags[b, h] = (flags[b, h] | GHOST) & ~HELD

@@ -55,7 +55,7 @@ Episodes = namedtuple(
     "follower_count overflow",
 )
 TidTable = namedtuple("TidTable", "key flags slot drawn")
-Ghosts = namedtuple("Ghosts", "count r lane x y speed length")
+Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel")
 Snapshot = namedtuple("Snapshot", "count r x y speed")
 Log = namedtuple(
     "Log",
@@ -146,6 +146,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
     ghosts = Ghosts(
         count=zeros.copy(), r=np.zeros((b, g), np.int64), lane=np.zeros((b, g), np.int64),
         x=np.zeros((b, g)), y=np.zeros((b, g)), speed=np.zeros((b, g)), length=np.zeros((b, g)),
+        accel=np.zeros((b, g)),
     )  # fmt: skip
     snap = Snapshot(
         count=zeros.copy(), r=np.zeros((b, s), np.int32), x=np.zeros((b, s)),
@@ -182,7 +183,9 @@ def vehicles(bo) -> traffic.Vehicles:
 
 def obstacles(g: Ghosts) -> traffic.Obstacles:
     """The traffic kernels' view of the ghosts (the same arrays)."""
-    return traffic.Obstacles(count=g.count, lane=g.lane, x=g.x, length=g.length, speed=g.speed)
+    return traffic.Obstacles(
+        count=g.count, lane=g.lane, x=g.x, length=g.length, speed=g.speed, accel=g.accel
+    )
 
 
 def pack(state: State, settings, traffic_settings, rec, params, beh) -> "CoreStruct":

@@ -57,6 +57,11 @@ CLEARANCE_SPEED = 5.0  # [m/s] from this speed of the rear vehicle a spawn needs
 #: [s] a change in front of a recording leaves it also what it closes in this time (the
 #: cosimulation's crowding test looks as far ahead: the recording is made a body in time)
 ROOM_AHEAD = 1.0
+#: [s] a change in front of a recording judges it at the speed it reaches this much later
+#: where it speeds up (its recorded acceleration, ``Obstacles.accel``): half the longest
+#: change, by when the changer is in the recording's lane and, braking behind its new
+#: leader, slower than it may have been when it began
+FORESEEN = 3.0
 
 
 @kernel(inline=True)
@@ -204,13 +209,16 @@ def room_behind(t, b, n, back, speed):
     the room it needs to be made a simulated vehicle that brakes behind it once it
     crowds the changing one: :func:`spawn_room` at the settings' ``obstacle_clearance``
     and ``obstacle_clearance_at_rest`` with the difference of braking distances at
-    ``emergency_decel``, plus what it closes in :data:`ROOM_AHEAD`. Ramp vehicles that
-    started their change 1.4 and 2.0 m ahead of a recording, then slowed behind their
-    new leader, were run through (SUMO's on-ramp morning)."""
+    ``emergency_decel``, plus what it closes in :data:`ROOM_AHEAD`, the recording judged
+    at the speed it will reach :data:`FORESEEN` seconds on where it speeds up. Ramp
+    vehicles that started their change 1.4 and 2.0 m ahead of a recording, then slowed
+    behind their new leader, were run through (SUMO's on-ramp morning); so was one that
+    left a recording then at 9.9 m/s the 2.0 m its speed asked for, which went on
+    speeding up to 11.2 m/s."""
     if back < n:
         return MIN_LANE_CHANGE_GAP
     s = t.settings
-    rear = t.scratch.sspeed[b, back]
+    rear = t.scratch.sspeed[b, back] + max(t.obstacles.accel[b, back - n], 0.0) * FORESEEN
     room = spawn_room(s.obstacle_clearance, s.obstacle_clearance_at_rest, s.emergency_decel,
                       rear, rear * rear - speed * speed)  # fmt: skip
     return max(room + ROOM_AHEAD * max(rear - speed, 0.0), MIN_LANE_CHANGE_GAP)

@@ -11,7 +11,10 @@ while the vehicles' ``valid`` is true.
   look no further); ``x`` [m] back centre and ``y`` [m] in the road frame; ``yaw``
   [rad] against the direction of travel; ``speed`` [m/s]; ``lane``, the lane the body
   is in (0 off the lanes); ``length``, ``width``, ``wheelbase`` [m]; ``mu``, the tyres' grip.
-* ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``.
+* ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``,
+  ``accel`` [m/s^2] (a recording's: its mean over the next
+  :data:`~twin.traffic.kernels.longitudinal.FORESEEN` seconds, what a lane change in
+  front of it foresees).
 * ``Drivers`` (B, N): the traffic manager's state of each vehicle (module
   :mod:`twin.traffic.kernels.decide` says what each field is); ``mandatory``, whether
   the driver's last lane change was one it had to make (toward its strategic target,
@@ -33,7 +36,7 @@ from twin.traffic.kernels.models import N_PARAMS
 from twin.traffic.kernels.neighbours import N_GROUPS
 
 Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length width wheelbase mu")
-Obstacles = namedtuple("Obstacles", "count lane x length speed")
+Obstacles = namedtuple("Obstacles", "count lane x length speed accel")
 Drivers = namedtuple(
     "Drivers",
     "key cf politeness threshold safe_decel keep_right hov_eligible auto lane lane_from "
