@@ -98,11 +98,11 @@ class CalibrationSettings:
             bias); the threshold is fitted.
         decision_every: [s] how often the recorded scenes are judged by MOBIL (the
             traffic manager's mean decision interval).
-        threshold_drivers: who MOBIL's threshold is fitted with: ``median``, one median
-            calibrated driver for every recorded vehicle; ``drawn``, one driver per
-            vehicle drawn from the calibrated distribution, as the twin draws its own
-            (:func:`~twin.calibration.lane_changes.drawn_drivers`; a road whose car
-            following was not calibrated keeps ``median``).
+        threshold_drivers: who MOBIL's threshold is fitted with: ``drawn`` (the
+            default), one driver per vehicle drawn from the calibrated distribution, as
+            the twin draws its own (:func:`~twin.calibration.lane_changes.drawn_drivers`;
+            a road whose car following was not calibrated keeps ``median``);
+            ``median``, one median calibrated driver for every recorded vehicle.
     """
 
     min_run: float = 20.0
@@ -111,7 +111,7 @@ class CalibrationSettings:
     min_fits: int = 10
     mobil: MOBILParams = field(default_factory=MOBILParams)
     decision_every: float = 1.0
-    threshold_drivers: str = "median"
+    threshold_drivers: str = "drawn"
 
     def __post_init__(self):
         if self.threshold_drivers not in THRESHOLD_DRIVERS:
