@@ -8,7 +8,7 @@ calibrated run draws its drivers from. The choice replays every following run of
 window (:func:`~twin.calibration.following.following_runs`, not only those that crossed
 a wave, which the fit needs): each follower gets a driver drawn from the candidate's
 distributions, with its desired speed from where the twin takes it
-(:func:`~twin.calibration.distributions.desired_speed_source`), and is driven behind its
+(:func:`~twin.calibration.distributions.draw_desired`), and is driven behind its
 recorded leader. The score is the median over the runs of each run's spacing RMSE: the typical
 follower, as the fit's quality is its median NRMSE. Not the error pooled over every
 step: a few drawn drivers whose desired speed the fits left loose fall back by hundreds
@@ -35,7 +35,7 @@ from twin.calibration.car_following import replay
 from twin.calibration.distributions import (
     ParameterDistribution,
     desired_speed_source,
-    draw_desired_speeds,
+    draw_desired,
     draw_parameters,
 )
 from twin.calibration.following import FollowingRuns
@@ -97,8 +97,9 @@ def replay_score(
         return ReplayScore(0, 0, 0.0, np.zeros(0), np.zeros(0))
     rng = np.random.default_rng([seed, SEED_STREAM])
     params = draw_parameters(distributions, runs.vehicle_class, rng)
-    if desired_speed_source(speeds, car_following, True) == "free_flow":
-        params[:, names.index("desired_speed")] = draw_desired_speeds(speeds, runs.lane, rng)
+    k = names.index("desired_speed")
+    source = desired_speed_source(speeds, car_following, True)
+    params[:, k] = draw_desired(speeds, source, params[:, k], runs.lane, rng)
     valid = runs.valid
     error = np.where(valid, replay(runs, params, model) - runs.gap, 0.0)
     steps = valid.sum(axis=1)

@@ -44,6 +44,7 @@ from twin.calibration.calibrate import calibration_model, read_calibration, read
 from twin.calibration.distributions import (
     ParameterDistribution,
     desired_speed_source,
+    draw_desired,
     draw_desired_speeds,
     draw_parameters,
 )
@@ -259,8 +260,11 @@ class Behaviour:
             for j, name in enumerate(names):
                 if name != "desired_speed":
                     out[name] = params[:, j]
-            if self.speed_source == "car_following":
-                out["desired_speed"] = params[:, names.index("desired_speed")]
+            if self.speed_source == "car_following":  # a lane's own free flow aside
+                fitted = params[:, names.index("desired_speed")]
+                drawn = draw_desired(self.speeds, self.speed_source, fitted, lane, self.rng)
+                own = np.isin(tid, self._fits.index.to_numpy()) if self._fits is not None else None
+                out["desired_speed"] = np.where(own, fitted, drawn) if own is not None else drawn
         if self.speed_source == "free_flow":
             out["desired_speed"] = draw_desired_speeds(self.speeds, lane, self.rng)
         if self.threshold is not None:

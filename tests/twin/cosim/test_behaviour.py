@@ -177,3 +177,38 @@ def test_a_gipps_calibration_drives_gipps_drivers_and_names_the_model_it_needs(
         assert len(sim.counters.collisions) == 0
     finally:
         sim.close()
+
+
+def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, built_map, tmp_path):
+    # the fits identify more desired speeds than free flow does (a congested morning),
+    # but lane -2's free drivers were seen at 17 m/s: its drivers want that, the other
+    # lanes' the fitted speeds (on SUMO's on-ramp morning the fits said 40.8 m/s where
+    # the HOV lane's free drivers drove 29.3, and its speed field was 4.9 m/s off)
+    import json
+    import shutil
+
+    folder = tmp_path / "store"
+    shutil.copytree(calibrated_store.path, folder)
+    path = folder / "calibration.json"
+    doc = json.loads(path.read_text())
+    road = doc["roads"]["westbound"]
+    road["car_following"]["desired_speed_identified"] = 1000
+    free = {"count": 12, "mean": 17.0, "sd": 0.1, "p10": 16.9, "p50": 17.0, "p90": 17.1}
+    road["desired_speed"] = {"all": free, "-2": free}
+    path.write_text(json.dumps(doc))
+    sim = _episode(TrajectoryStore(folder), built_map, "calibrated", seconds=0.1)
+    try:
+        assert sim.behaviour.speed_source == "car_following"
+        ids = sim.manager.ids
+        base = sim.base_speeds(ids)
+        lanes, changing = sim.manager.lanes(ids), sim.manager.changing(ids)
+        in_2, others = (lanes == -2) & ~changing, (lanes != -2) & ~changing  # as spawned
+        assert in_2.any() and others.any()
+        assert np.all(np.abs(base[in_2] - 17.0) <= 0.2 + 1e-9)  # within 2 sd
+        assert np.all(np.abs(base[others] - 17.0) > 0.2)  # the fits' (calibrated at 25+)
+        # the reference draw says the same
+        drawn = sim.behaviour.drivers(np.arange(4), np.zeros(4, int), np.array([-2, -2, -3, -1]))
+        assert np.all(np.abs(drawn["desired_speed"][:2] - 17.0) <= 0.2 + 1e-9)
+        assert np.all(np.abs(drawn["desired_speed"][2:] - 17.0) > 0.2)
+    finally:
+        sim.close()

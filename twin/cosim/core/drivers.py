@@ -64,7 +64,7 @@ BehaviourArrays = namedtuple(
     "v0_scale time_headway_scale max_accel_scale hov_share decision_interval auto "
     "politeness threshold safe_decel keep_right dist_on dist_have dist_mean dist_matrix "
     "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
-    "lane_speed_sd fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes flow_states "
+    "lane_speed_sd lane_speed_own fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes flow_states "
     "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x",
 )
 
@@ -144,12 +144,12 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
     desired speed [m/s] (:meth:`twin.cosim.behaviour.Behaviour.drivers`)."""
     beh, drivers, vel_default = core.beh, core.traffic.drivers, core.settings.vel_default
     desired = vel_default
+    own = beh.mode == RECORDED and beh.fit_ok[r]  # its own fit (recorded)
     if beh.dist_on:
         group = beh.class_group[c]
         if not beh.dist_have[group]:
             group = 0
         k = beh.dist_columns.size
-        own = beh.mode == RECORDED and beh.fit_ok[r]
         for d in range(k):
             if own:
                 value = beh.fits[r, d]
@@ -164,8 +164,11 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
                     desired = value
             else:
                 drivers.cf[b, i, beh.dist_columns[d]] = value
-    if beh.speed_source == 1:
-        k = min(-lane - 1, 3)  # an on-ramp's driver: lane -4's
+    k = min(-lane - 1, 3)  # an on-ramp's driver: lane -4's
+    # free-flow speeds: every lane's, or, where desired speeds come from the fits, those
+    # of a lane with free-flow speeds of its own (a drawn driver's, not a vehicle's own fit)
+    drawn_fit = beh.speed_source == 2 and not own
+    if beh.speed_source == 1 or (drawn_fit and beh.lane_speed_own[k]):
         z = _z(seed, SPEED_STREAM, key, np.int64(0))
         desired = max(beh.lane_speed_mean[k] + beh.lane_speed_sd[k] * z, 1.0)
     return desired
@@ -505,11 +508,12 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
     if mode == PAPER:
         source = 0
     speeds = behaviour.speeds or {}
-    lane_mean, lane_sd = np.zeros(4), np.zeros(4)
+    lane_mean, lane_sd, lane_own = np.zeros(4), np.zeros(4), np.zeros(4, bool)
     for j, lane in enumerate((-1, -2, -3, -4)):
         entry = speeds.get(str(lane)) or speeds.get("all")
         if entry:
             lane_mean[j], lane_sd[j] = entry["mean"], entry["sd"]
+        lane_own[j] = str(lane) in speeds
     fits, fit_ok = np.zeros((recording.tid.size, k)), np.zeros(recording.tid.size, bool)
     if behaviour._fits is not None and len(behaviour._fits):
         table = behaviour._fits
@@ -549,7 +553,8 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         dist_matrix=matrix, dist_low=low, dist_high=high,
         dist_columns=np.array([names.index(f) for f in fitted], np.int64),
         desired_dim=fitted.index("desired_speed"), speed_source=source,
-        lane_speed_mean=lane_mean, lane_speed_sd=lane_sd, fits=fits, fit_ok=fit_ok,
+        lane_speed_mean=lane_mean, lane_speed_sd=lane_sd, lane_speed_own=lane_own, fits=fits,
+        fit_ok=fit_ok,
         flows_on=flows is not None, flow_edges=edges, flow_left=left, flow_right=right,
         flow_lanes=lanes, flow_states=states, plan_start=plan["start"], plan_x=plan["x"],
         plan_time=plan["time"], plan_from=plan["lane_from"], plan_to=plan["lane_to"],
