@@ -190,7 +190,8 @@ def draw_desired(speeds: dict, source: str, fitted: np.ndarray, lane: np.ndarray
     if source == "free_flow":
         return draw_desired_speeds(speeds, lane, rng)
     out = np.array(fitted, dtype=np.float64)
-    own = np.isin(lane, [int(k) for k in speeds if k != "all"])
+    as_lane = -np.minimum(-lane - 1, len(LANES) - 1) - 1  # an on-ramp's driver: lane -4
+    own = np.isin(as_lane, [int(k) for k in speeds if k != "all"])
     if source == "car_following" and own.any():
         out[own] = draw_desired_speeds(speeds, lane[own], rng)
     return out

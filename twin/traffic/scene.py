@@ -13,7 +13,11 @@ class Obstacles:
     """Vehicles the manager does not drive but its drivers must respect (the ghosts).
 
     Struct-of-arrays (k,): ``road`` directions, ``lane`` ids, ``x`` [m] back centre,
-    ``length`` [m], ``speed`` [m/s] and ``accel`` [m/s^2] along the road.
+    ``length`` [m], ``speed`` [m/s] and ``accel`` [m/s^2] along the road: what the
+    obstacle will do, its mean acceleration over the next
+    :data:`~twin.traffic.kernels.longitudinal.FORESEEN` seconds (a lane change in front
+    of it judges it at the speed it reaches then, where it speeds up), or its
+    acceleration now where nothing better is known.
     """
 
     road: np.ndarray

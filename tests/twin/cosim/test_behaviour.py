@@ -210,5 +210,12 @@ def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, b
         drawn = sim.behaviour.drivers(np.arange(4), np.zeros(4, int), np.array([-2, -2, -3, -1]))
         assert np.all(np.abs(drawn["desired_speed"][:2] - 17.0) <= 0.2 + 1e-9)
         assert np.all(np.abs(drawn["desired_speed"][2:] - 17.0) > 0.2)
+        # an on-ramp's driver (lane -5) takes lane -4's, as the compiled draw does
+        from twin.calibration.distributions import draw_desired
+
+        speeds = {"all": free, "-4": free}
+        lanes = np.array([-4, -5, -3])
+        ramp = draw_desired(speeds, "car_following", np.full(3, 40.0), lanes, np.random.default_rng(0))
+        assert np.all(np.abs(ramp[:2] - 17.0) <= 0.2 + 1e-9) and ramp[2] == 40.0
     finally:
         sim.close()

@@ -320,4 +320,6 @@ def test_a_change_in_front_of_a_recording_foresees_it_speeding_up():
     assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=3.0) == -2  # 24 < 25 m/s
     assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=4.0) == -3  # 27 > 25 m/s
     assert _overtaker_beside_a_recording(20.0, clearance=2.0, accel=4.0) == -2  # room for it
-    assert _overtaker_beside_a_recording(2.5, clearance=2.0, accel=-3.0) == -2  # braking
+    # one braking is judged at its speed now, not at the crawl it will reach (where the
+    # room at rest, 0.3 m, would let the change in 1.5 m ahead of it)
+    assert _overtaker_beside_a_recording(1.5, clearance=2.0, accel=-5.0) == -3
