@@ -190,8 +190,7 @@ def draw_desired(speeds: dict, source: str, fitted: np.ndarray, lane: np.ndarray
     if source == "free_flow":
         return draw_desired_speeds(speeds, lane, rng)
     out = np.array(fitted, dtype=np.float64)
-    as_lane = -np.minimum(-lane - 1, len(LANES) - 1) - 1  # an on-ramp's driver: lane -4
-    own = np.isin(as_lane, [int(k) for k in speeds if k != "all"])
+    own = np.isin(_lane_row(lane), [-int(k) - 1 for k in speeds if k != "all"])
     if source == "car_following" and own.any():
         out[own] = draw_desired_speeds(speeds, lane[own], rng)
     return out
@@ -206,5 +205,10 @@ def draw_desired_speeds(speeds: dict, lane: np.ndarray, rng) -> np.ndarray:
     summary = {k: speeds.get(str(k)) or speeds["all"] for k in LANES}
     mean = np.array([summary[k]["mean"] for k in LANES])
     sd = np.array([summary[k]["sd"] for k in LANES])
-    at = np.minimum(-np.asarray(lane, dtype=np.int64) - 1, len(LANES) - 1)
+    at = _lane_row(lane)
     return np.maximum(mean[at] + sd[at] * z, 1.0)
+
+
+def _lane_row(lane) -> np.ndarray:
+    """Index into LANES of each ``lane`` (an on-ramp's driver, lane -5: lane -4's)."""
+    return np.minimum(-np.asarray(lane, dtype=np.int64) - 1, len(LANES) - 1)

@@ -252,6 +252,7 @@ class Behaviour:
         if self.distributions:
             names = next(iter(self.distributions.values())).names
             params = draw_parameters(self.distributions, vehicle_class, self.rng)
+            own = np.zeros(n, bool)  # vehicles with a fit of their own (recorded)
             if self._fits is not None:
                 own = np.isin(tid, self._fits.index.to_numpy())
                 if own.any():
@@ -263,8 +264,7 @@ class Behaviour:
             if self.speed_source == "car_following":  # a lane's own free flow aside
                 fitted = params[:, names.index("desired_speed")]
                 drawn = draw_desired(self.speeds, self.speed_source, fitted, lane, self.rng)
-                own = np.isin(tid, self._fits.index.to_numpy()) if self._fits is not None else None
-                out["desired_speed"] = np.where(own, fitted, drawn) if own is not None else drawn
+                out["desired_speed"] = np.where(own, fitted, drawn)
         if self.speed_source == "free_flow":
             out["desired_speed"] = draw_desired_speeds(self.speeds, lane, self.rng)
         if self.threshold is not None:

@@ -118,11 +118,11 @@ def mean_accel(rec, r, t, span):
     """[m/s^2] trajectory ``r``'s mean acceleration over the ``span`` [s] from unix
     time ``t`` (its speed's change over the span), or 0 where it is absent at either
     end (a recording that ends soon foresees nothing)."""
+    if span <= 0.0:
+        return 0.0
     here, _, _, v0 = replay(rec, r, t)
     there, _, _, v1 = replay(rec, r, t + span)
-    if not (here and there) or span <= 0.0:
-        return 0.0
-    return (v1 - v0) / span
+    return (v1 - v0) / span if here and there else 0.0
 
 
 @kernel

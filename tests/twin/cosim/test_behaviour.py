@@ -215,7 +215,8 @@ def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, b
 
         speeds = {"all": free, "-4": free}
         lanes = np.array([-4, -5, -3])
-        ramp = draw_desired(speeds, "car_following", np.full(3, 40.0), lanes, np.random.default_rng(0))
+        rng = np.random.default_rng(0)
+        ramp = draw_desired(speeds, "car_following", np.full(3, 40.0), lanes, rng)
         assert np.all(np.abs(ramp[:2] - 17.0) <= 0.2 + 1e-9) and ramp[2] == 40.0
     finally:
         sim.close()

@@ -64,7 +64,8 @@ BehaviourArrays = namedtuple(
     "v0_scale time_headway_scale max_accel_scale hov_share decision_interval auto "
     "politeness threshold safe_decel keep_right dist_on dist_have dist_mean dist_matrix "
     "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
-    "lane_speed_sd lane_speed_own fits fit_ok flows_on flow_edges flow_left flow_right flow_lanes flow_states "
+    "lane_speed_sd lane_speed_own fits fit_ok flows_on flow_edges flow_left flow_right "
+    "flow_lanes flow_states "
     "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x",
 )
 
