@@ -98,6 +98,11 @@ def register(commands) -> None:
         "(default) or its own previous command",
     )  # fmt: skip
     p.add_argument(
+        "--time-gap-p90-max", type=float, default=4.0,
+        help="es: [s] the time gap p90 the score penalises a run over (default 4, the "
+        "target; lower asks for a margin)",
+    )  # fmt: skip
+    p.add_argument(
         "--start", type=Path, default=None,
         help="es: a policy file whose weights the training starts from (default: none, drawn "
         "weights that follow the leader)",
@@ -167,7 +172,7 @@ def _evolve(args) -> int:
         heldout_episodes=args.heldout_episodes, obs_noise=args.obs_noise,
         latency_steps=args.latency_steps, smoothing=args.smoothing, jerk_from=args.jerk_from,
         start=args.start, data=str(args.data or "embedded:morning"),
-        also=tuple(args.also_data), seed=args.seed,
+        also=tuple(args.also_data), seed=args.seed, time_gap_p90_max=args.time_gap_p90_max,
     )  # fmt: skip
     policy = evolve(args.out, config, progress=not args.quiet)
     print(

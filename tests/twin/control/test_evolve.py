@@ -28,6 +28,19 @@ def test_the_score_is_the_economy_less_each_target_missed():
     assert score(_figures(safety_pct=1.0))[0] == pytest.approx(1.0)
 
 
+def test_a_training_may_ask_for_a_margin_under_the_time_gap_target():
+    """A lower time_gap_p90_max penalises a run inside the 4 s target; the default
+    settings still resume trainings made before the setting existed."""
+    from twin.control.evolve import _settings
+
+    assert score(_figures(time_gap_p90_s=3.8), 3.5)[0] == pytest.approx(3.0 - 20.0 * 0.3)
+    assert score(_figures(time_gap_p90_s=3.8))[0] == pytest.approx(3.0)
+    assert "time_gap_p90_max" not in _settings(EvolveConfig())
+    assert _settings(EvolveConfig(time_gap_p90_max=3.5))["time_gap_p90_max"] == 3.5
+    with pytest.raises(TrainingError, match="time_gap_p90_max must be a positive number"):
+        EvolveConfig(time_gap_p90_max=float("nan"))
+
+
 def test_centred_ranks_span_minus_to_plus_a_half_and_nan_ranks_lowest():
     assert centred_ranks(np.array([3.0, -1.0, 10.0])).tolist() == [0.0, -0.5, 0.5]
     assert centred_ranks(np.array([3.0, np.nan, -1.0])).tolist() == [0.5, -0.5, 0.0]
