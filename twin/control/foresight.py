@@ -1,0 +1,304 @@
+"""What an AV that knew its leader's whole future could save: the ceiling of the
+wave-dampening targets on a morning.
+
+A policy sees the present (and the recorded speeds ahead); the most any controller of
+the AV could do is bounded by one that knows how its leader will drive for the whole
+episode. :func:`least_fuel_plan` finds that controller's trajectory: the AV's speeds,
+every ``step`` seconds with a constant acceleration between, that drive it the most
+miles per gallon of its own (the RAV4 fuel model on the flat) while its time gap stays
+within a comfort band (:class:`Band`: the benchmark's 1 to 4 s, at least 2 m, the env's
+acceleration range) at every knot. It is a dynamic programme over (gap, speed) on a grid
+(value function interpolated in the gap), with Dinkelbach's iteration for the ratio
+(distance over fuel: least ``fuel - mu distance``, ``mu`` updated to the plan's fuel per
+metre until it settles).
+
+:func:`headroom` measures it in the twin: it drives ``human`` on episodes of the vector
+env (the benchmark's pairing), plans each AV's trajectory from its leader's recorded
+speeds in that run, then drives the plans in the same episodes (the AV tracks its plan;
+its leader drives as before, since nothing ahead of it changes where nobody changes
+lanes), and reports per episode the AV's economy and that of the AV and its followers
+against ``human``. The AV's own figure is a ceiling for any controller that keeps the
+band (up to the grid; ``human`` itself may leave it, at a standing start closer than
+2 m, say); the followers' is what they make of the AV's best plan for itself (a plan for
+the group could do better for them).
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from twin.control.env import ACCEL_RANGE
+from twin.metrics.economy import economy
+from twin.physics.energy import RAV4_2019
+
+FINE_DT = 0.1  # [s] the env's control step: the leader's speeds come at it
+TIME_GAP_FLOOR_SPEED = 1.0  # [m/s] the time gap is gap / max(speed, this), as evolve's
+
+
+class ForesightError(ValueError):
+    """A plan was asked of impossible inputs (named)."""
+
+
+@dataclass(frozen=True)
+class Band:
+    """The comfort band the plan keeps at every knot: time gap [s] (gap over the
+    speed, at least 1 m/s) within ``time_gap``, gap at least ``min_gap`` [m],
+    acceleration [m/s^2] within ``accel``."""
+
+    time_gap: tuple[float, float] = (1.0, 4.0)
+    min_gap: float = 2.0
+    accel: tuple[float, float] = ACCEL_RANGE
+
+    def holds(self, gap, speed) -> np.ndarray:
+        floor = np.maximum(speed, TIME_GAP_FLOOR_SPEED)
+        low = np.maximum(self.min_gap, self.time_gap[0] * floor)
+        return (gap >= low) & (gap <= self.time_gap[1] * floor)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The AV's planned speeds and gaps at the knots (every ``step`` s), its fuel [g]
+    and distance [m] (constant acceleration between knots, the flat road)."""
+
+    speeds: np.ndarray
+    gaps: np.ndarray
+    step: float
+    fuel_g: float
+    distance_m: float
+
+    def speed_at(self, t) -> np.ndarray:
+        """[m/s] the planned speed at times ``t`` [s] from the start."""
+        return np.interp(t, self.step * np.arange(self.speeds.size), self.speeds)
+
+
+def least_fuel_plan(
+    leader_speed,
+    gap: float,
+    speed: float,
+    *,
+    band: Band = Band(),
+    step: float = 1.0,
+    speed_step: float = 0.25,
+    gap_step: float = 0.5,
+    gap_max: float = 200.0,
+    speed_max: float = 35.0,
+    end_speed: float | None = None,
+    iterations: int = 6,
+) -> Plan:
+    """The most miles per gallon the AV could drive behind a leader whose speeds
+    ``leader_speed`` [m/s] (one per :data:`FINE_DT`) it knew in advance, from the gap
+    ``gap`` [m] (bumper to bumper) and its speed ``speed`` [m/s], within ``band`` at
+    every knot (module doc), ending at ``end_speed`` [m/s] or faster (by default its
+    leader's last speed: a plan may not sell the speed it was given, coasting down
+    for free at the end). Speeds are on a grid of ``speed_step``, gaps of
+    ``gap_step`` up to ``gap_max``; the knots are ``step`` s apart.
+
+    Raises:
+        ForesightError: an input is not finite or negative, the grid does not fit the
+            acceleration range, or no trajectory keeps the band from this start.
+    """
+    lead = np.asarray(leader_speed, dtype=np.float64)
+    sub = round(step / FINE_DT)
+    if lead.ndim != 1 or lead.size < sub or not np.all(np.isfinite(lead)) or lead.min() < 0:
+        raise ForesightError(
+            f"leader_speed must be at least {sub} finite speeds >= 0 m/s, one per {FINE_DT} s"
+        )
+    end_speed = float(lead[-1]) if end_speed is None else end_speed
+    for name, value in (("gap", gap), ("speed", speed), ("end_speed", end_speed)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ForesightError(f"{name} must be a finite number >= 0, got {value!r}")
+    if abs(sub * FINE_DT - step) > 1e-9:
+        raise ForesightError(f"step must be a multiple of {FINE_DT} s, got {step!r}")
+    low, high = (a * step / speed_step for a in band.accel)
+    if abs(low - round(low)) > 1e-9 or abs(high - round(high)) > 1e-9:
+        raise ForesightError(
+            f"speed_step {speed_step} m/s must divide the acceleration range {band.accel} "
+            f"times the step {step} s"
+        )
+    # the grid need not reach past what the band and the leader allow
+    speed_max = min(speed_max, max(float(lead.max()), speed, end_speed) + 5.0)
+    speed_max = speed_step * math.ceil(speed_max / speed_step)
+    gap_max = min(gap_max, max(band.time_gap[1] * max(speed_max, TIME_GAP_FLOOR_SPEED), gap) + 5.0)
+    knots = lead.size // sub
+    ahead = lead[: knots * sub].reshape(knots, sub).sum(axis=1) * FINE_DT  # leader's metres
+    speeds = np.arange(0.0, speed_max + 1e-9, speed_step)
+    gaps = np.arange(0.0, gap_max + 1e-9, gap_step)
+    moves = np.arange(round(low), round(high) + 1)  # speed change per step, in speed steps
+    inside = band.holds(gaps[:, None], speeds[None, :])
+    last = inside & (speeds[None, :] >= speed_step * math.floor(end_speed / speed_step))
+    fuel = _step_fuel(speeds, moves * speed_step / step, step)  # (speeds, moves)
+    rate = None
+    plan = None
+    for _ in range(iterations):
+        policy = _backward(ahead, speeds, gaps, moves, inside, last, fuel, step, rate or 0.0)
+        plan = _forward(policy, ahead, speeds, gaps, moves, fuel, step, gap, speed, band)
+        settled = rate is not None and abs(plan.fuel_g / plan.distance_m - rate) <= 1e-6 * rate
+        rate = plan.fuel_g / plan.distance_m if plan.distance_m > 0 else 0.0
+        if settled:
+            break
+    return plan
+
+
+def _step_fuel(speeds, accels, step) -> np.ndarray:
+    """[g] over one step from each speed (rows) at each acceleration (columns), the
+    fuel model at the midpoints of its control steps, on the flat."""
+    sub = round(step / FINE_DT)
+    tau = (np.arange(sub) + 0.5) * FINE_DT
+    v = np.maximum(speeds[:, None, None] + accels[None, :, None] * tau, 0.0)
+    a = np.broadcast_to(accels[None, :, None], v.shape)
+    rate = RAV4_2019.rate(v.ravel(), a.ravel(), np.zeros(v.size)).reshape(v.shape)
+    return rate.sum(axis=2) * FINE_DT
+
+
+def _backward(ahead, speeds, gaps, moves, inside, last, fuel, step, rate) -> np.ndarray:
+    """The best move (an index of ``moves``) at each knot, gap and speed, for the cost
+    ``fuel - rate distance`` to the end (any gap within the band, a speed of ``last``)."""
+    n_g, n_v = gaps.size, speeds.size
+    gap_step = gaps[1] - gaps[0]
+    value = np.where(last, 0.0, np.inf)
+    padded = np.full((n_g + 2, n_v), np.inf)
+    rows = np.arange(n_g)[:, None]
+    policy = np.zeros((ahead.size, n_g, n_v), dtype=np.int16)
+    for k in range(ahead.size - 1, -1, -1):
+        padded[1:-1] = value
+        best = np.full((n_g, n_v), np.inf)
+        choice = np.zeros((n_g, n_v), dtype=np.int16)
+        for j, move in enumerate(moves):
+            to = np.arange(n_v) + move
+            ok = (to >= 0) & (to < n_v)
+            to = np.clip(to, 0, n_v - 1)
+            travelled = (speeds + speeds[to]) / 2.0 * step
+            shift = (ahead[k] - travelled) / gap_step  # the gap changes by this many cells
+            whole = np.floor(shift).astype(int)
+            w = shift - whole
+            at = np.clip(rows + whole[None, :] + 1, 0, n_g + 1)  # +1: the padding row
+            nxt = np.clip(at + 1, 0, n_g + 1)
+            left, right = padded[at, to[None, :]], padded[nxt, to[None, :]]
+            with np.errstate(invalid="ignore"):
+                later = np.where(w[None, :] > 1e-12, (1 - w) * left + w * right, left)
+            later = np.where(np.isnan(later) | ~ok[None, :], np.inf, later)
+            cost = (fuel[:, j] - rate * travelled)[None, :] + later
+            better = cost < best
+            best = np.where(better, cost, best)
+            choice = np.where(better, j, choice)
+        value = np.where(inside, best, np.inf)
+        choice[~np.isfinite(value)] = -1  # no way on within the band from there
+        policy[k] = choice
+    return policy
+
+
+def _forward(policy, ahead, speeds, gaps, moves, fuel, step, gap, speed, band) -> Plan:
+    """Drive the policy from the exact start (its speed on the grid)."""
+    gap_step, speed_step = gaps[1] - gaps[0], speeds[1] - speeds[0]
+    v = min(round(speed / speed_step), speeds.size - 1)
+    g = float(gap)
+    out_v, out_g, total_fuel, distance = [speeds[v]], [g], 0.0, 0.0
+    for k in range(ahead.size):
+        near = g / gap_step
+        rows = sorted({math.floor(near), math.ceil(near)}, key=lambda r: abs(r - near))
+        rows = [r for r in rows if 0 <= r < gaps.size and policy[k, r, v] >= 0]
+        if not rows:
+            raise ForesightError(
+                f"no trajectory keeps the band {band} from a gap of {gap:.1f} m at "
+                f"{speed:.1f} m/s behind this leader"
+            )
+        j = int(policy[k, rows[0], v])
+        to = v + int(moves[j])
+        travelled = (speeds[v] + speeds[to]) / 2.0 * step
+        total_fuel += float(fuel[v, j])
+        distance += travelled
+        g += ahead[k] - travelled
+        v = to
+        out_v.append(speeds[v])
+        out_g.append(g)
+    return Plan(np.array(out_v), np.array(out_g), step, total_fuel, distance)
+
+
+def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = "test",
+             seed: int = 0, band: Band = Band(), progress: bool = True) -> list[dict]:  # fmt: skip
+    """Per episode of ``data``'s ``split`` (the first ``episodes`` the vector env places),
+    ``human``'s figures and those of the AV driving the plan of
+    :func:`least_fuel_plan` from its leader's speeds in ``human``'s run (module doc):
+    rows with ``episode``, ``status`` (``planned``, or why not), the AV's planned and
+    human's economy [mpg] on the plan's grid, and from the twin: the AV and its
+    followers' mpg with ``human`` and with the plan, their change [%], the plan's
+    collisions and least time to collision."""
+    from twin.control.evolve import _placeable
+    from twin.control.vector_env import VectorWaveDampeningEnv
+
+    def env(ego):
+        return VectorWaveDampeningEnv(episodes, data, split=split, duration=duration, ego=ego,
+                                      seed=seed)  # fmt: skip
+
+    human_env = env("human")
+    chosen = _placeable(human_env, iter(range(1000)), episodes)
+    observed, human = _drive(human_env, chosen, lambda obs, t: np.zeros(len(chosen)))
+    rows, plans = [], {}
+    for b, k in enumerate(chosen):
+        o = observed[:, b]
+        row = {"episode": k, "human_mpg": human[b].get("ego_and_followers_mpg")}
+        gap, lead, own = o[:, 2], o[:, 3], o[:, 0]
+        jumps = np.abs(np.diff(gap) - (lead[:-1] - own[:-1]) * FINE_DT) > 1.0
+        if jumps.any() or gap.max() >= 199.0:  # a new leader, or none within the cap
+            rows.append({**row, "status": "another leader or none"})
+            continue
+        try:
+            plan = least_fuel_plan(lead[:-1], float(gap[0]), float(own[0]), band=band,
+                                   end_speed=min(float(own[-1]), float(lead[-1])))  # fmt: skip
+        except ForesightError as error:
+            rows.append({**row, "status": str(error)})
+            continue
+        plans[b] = plan
+        knots = own[:: round(plan.step / FINE_DT)][: plan.speeds.size]
+        rows.append({**row, "status": "planned", "plan": plan,
+                     "av_human_grid_mpg": _mpg(*_grid_drive(knots, plan.step)),
+                     "av_plan_mpg": _mpg(plan.distance_m, plan.fuel_g)})  # fmt: skip
+        if progress:
+            print(f"episode {k}: planned ({len(plans)} of {b + 1})", flush=True)
+    tracked = sorted(plans)
+    if tracked:
+
+        def track(obs, t):
+            target = np.zeros(len(chosen))
+            for b in tracked:
+                target[b] = plans[b].speed_at(t + FINE_DT)
+            return (target - obs[:, 0]) / FINE_DT
+
+        _, planned = _drive(env("agent"), chosen, track)
+        for b in tracked:
+            rows[b]["plan_mpg"] = planned[b].get("ego_and_followers_mpg")
+            rows[b]["plan_collisions"] = planned[b].get("collisions")
+            rows[b]["plan_min_ttc_s"] = planned[b].get("min_ttc_s")
+    return rows
+
+
+def _grid_drive(speeds, step) -> tuple[float, float]:
+    """(distance [m], fuel [g]) of speeds at knots ``step`` s apart, a constant
+    acceleration between them, on the flat (as a plan is counted)."""
+    accels = np.diff(speeds) / step
+    fuel = sum(float(_step_fuel(np.array([v]), np.array([a]), step)[0, 0])
+               for v, a in zip(speeds[:-1], accels, strict=True))  # fmt: skip
+    return float(((speeds[:-1] + speeds[1:]) / 2.0 * step).sum()), fuel
+
+
+def _mpg(distance, fuel) -> float | None:
+    return economy(distance, fuel)["mpg"]
+
+
+def _drive(env, chosen, accel):
+    """Run ``env``'s sub-envs on episodes ``chosen`` to their end with the accelerations
+    ``accel(obs, t)``; every control step's observations (T, B, obs) and each episode's
+    figures."""
+    obs, _ = env.reset(seed=0, options={"episode": list(chosen)})
+    done = np.zeros(len(chosen), dtype=bool)
+    seen, figures, step = [obs.astype(np.float64)], [dict() for _ in chosen], 0
+    while not done.all():
+        action = np.clip(accel(obs.astype(np.float64), step * FINE_DT), *ACCEL_RANGE)
+        obs, _, terminated, truncated, info = env.step(action[:, None].astype(np.float32))
+        for b in np.flatnonzero((terminated | truncated) & ~done):
+            figures[b] = {name: values[b] for name, values in info["metrics"].items()}
+        done |= terminated | truncated
+        seen.append(obs.astype(np.float64))
+        step += 1
+    return np.array(seen[:-1]), figures
