@@ -302,3 +302,26 @@ def _drive(env, chosen, accel):
         seen.append(obs.astype(np.float64))
         step += 1
     return np.array(seen[:-1]), figures
+
+
+def summary(rows: list[dict]) -> dict:
+    """The figures of :func:`headroom`'s rows over the planned episodes: the AV's own
+    economy change [%] (the plan against ``human`` on the plan's grid) and the AV and
+    its followers' in the twin, mean and median, the plans' collisions and the median
+    of their least times to collision [s]."""
+    planned = [r for r in rows if r["status"] == "planned" and r.get("plan_mpg")]
+    if not planned:
+        return {"episodes": len(rows), "planned": 0}
+    own = np.array([100.0 * (r["av_plan_mpg"] / r["av_human_grid_mpg"] - 1.0) for r in planned])
+    group = np.array([100.0 * (r["plan_mpg"] / r["human_mpg"] - 1.0) for r in planned])
+    ttc = [r["plan_min_ttc_s"] for r in planned if r["plan_min_ttc_s"] is not None]
+    return {
+        "episodes": len(rows),
+        "planned": len(planned),
+        "av_economy_pct_mean": round(float(own.mean()), 2),
+        "av_economy_pct_median": round(float(np.median(own)), 2),
+        "av_and_followers_economy_pct_mean": round(float(group.mean()), 2),
+        "av_and_followers_economy_pct_median": round(float(np.median(group)), 2),
+        "collisions": int(sum(r["plan_collisions"] for r in planned)),
+        "min_ttc_s_median": round(float(np.median(ttc)), 2) if ttc else None,
+    }

@@ -14,6 +14,7 @@ from twin.control.foresight import (
     _grid_drive,
     headroom,
     least_fuel_plan,
+    summary,
 )
 
 
@@ -84,3 +85,11 @@ def test_headroom_drives_the_plans_in_the_twin(calibrated_wave_store):
             assert row["plan_mpg"] > 0 and row["plan_collisions"] == 0
             assert row["av_plan_mpg"] > 0 and row["av_human_grid_mpg"] > 0
     assert any(row["status"] == "planned" for row in rows)
+    figures = summary(rows)
+    assert figures["episodes"] == 2 and figures["planned"] >= 1
+    assert np.isfinite(figures["av_and_followers_economy_pct_mean"])
+    assert figures["collisions"] == 0
+
+
+def test_a_summary_of_nothing_planned_says_so():
+    assert summary([{"status": "another leader or none"}]) == {"episodes": 1, "planned": 0}
