@@ -62,6 +62,19 @@ def test_behind_a_steady_leader_there_is_nothing_to_smooth():
     assert near.speed_at(np.array([0.0, 0.5, 1.0]))[0] == 20.0
 
 
+def test_a_share_of_long_gaps_is_the_p90_target_kept():
+    """With long_share 0.1 a tenth of the knots may have time gaps over 4 s (the
+    benchmark's p90 target): the plan uses them and saves more than within the band."""
+    lead = _wave()
+    strict = least_fuel_plan(lead, 15.0, 10.0, gap_step=1.0)
+    loose = least_fuel_plan(lead, 15.0, 10.0, gap_step=1.0,
+                            band=Band(long_share=0.1, long_max=6.0))  # fmt: skip
+    long = _time_gaps(loose)[1:] > 4.0 + 0.05
+    assert 0 < long.sum() <= math.floor(0.1 * (loose.speeds.size - 1))
+    assert np.all(_time_gaps(loose)[1:] <= 6.0 + 0.05)
+    assert loose.distance_m / loose.fuel_g > strict.distance_m / strict.fuel_g
+
+
 @pytest.mark.parametrize(
     "args, kwargs, message",
     [((np.full(1200, np.nan), 15.0, 10.0), {}, "leader_speed"),
