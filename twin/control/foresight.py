@@ -238,10 +238,12 @@ def _forward(policy, ahead, speeds, gaps, moves, fuel, step, gap, speed, band) -
 
 
 def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = "test",
-             seed: int = 0, band: Band = Band(), progress: bool = True) -> list[dict]:  # fmt: skip
+             seed: int = 0, band: Band = Band(), gap_step: float = 0.5,
+             progress: bool = True) -> list[dict]:  # fmt: skip
     """Per episode of ``data``'s ``split`` (the first ``episodes`` the vector env places),
     ``human``'s figures and those of the AV driving the plan of
-    :func:`least_fuel_plan` from its leader's speeds in ``human``'s run (module doc):
+    :func:`least_fuel_plan` (within ``band``, on a grid of ``gap_step`` [m]) from its
+    leader's speeds in ``human``'s run (module doc):
     rows with ``episode``, ``status`` (``planned``, or why not), the AV's planned and
     human's economy [mpg] on the plan's grid, and from the twin: the AV and its
     followers' mpg with ``human`` and with the plan, their change [%], the plan's
@@ -267,6 +269,7 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
             continue
         try:
             plan = least_fuel_plan(lead[:-1], float(gap[0]), float(own[0]), band=band,
+                                   gap_step=gap_step,
                                    end_speed=min(float(own[-1]), float(lead[-1])))  # fmt: skip
         except ForesightError as error:
             rows.append({**row, "status": str(error)})
