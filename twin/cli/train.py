@@ -98,7 +98,7 @@ def register(commands) -> None:
         "(default) or its own previous command",
     )  # fmt: skip
     p.add_argument(
-        "--time-gap-p90-max", type=float, default=4.0,
+        "--time-gap-p90-max", type=float, default=4.0,  # evolve.TIME_GAP_P90_MAX
         help="es: [s] the time gap p90 the score penalises a run over (default 4, the "
         "target; lower asks for a margin)",
     )  # fmt: skip

@@ -29,10 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.control.env import ACCEL_RANGE
+from twin.control.observe import GAP_CAP
 from twin.metrics.economy import economy
 from twin.physics.energy import RAV4_2019
 
 FINE_DT = 0.1  # [s] the env's control step: the leader's speeds come at it
+#: [m] a replayed AV whose gap at a knot is this far from its plan's followed another
+#: leader (one that changed lanes): its episode is not counted.
+REPLAY_DRIFT = 2.0
 TIME_GAP_FLOOR_SPEED = 1.0  # [m/s] the time gap is gap / max(speed, this), as evolve's
 
 
@@ -53,6 +57,23 @@ class Band:
     accel: tuple[float, float] = ACCEL_RANGE
     long_share: float = 0.0
     long_max: float = 10.0
+
+    def __post_init__(self):
+        low, high = self.time_gap
+        if not (0 <= low < high and math.isfinite(high)):
+            raise ForesightError(
+                f"time_gap must be (low, high) with 0 <= low < high, got {self.time_gap}"
+            )
+        if not (self.accel[0] < 0 < self.accel[1]):
+            raise ForesightError(f"accel must be (braking < 0, accelerating > 0), got {self.accel}")
+        if not (0 <= self.long_share <= 1):
+            raise ForesightError(f"long_share must be within 0 and 1, got {self.long_share!r}")
+        if self.long_share > 0 and not (high < self.long_max and math.isfinite(self.long_max)):
+            raise ForesightError(
+                f"long_max must be over the band's {high} s, got {self.long_max!r}"
+            )
+        if not (math.isfinite(self.min_gap) and self.min_gap >= 0):
+            raise ForesightError(f"min_gap must be a number >= 0, got {self.min_gap!r}")
 
     def holds(self, gap, speed, upper=None) -> np.ndarray:
         """Whether ``gap`` [m] at ``speed`` [m/s] is within the band (up to ``upper``
@@ -98,15 +119,29 @@ def least_fuel_plan(
     every knot (module doc), ending at ``end_speed`` [m/s] or faster (by default its
     leader's last speed: a plan may not sell the speed it was given, coasting down
     for free at the end). Speeds are on a grid of ``speed_step``, gaps of
-    ``gap_step`` up to ``gap_max``; the knots are ``step`` s apart.
+    ``gap_step`` up to ``gap_max``; the knots are ``step`` s apart, one per ``step`` s
+    of ``leader_speed`` (what is left over is not planned). The plan follows the exact
+    gap with the moves of the nearest grid row: its time gap may leave the band by up
+    to ``gap_step / max(speed, 1 m/s)``.
 
     Raises:
         ForesightError: an input is not finite or negative, the grid does not fit the
             acceleration range, or no trajectory keeps the band from this start.
     """
+    for name, value in (("step", step), ("speed_step", speed_step), ("gap_step", gap_step)):
+        if not (math.isfinite(value) and value > 0):
+            raise ForesightError(f"{name} must be a positive number, got {value!r}")
+    if not (isinstance(iterations, int) and iterations >= 1):
+        raise ForesightError(f"iterations must be an integer >= 1, got {iterations!r}")
     lead = np.asarray(leader_speed, dtype=np.float64)
     sub = round(step / FINE_DT)
-    if lead.ndim != 1 or lead.size < sub or not np.all(np.isfinite(lead)) or lead.min() < 0:
+    if (
+        sub < 1
+        or lead.ndim != 1
+        or lead.size < sub
+        or not np.all(np.isfinite(lead))
+        or lead.min() < 0
+    ):
         raise ForesightError(
             f"leader_speed must be at least {sub} finite speeds >= 0 m/s, one per {FINE_DT} s"
         )
@@ -114,6 +149,11 @@ def least_fuel_plan(
     for name, value in (("gap", gap), ("speed", speed), ("end_speed", end_speed)):
         if not (math.isfinite(value) and value >= 0):
             raise ForesightError(f"{name} must be a finite number >= 0, got {value!r}")
+    if speed > speed_max or gap > gap_max:
+        raise ForesightError(
+            f"the start ({gap:.1f} m at {speed:.1f} m/s) is off the grid (gaps up to "
+            f"{gap_max} m, speeds up to {speed_max} m/s)"
+        )
     if abs(sub * FINE_DT - step) > 1e-9:
         raise ForesightError(f"step must be a multiple of {FINE_DT} s, got {step!r}")
     low, high = (a * step / speed_step for a in band.accel)
@@ -138,20 +178,22 @@ def least_fuel_plan(
         np.zeros_like(inside))  # fmt: skip
     # a state with any budget left may be over: entering it spent one (_backward)
     allowed = np.repeat((inside | over)[None], budget + 1, axis=0)
-    fast = speeds[None, :] >= speed_step * math.floor(end_speed / speed_step)
+    fast = speeds[None, :] >= speed_step * math.ceil(end_speed / speed_step - 1e-9)
     last = allowed & fast[None]
     fuel = _step_fuel(speeds, moves * speed_step / step, step)  # (speeds, moves)
-    rate = None
-    plan = None
+    rate, best = 0.0, None
     for _ in range(iterations):
-        policy = _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step,
-                           rate or 0.0)  # fmt: skip
-        plan = _forward(policy, ahead, speeds, gaps, moves, fuel, step, gap, speed, band)
-        settled = rate is not None and abs(plan.fuel_g / plan.distance_m - rate) <= 1e-6 * rate
-        rate = plan.fuel_g / plan.distance_m if plan.distance_m > 0 else 0.0
+        policy = _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step, rate)
+        plan = _forward(policy, ahead, speeds, gaps, moves, over, fuel, step, gap, speed, band)
+        if plan.distance_m <= 0 or plan.fuel_g <= 0:
+            return plan  # standing still: nothing to improve
+        if best is None or plan.distance_m / plan.fuel_g > best.distance_m / best.fuel_g:
+            best = plan  # the grid's plans need not improve every round: keep the best
+        settled = rate > 0 and abs(plan.fuel_g / plan.distance_m - rate) <= 1e-6 * rate
+        rate = plan.fuel_g / plan.distance_m
         if settled:
             break
-    return plan
+    return best
 
 
 def _step_fuel(speeds, accels, step) -> np.ndarray:
@@ -207,31 +249,36 @@ def _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step, rate)
     return policy
 
 
-def _forward(policy, ahead, speeds, gaps, moves, fuel, step, gap, speed, band) -> Plan:
+def _forward(policy, ahead, speeds, gaps, moves, over, fuel, step, gap, speed, band) -> Plan:
     """Drive the policy from the exact start (its speed on the grid), its budget of
-    long knots whole."""
+    long knots whole: at each knot the nearer grid row with a way on decides, and
+    landing on a row that is ``over`` spends one, as :func:`_backward` counts it."""
     gap_step, speed_step = gaps[1] - gaps[0], speeds[1] - speeds[0]
     v = min(round(speed / speed_step), speeds.size - 1)
     g, budget = float(gap), policy.shape[1] - 1
     out_v, out_g, total_fuel, distance = [speeds[v]], [g], 0.0, 0.0
     for k in range(ahead.size):
         near = g / gap_step
-        rows = sorted({math.floor(near), math.ceil(near)}, key=lambda r: abs(r - near))
-        rows = [r for r in rows if 0 <= r < gaps.size and policy[k, budget, r, v] >= 0]
-        if not rows:
+        options = []
+        for r in sorted({math.floor(near), math.ceil(near)}, key=lambda r: abs(r - near)):
+            # arriving on a long row spends one of the budget (not the start's)
+            left = budget - int(k > 0 and 0 <= r < gaps.size and over[r, v])
+            if 0 <= r < gaps.size and left >= 0 and policy[k, left, r, v] >= 0:
+                options.append((r, left))
+        if not options:
             raise ForesightError(
                 f"no trajectory keeps the band {band} from a gap of {gap:.1f} m at "
-                f"{speed:.1f} m/s behind this leader"
+                f"{speed:.1f} m/s behind this leader (none on from {g:.1f} m at "
+                f"{speeds[v]:.2f} m/s after {k} knots)"
             )
-        j = int(policy[k, budget, rows[0], v])
+        row, budget = options[0]
+        j = int(policy[k, budget, row, v])
         to = v + int(moves[j])
         travelled = (speeds[v] + speeds[to]) / 2.0 * step
         total_fuel += float(fuel[v, j])
         distance += travelled
         g += ahead[k] - travelled
         v = to
-        if not band.holds(g, speeds[v]) and budget > 0:
-            budget -= 1
         out_v.append(speeds[v])
         out_g.append(g)
     return Plan(np.array(out_v), np.array(out_g), step, total_fuel, distance)
@@ -244,10 +291,13 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
     ``human``'s figures and those of the AV driving the plan of
     :func:`least_fuel_plan` (within ``band``, on a grid of ``gap_step`` [m]) from its
     leader's speeds in ``human``'s run (module doc):
-    rows with ``episode``, ``status`` (``planned``, or why not), the AV's planned and
-    human's economy [mpg] on the plan's grid, and from the twin: the AV and its
-    followers' mpg with ``human`` and with the plan, their change [%], the plan's
-    collisions and least time to collision."""
+    rows with ``episode``, ``status`` (``planned``, or why not: ended early, another
+    leader, no way within the band), ``plan`` (the :class:`Plan`), the AV's planned and
+    human's economy [mpg] on the plan's grid (``av_plan_mpg``, ``av_human_grid_mpg``),
+    and from the twin: the AV and its followers' mpg with ``human`` and with the plan
+    (``human_mpg``, ``plan_mpg``), the plan's collisions and least time to collision,
+    and how far the replayed gap strayed from the plan's at a knot
+    (``replay_gap_drift_m``)."""
     from twin.control.evolve import _placeable
     from twin.control.vector_env import VectorWaveDampeningEnv
 
@@ -264,20 +314,24 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
         row = {"episode": k, "human_mpg": human[b].get("ego_and_followers_mpg")}
         gap, lead, own = o[:, 2], o[:, 3], o[:, 0]
         jumps = np.abs(np.diff(gap) - (lead[:-1] - own[:-1]) * FINE_DT) > 1.0
-        if jumps.any() or gap.max() >= 199.0:  # a new leader, or none within the cap
+        if human[b].get("simulated_s", 0.0) < duration - 1e-6:
+            rows.append({**row, "status": "ended early"})
+            continue
+        if jumps.any() or gap.max() >= GAP_CAP - 1.0:  # a new leader, or none within the cap
             rows.append({**row, "status": "another leader or none"})
             continue
+        sub = round(1.0 / FINE_DT)
+        end = (o.shape[0] - 1) // sub * sub  # the plan's last knot
         try:
             plan = least_fuel_plan(lead[:-1], float(gap[0]), float(own[0]), band=band,
                                    gap_step=gap_step,
-                                   end_speed=min(float(own[-1]), float(lead[-1])))  # fmt: skip
+                                   end_speed=min(float(own[end]), float(lead[end])))  # fmt: skip
         except ForesightError as error:
             rows.append({**row, "status": str(error)})
             continue
         plans[b] = plan
-        knots = own[:: round(plan.step / FINE_DT)][: plan.speeds.size]
         rows.append({**row, "status": "planned", "plan": plan,
-                     "av_human_grid_mpg": _mpg(*_grid_drive(knots, plan.step)),
+                     "av_human_grid_mpg": _mpg(*_grid_drive(own[: end + 1 : sub], plan.step)),
                      "av_plan_mpg": _mpg(plan.distance_m, plan.fuel_g)})  # fmt: skip
         if progress:
             print(f"episode {k}: planned ({len(plans)} of {b + 1})", flush=True)
@@ -285,16 +339,26 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
     if tracked:
 
         def track(obs, t):
-            target = np.zeros(len(chosen))
+            command = np.zeros(len(chosen))  # the others are not counted
             for b in tracked:
-                target[b] = plans[b].speed_at(t + FINE_DT)
-            return (target - obs[:, 0]) / FINE_DT
+                command[b] = (plans[b].speed_at(t + FINE_DT) - obs[b, 0]) / FINE_DT
+            return command
 
-        _, planned = _drive(env("agent"), chosen, track)
+        replayed, planned = _drive(env("agent"), chosen, track)
         for b in tracked:
-            rows[b]["plan_mpg"] = planned[b].get("ego_and_followers_mpg")
-            rows[b]["plan_collisions"] = planned[b].get("collisions")
-            rows[b]["plan_min_ttc_s"] = planned[b].get("min_ttc_s")
+            plan, figures = plans[b], planned[b]
+            knots = replayed[:: round(plan.step / FINE_DT), b, 2][: plan.gaps.size]
+            drift = float(np.max(np.abs(knots - plan.gaps)))
+            rows[b].update({
+                "plan_mpg": figures.get("ego_and_followers_mpg"),
+                "plan_collisions": figures.get("collisions"),
+                "plan_min_ttc_s": figures.get("min_ttc_s"),
+                "replay_gap_drift_m": round(drift, 3),
+            })  # fmt: skip
+            if figures.get("simulated_s", 0.0) < duration - 1e-6:
+                rows[b]["status"] = "the replay ended early"
+            elif drift > REPLAY_DRIFT:
+                rows[b]["status"] = "another leader in the replay"
     return rows
 
 
@@ -313,8 +377,9 @@ def _mpg(distance, fuel) -> float | None:
 
 def _drive(env, chosen, accel):
     """Run ``env``'s sub-envs on episodes ``chosen`` to their end with the accelerations
-    ``accel(obs, t)``; every control step's observations (T, B, obs) and each episode's
-    figures."""
+    ``accel(obs, t)``; the observations from the first to the last (T + 1, B, obs; an
+    episode that ended early is another one's after it: check its figures'
+    ``simulated_s``) and each episode's figures."""
     obs, _ = env.reset(seed=0, options={"episode": list(chosen)})
     done = np.zeros(len(chosen), dtype=bool)
     seen, figures, step = [obs.astype(np.float64)], [dict() for _ in chosen], 0
@@ -326,7 +391,7 @@ def _drive(env, chosen, accel):
         done |= terminated | truncated
         seen.append(obs.astype(np.float64))
         step += 1
-    return np.array(seen[:-1]), figures
+    return np.array(seen), figures
 
 
 def summary(rows: list[dict]) -> dict:
@@ -334,7 +399,14 @@ def summary(rows: list[dict]) -> dict:
     economy change [%] (the plan against ``human`` on the plan's grid) and the AV and
     its followers' in the twin, mean and median, the plans' collisions and the median
     of their least times to collision [s]."""
-    planned = [r for r in rows if r["status"] == "planned" and r.get("plan_mpg")]
+
+    def number(value) -> bool:
+        return value is not None and math.isfinite(value) and value > 0
+
+    needed = ("plan_mpg", "human_mpg", "av_plan_mpg", "av_human_grid_mpg")
+    planned = [
+        r for r in rows if r["status"] == "planned" and all(number(r.get(k)) for k in needed)
+    ]
     if not planned:
         return {"episodes": len(rows), "planned": 0}
     own = np.array([100.0 * (r["av_plan_mpg"] / r["av_human_grid_mpg"] - 1.0) for r in planned])

@@ -59,7 +59,9 @@ def test_behind_a_steady_leader_there_is_nothing_to_smooth():
     near = least_fuel_plan(lead, 40.0, 20.0)
     assert 1.0 < (near.distance_m / near.fuel_g) / (copy_distance / copy_fuel) < 1.02
     assert near.speeds[-1] >= 20.0
-    assert near.speed_at(np.array([0.0, 0.5, 1.0]))[0] == 20.0
+    ramp = least_fuel_plan(np.linspace(10.0, 12.0, 1200), 20.0, 10.0)
+    assert ramp.speeds[-1] >= 12.0 - 1e-9  # the leader's end speed, not a step under
+    assert ramp.speed_at(np.array([0.5]))[0] == pytest.approx(ramp.speeds[:2].mean())
 
 
 def test_a_share_of_long_gaps_is_the_p90_target_kept():
@@ -79,14 +81,29 @@ def test_a_share_of_long_gaps_is_the_p90_target_kept():
     "args, kwargs, message",
     [((np.full(1200, np.nan), 15.0, 10.0), {}, "leader_speed"),
      ((np.full(1200, 10.0), -1.0, 10.0), {}, "gap must be"),
-     ((np.full(1200, 10.0), 15.0, math.inf), {}, "speed must be"),
+     ((np.full(1200, 10.0), 15.0, math.inf), {}, "^speed must be"),
+     ((np.full(1200, 10.0), 15.0, 10.0), {"step": 0.0}, "step must be a positive"),
+     ((np.full(1200, 10.0), 15.0, 40.0), {}, "off the grid"),
      ((np.full(1200, 10.0), 15.0, 10.0), {"step": 0.25}, "multiple"),
      ((np.full(1200, 10.0), 15.0, 10.0), {"speed_step": 0.4}, "must divide"),
-     ((np.full(1200, 20.0), 0.5, 20.0), {}, "no trajectory keeps the band")],
+     ((np.full(1200, 20.0), 0.5, 20.0), {}, "no trajectory keeps the band"),
+     # a leader braking harder than the AV may: no way on within the band
+     ((np.concatenate([np.full(100, 20.0), np.maximum(20.0 - 6.0 * np.arange(1, 101) * 0.1, 0.0),
+                       np.zeros(1000)]), 12.0, 20.0), {}, "no trajectory keeps the band")],
 )  # fmt: skip
 def test_impossible_plans_are_named(args, kwargs, message):
     with pytest.raises(ForesightError, match=message):
         least_fuel_plan(*args, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "band, message",
+    [({"time_gap": (4.0, 1.0)}, "time_gap"), ({"long_share": 1.5}, "long_share"),
+     ({"long_share": 0.1, "long_max": 3.0}, "long_max"), ({"accel": (1.0, 2.0)}, "accel")],
+)  # fmt: skip
+def test_an_impossible_band_is_named(band, message):
+    with pytest.raises(ForesightError, match=message):
+        Band(**band)
 
 
 def test_headroom_drives_the_plans_in_the_twin(calibrated_wave_store):
@@ -97,6 +114,8 @@ def test_headroom_drives_the_plans_in_the_twin(calibrated_wave_store):
         if row["status"] == "planned":
             assert row["plan_mpg"] > 0 and row["plan_collisions"] == 0
             assert row["av_plan_mpg"] > 0 and row["av_human_grid_mpg"] > 0
+            # the twin drove the plan: its gaps at the knots are the plan's
+            assert row["replay_gap_drift_m"] < 0.5
     assert any(row["status"] == "planned" for row in rows)
     figures = summary(rows)
     assert figures["episodes"] == 2 and figures["planned"] >= 1
