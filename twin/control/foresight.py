@@ -34,9 +34,9 @@ from twin.metrics.economy import economy
 from twin.physics.energy import RAV4_2019
 
 FINE_DT = 0.1  # [s] the env's control step: the leader's speeds come at it
-#: [m] a replayed AV whose gap at a knot is this far from its plan's followed another
-#: leader (one that changed lanes): its episode is not counted.
-REPLAY_DRIFT = 2.0
+#: [m] a gap that moves this much more in a control step than the two speeds say is
+#: another leader's (a lane change); such an episode is not planned, or not counted.
+LEADER_JUMP = 1.0
 TIME_GAP_FLOOR_SPEED = 1.0  # [m/s] the time gap is gap / max(speed, this), as evolve's
 
 
@@ -114,7 +114,8 @@ def least_fuel_plan(
     iterations: int = 6,
 ) -> Plan:
     """The most miles per gallon the AV could drive behind a leader whose speeds
-    ``leader_speed`` [m/s] (one per :data:`FINE_DT`) it knew in advance, from the gap
+    ``leader_speed`` [m/s] (every :data:`FINE_DT` from the start, the end's included:
+    the leader covers their trapezoid) it knew in advance, from the gap
     ``gap`` [m] (bumper to bumper) and its speed ``speed`` [m/s], within ``band`` at
     every knot (module doc), ending at ``end_speed`` [m/s] or faster (by default its
     leader's last speed: a plan may not sell the speed it was given, coasting down
@@ -138,12 +139,12 @@ def least_fuel_plan(
     if (
         sub < 1
         or lead.ndim != 1
-        or lead.size < sub
+        or lead.size < sub + 1
         or not np.all(np.isfinite(lead))
         or lead.min() < 0
     ):
         raise ForesightError(
-            f"leader_speed must be at least {sub} finite speeds >= 0 m/s, one per {FINE_DT} s"
+            f"leader_speed must be at least {sub + 1} finite speeds >= 0 m/s, one per {FINE_DT} s"
         )
     end_speed = float(lead[-1]) if end_speed is None else end_speed
     for name, value in (("gap", gap), ("speed", speed), ("end_speed", end_speed)):
@@ -167,8 +168,9 @@ def least_fuel_plan(
     speed_max = speed_step * math.ceil(speed_max / speed_step)
     widest = band.long_max if band.long_share > 0 else band.time_gap[1]
     gap_max = min(gap_max, max(widest * max(speed_max, TIME_GAP_FLOOR_SPEED), gap) + 5.0)
-    knots = lead.size // sub
-    ahead = lead[: knots * sub].reshape(knots, sub).sum(axis=1) * FINE_DT  # leader's metres
+    knots = (lead.size - 1) // sub
+    steps = (lead[:-1] + lead[1:])[: knots * sub] / 2.0 * FINE_DT  # as the twin moves it
+    ahead = steps.reshape(knots, sub).sum(axis=1)  # the leader's metres per knot
     speeds = np.arange(0.0, speed_max + 1e-9, speed_step)
     gaps = np.arange(0.0, gap_max + 1e-9, gap_step)
     moves = np.arange(round(low), round(high) + 1)  # speed change per step, in speed steps
@@ -296,8 +298,9 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
     human's economy [mpg] on the plan's grid (``av_plan_mpg``, ``av_human_grid_mpg``),
     and from the twin: the AV and its followers' mpg with ``human`` and with the plan
     (``human_mpg``, ``plan_mpg``), the plan's collisions and least time to collision,
-    and how far the replayed gap strayed from the plan's at a knot
-    (``replay_gap_drift_m``)."""
+    how far the replayed gap strayed from the plan's at a knot (``replay_gap_drift_m``:
+    the leader is driven again, and the traffic ahead of it need not do exactly what it
+    did) and the replay's time gap p10 and p90 [s]."""
     from twin.control.evolve import _placeable
     from twin.control.vector_env import VectorWaveDampeningEnv
 
@@ -313,17 +316,16 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
         o = observed[:, b]
         row = {"episode": k, "human_mpg": human[b].get("ego_and_followers_mpg")}
         gap, lead, own = o[:, 2], o[:, 3], o[:, 0]
-        jumps = np.abs(np.diff(gap) - (lead[:-1] - own[:-1]) * FINE_DT) > 1.0
         if human[b].get("simulated_s", 0.0) < duration - 1e-6:
             rows.append({**row, "status": "ended early"})
             continue
-        if jumps.any() or gap.max() >= GAP_CAP - 1.0:  # a new leader, or none within the cap
+        if _leader_changed(o):
             rows.append({**row, "status": "another leader or none"})
             continue
         sub = round(1.0 / FINE_DT)
         end = (o.shape[0] - 1) // sub * sub  # the plan's last knot
         try:
-            plan = least_fuel_plan(lead[:-1], float(gap[0]), float(own[0]), band=band,
+            plan = least_fuel_plan(lead, float(gap[0]), float(own[0]), band=band,
                                    gap_step=gap_step,
                                    end_speed=min(float(own[end]), float(lead[end])))  # fmt: skip
         except ForesightError as error:
@@ -346,20 +348,33 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
 
         replayed, planned = _drive(env("agent"), chosen, track)
         for b in tracked:
-            plan, figures = plans[b], planned[b]
-            knots = replayed[:: round(plan.step / FINE_DT), b, 2][: plan.gaps.size]
+            plan, figures, o = plans[b], planned[b], replayed[:, b]
+            knots = o[:: round(plan.step / FINE_DT), 2][: plan.gaps.size]
             drift = float(np.max(np.abs(knots - plan.gaps)))
+            time_gaps = o[:, 2] / np.maximum(o[:, 0], TIME_GAP_FLOOR_SPEED)
             rows[b].update({
                 "plan_mpg": figures.get("ego_and_followers_mpg"),
                 "plan_collisions": figures.get("collisions"),
                 "plan_min_ttc_s": figures.get("min_ttc_s"),
                 "replay_gap_drift_m": round(drift, 3),
+                "replay_time_gap_p10_s": round(float(np.percentile(time_gaps, 10)), 3),
+                "replay_time_gap_p90_s": round(float(np.percentile(time_gaps, 90)), 3),
             })  # fmt: skip
             if figures.get("simulated_s", 0.0) < duration - 1e-6:
                 rows[b]["status"] = "the replay ended early"
-            elif drift > REPLAY_DRIFT:
+            elif _leader_changed(o):
                 rows[b]["status"] = "another leader in the replay"
     return rows
+
+
+def _leader_changed(observed) -> bool:
+    """Whether the observations (T, obs) of one episode show another leader (a gap
+    jumping by more than :data:`LEADER_JUMP` beyond what the speeds move it) or none
+    within the gap cap."""
+    gap, lead, own = observed[:, 2], observed[:, 3], observed[:, 0]
+    moved = (lead[:-1] + lead[1:] - own[:-1] - own[1:]) / 2.0 * FINE_DT
+    jumps = np.abs(np.diff(gap) - moved) > LEADER_JUMP
+    return bool(jumps.any() or gap.max() >= GAP_CAP - 1.0)
 
 
 def _grid_drive(speeds, step) -> tuple[float, float]:

@@ -106,6 +106,22 @@ def test_an_impossible_band_is_named(band, message):
         Band(**band)
 
 
+def test_another_leader_is_a_gap_the_speeds_do_not_explain():
+    from twin.control.foresight import _leader_changed
+
+    steps = 50
+    obs = np.zeros((steps, 18))
+    obs[:, 0], obs[:, 3] = 10.0, 12.0  # the leader pulls away at 2 m/s
+    obs[:, 2] = 20.0 + 2.0 * FINE_DT * np.arange(steps)
+    assert not _leader_changed(obs)
+    cut_in = obs.copy()
+    cut_in[25:, 2] -= 8.0  # a vehicle changes lanes in between
+    assert _leader_changed(cut_in)
+    nobody = obs.copy()
+    nobody[:, 2] = 200.0
+    assert _leader_changed(nobody)
+
+
 def test_headroom_drives_the_plans_in_the_twin(calibrated_wave_store):
     rows = headroom(str(calibrated_wave_store.path), 2, duration=20.0, progress=False)
     assert len(rows) == 2
