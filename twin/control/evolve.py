@@ -71,7 +71,7 @@ from twin.core.atomic import atomic_file
 PENALTIES = {
     "collision": 50.0,
     "time_gap_p10_under_1s": 10.0,
-    "time_gap_p90_over_4s": 20.0,
+    "time_gap_p90_over_max": 20.0,
     "min_ttc_under_5s": 2.0,
     "jerk_rms_over_0_5": 10.0,
     "safety_percent": 2.0,
@@ -199,7 +199,7 @@ def score(figures: dict, time_gap_p90_max: float = TIME_GAP_P90_MAX) -> tuple[fl
         economy
         - p["collision"] * figures["collisions"]
         - p["time_gap_p10_under_1s"] * max(0.0, 1.0 - figures["time_gap_p10_s"])
-        - p["time_gap_p90_over_4s"] * max(0.0, figures["time_gap_p90_s"] - time_gap_p90_max)
+        - p["time_gap_p90_over_max"] * max(0.0, figures["time_gap_p90_s"] - time_gap_p90_max)
         - p["min_ttc_under_5s"] * max(0.0, 5.0 - figures["min_ttc_s"])
         - p["jerk_rms_over_0_5"] * max(0.0, figures["jerk_rms_mps3"] - 0.5)
         - p["safety_percent"] * figures["safety_pct"]
