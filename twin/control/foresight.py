@@ -1,26 +1,26 @@
-"""What an AV that knew its leader's whole future could save: the ceiling of the
-wave-dampening targets on a morning.
+"""What an AV that knew its leader's whole future could save: how far a policy is from
+what a controller keeping the wave-dampening targets could do on a morning.
 
-A policy sees the present (and the recorded speeds ahead); the most any controller of
-the AV could do is bounded by one that knows how its leader will drive for the whole
-episode. :func:`least_fuel_plan` finds that controller's trajectory: the AV's speeds,
-every ``step`` seconds with a constant acceleration between, that drive it the most
-miles per gallon of its own (the RAV4 fuel model on the flat) while its time gap stays
-within a comfort band (:class:`Band`: the benchmark's 1 to 4 s, at least 2 m, the env's
-acceleration range) at every knot. It is a dynamic programme over (gap, speed) on a grid
-(value function interpolated in the gap), with Dinkelbach's iteration for the ratio
-(distance over fuel: least ``fuel - mu distance``, ``mu`` updated to the plan's fuel per
-metre until it settles).
+A policy sees the present (and the recorded speeds ahead); a controller that knows how
+its leader will drive for the whole episode can do more. :func:`least_fuel_plan` finds
+that controller's trajectory: the AV's speeds, every ``step`` seconds with a constant
+acceleration between, that drive it the most miles per gallon of its own (the RAV4
+fuel model on the flat) while its time gap stays within a comfort band at every knot
+(:class:`Band`: the benchmark's 1 to 4 s, at least 2 m, the env's acceleration range;
+optionally a share of the knots longer: the p90 target). It is a dynamic programme over
+(gap, speed) on a grid (the value function interpolated in the gap; the long knots
+left as a state), with Dinkelbach's iteration for the ratio (distance over fuel: least
+``fuel - mu distance``, ``mu`` updated to the plan's fuel per metre until it settles).
 
 :func:`headroom` measures it in the twin: it drives ``human`` on episodes of the vector
-env (the benchmark's pairing), plans each AV's trajectory from its leader's recorded
-speeds in that run, then drives the plans in the same episodes (the AV tracks its plan;
-its leader drives as before, since nothing ahead of it changes where nobody changes
-lanes), and reports per episode the AV's economy and that of the AV and its followers
-against ``human``. The AV's own figure is a ceiling for any controller that keeps the
-band (up to the grid; ``human`` itself may leave it, at a standing start closer than
-2 m, say); the followers' is what they make of the AV's best plan for itself (a plan for
-the group could do better for them).
+env (the benchmark's pairing), plans each AV's trajectory from its leader's speeds in
+that run, then drives the plans in the same episodes (the AV tracks its plan; its
+leader is driven again, and an episode whose leader changes is not counted), and
+reports per episode the AV's economy and that of the AV and its followers against
+``human``. The AV's own figure bounds any controller that keeps the band (up to the
+grid and the leader's drift; ``human`` itself may leave the band, at a standing start
+closer than 2 m, say); the followers' is what they make of the AV's best plan for
+itself (a plan for the group could do better for them): an estimate, not a bound.
 """
 
 import math
