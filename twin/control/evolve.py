@@ -112,6 +112,8 @@ class EvolveConfig:
         also: other stores whose training splits it trains on too (other mornings;
             ``episodes`` must be at least one per morning).
         seed: the episodes', perturbations' and initial weights' seed.
+        time_gap_p90_max: [s] the time gap p90 the score penalises a run over (the 4 s
+            target by default; lower: a margin under it).
     """
 
     generations: int = 100
