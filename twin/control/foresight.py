@@ -38,6 +38,7 @@ FINE_DT = 0.1  # [s] the env's control step: the leader's speeds come at it
 #: another leader's (a lane change); such an episode is not planned, or not counted.
 LEADER_JUMP = 1.0
 TIME_GAP_FLOOR_SPEED = 1.0  # [m/s] the time gap is gap / max(speed, this), as evolve's
+STEP = 1.0  # [s] between a plan's knots
 
 
 class ForesightError(ValueError):
@@ -105,7 +106,7 @@ def least_fuel_plan(
     speed: float,
     *,
     band: Band = Band(),
-    step: float = 1.0,
+    step: float = STEP,
     speed_step: float = 0.25,
     gap_step: float = 0.5,
     gap_max: float = 200.0,
@@ -176,16 +177,18 @@ def least_fuel_plan(
     moves = np.arange(round(low), round(high) + 1)  # speed change per step, in speed steps
     inside = band.holds(gaps[:, None], speeds[None, :])
     budget = math.floor(band.long_share * knots + 1e-9)
-    over = band.holds(gaps[:, None], speeds[None, :], band.long_max) & ~inside if budget else (
-        np.zeros_like(inside))  # fmt: skip
-    # a state with any budget left may be over: entering it spent one (_backward)
-    allowed = np.repeat((inside | over)[None], budget + 1, axis=0)
+    if budget:
+        over = band.holds(gaps[:, None], speeds[None, :], band.long_max) & ~inside
+    else:
+        over = np.zeros_like(inside)
+    allowed = inside | over  # with any budget left: entering an over state spent one
     fast = speeds[None, :] >= speed_step * math.ceil(end_speed / speed_step - 1e-9)
-    last = allowed & fast[None]
-    fuel = _step_fuel(speeds, moves * speed_step / step, step)  # (speeds, moves)
+    last = allowed & fast
+    fuel = _step_fuel(speeds[:, None], moves[None, :] * speed_step / step, step)  # (V, moves)
     rate, best = 0.0, None
     for _ in range(iterations):
-        policy = _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step, rate)
+        policy = _backward(ahead, speeds, gaps, moves, budget, allowed, over, last, fuel, step,
+                           rate)  # fmt: skip
         plan = _forward(policy, ahead, speeds, gaps, moves, over, fuel, step, gap, speed, band)
         if plan.distance_m <= 0 or plan.fuel_g <= 0:
             return plan  # standing still: nothing to improve
@@ -198,26 +201,29 @@ def least_fuel_plan(
     return best
 
 
-def _step_fuel(speeds, accels, step) -> np.ndarray:
-    """[g] over one step from each speed (rows) at each acceleration (columns), the
-    fuel model at the midpoints of its control steps, on the flat."""
-    sub = round(step / FINE_DT)
-    tau = (np.arange(sub) + 0.5) * FINE_DT
-    v = np.maximum(speeds[:, None, None] + accels[None, :, None] * tau, 0.0)
-    a = np.broadcast_to(accels[None, :, None], v.shape)
+def _step_fuel(speed, accel, step) -> np.ndarray:
+    """[g] over one step from ``speed`` [m/s] at ``accel`` [m/s^2] (arrays that
+    broadcast together), the fuel model at the midpoints of its control steps, on the
+    flat."""
+    tau = (np.arange(round(step / FINE_DT)) + 0.5) * FINE_DT
+    v, a = np.broadcast_arrays(np.asarray(speed, dtype=np.float64)[..., None],
+                               np.asarray(accel, dtype=np.float64)[..., None])  # fmt: skip
+    v = np.maximum(v + a * tau, 0.0)
+    a = np.broadcast_to(a, v.shape)
     rate = RAV4_2019.rate(v.ravel(), a.ravel(), np.zeros(v.size)).reshape(v.shape)
-    return rate.sum(axis=2) * FINE_DT
+    return rate.sum(axis=-1) * FINE_DT
 
 
-def _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step, rate) -> np.ndarray:
+def _backward(ahead, speeds, gaps, moves, budget, allowed, over, last, fuel, step,
+              rate) -> np.ndarray:  # fmt: skip
     """The best move (an index of ``moves``, -1 where none keeps the band) at each knot,
-    budget of long knots left (``allowed`` (B, G, V) says which states each budget may be
-    in), gap and speed, for the cost ``fuel - rate distance`` to the end (``last``: the
-    states the end may be in). Entering an ``over`` state (a long time gap) spends one
-    of the budget."""
-    n_b, n_g, n_v = allowed.shape
+    budget of long knots left (0 to ``budget``), gap and speed, for the cost ``fuel -
+    rate distance`` to the end. ``allowed`` (G, V): the states a knot may be in;
+    ``last``: those the end may be in. Entering an ``over`` state (a long time gap)
+    spends one of the budget."""
+    n_b, (n_g, n_v) = budget + 1, allowed.shape
     gap_step = gaps[1] - gaps[0]
-    value = np.where(last, 0.0, np.inf)
+    value = np.repeat(np.where(last, 0.0, np.inf)[None], n_b, axis=0)
     padded = np.full((n_b, n_g + 2, n_v), np.inf)
     rows = np.arange(n_g)[:, None]
     policy = np.zeros((ahead.size, n_b, n_g, n_v), dtype=np.int16)
@@ -245,7 +251,7 @@ def _backward(ahead, speeds, gaps, moves, allowed, over, last, fuel, step, rate)
             better = cost < best
             best = np.where(better, cost, best)
             choice = np.where(better, j, choice)
-        value = np.where(allowed, best, np.inf)
+        value = np.where(allowed[None], best, np.inf)
         choice[~np.isfinite(value)] = -1  # no way on within the band from there
         policy[k] = choice
     return policy
@@ -322,7 +328,7 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
         if _leader_changed(o):
             rows.append({**row, "status": "another leader or none"})
             continue
-        sub = round(1.0 / FINE_DT)
+        sub = round(STEP / FINE_DT)
         end = (o.shape[0] - 1) // sub * sub  # the plan's last knot
         try:
             plan = least_fuel_plan(lead, float(gap[0]), float(own[0]), band=band,
@@ -339,12 +345,15 @@ def headroom(data, episodes: int = 40, *, duration: float = 120.0, split: str = 
             print(f"episode {k}: planned ({len(plans)} of {b + 1})", flush=True)
     tracked = sorted(plans)
     if tracked:
+        times = FINE_DT * np.arange(1, observed.shape[0] + 1)  # each step's end
+        target = np.zeros((times.size, len(chosen)))
+        for b in tracked:
+            target[:, b] = plans[b].speed_at(times)
+        steer = np.isin(np.arange(len(chosen)), tracked)  # the others stand: not counted
 
         def track(obs, t):
-            command = np.zeros(len(chosen))  # the others are not counted
-            for b in tracked:
-                command[b] = (plans[b].speed_at(t + FINE_DT) - obs[b, 0]) / FINE_DT
-            return command
+            k = min(round(t / FINE_DT), times.size - 1)
+            return np.where(steer, (target[k] - obs[:, 0]) / FINE_DT, 0.0)
 
         replayed, planned = _drive(env("agent"), chosen, track)
         for b in tracked:
@@ -380,9 +389,7 @@ def _leader_changed(observed) -> bool:
 def _grid_drive(speeds, step) -> tuple[float, float]:
     """(distance [m], fuel [g]) of speeds at knots ``step`` s apart, a constant
     acceleration between them, on the flat (as a plan is counted)."""
-    accels = np.diff(speeds) / step
-    fuel = sum(float(_step_fuel(np.array([v]), np.array([a]), step)[0, 0])
-               for v, a in zip(speeds[:-1], accels, strict=True))  # fmt: skip
+    fuel = sum(_step_fuel(speeds[:-1], np.diff(speeds) / step, step).tolist())  # in order
     return float(((speeds[:-1] + speeds[1:]) / 2.0 * step).sum()), fuel
 
 
