@@ -304,3 +304,31 @@ def test_a_body_is_not_handed_to_a_recording_that_would_crowd_the_body_ahead():
     sl.rec_speed[b, rear] = 0.80
     _hand_back(b, run.core)
     assert not bo.valid[b, rear]
+
+
+def _speeding_up(n, lane, x, speed, accel, at, over):
+    """A document at ``speed`` [m/s] whose recording speeds up at ``accel`` [m/s^2] for
+    ``over`` seconds from T0 + ``at``."""
+    doc = vehicle(n, lane, x, speed)
+    t = np.asarray(doc["timestamp"]) - (T0 + at)
+    busy = np.clip(t, 0.0, over)
+    extra = 0.5 * accel * busy**2 + accel * over * np.maximum(t - over, 0.0)  # [m] ahead
+    doc["x_position"] = (np.asarray(doc["x_position"]) - extra / i24.FT).tolist()
+    return doc
+
+
+def test_a_recording_drawn_at_the_clearance_behind_a_body_yields_once_it_closes_on_it(cosim):
+    # SUMO's on-ramp morning, episode 17: a recording appeared as a ghost the whole
+    # clearance (2 m) behind a body as fast as it, then sped up; crowding the body from
+    # its first step of closing, it was already too close to yield at the whole
+    # clearance, stayed a ghost and ran into the body. Here a queue of bodies reaches
+    # the visible window's rear edge and a recording in the rear ghost cell, 2.05 m
+    # behind the last, speeds up: it becomes a body behind it, and nothing is run into
+    length = 15 * i24.FT
+    queue = [vehicle(2 + k, -2, EGO_X - 37.0 * (k + 1), 20.0) for k in range(4)]
+    last = EGO_X - 37.0 * 4
+    closing = _speeding_up(9, -2, last - length - 2.05, 20.0, accel=1.5, at=0.5, over=3.0)
+    sim = cosim([vehicle(1, -2, EGO_X, 20.0), *queue, closing], world="kinematic", t_max=6.0)
+    sim.run()
+    assert int(sim.state.episodes.yielded[0]) >= 1
+    assert sim.counters.contacts == 0

@@ -685,14 +685,17 @@ def _yields(b, core, k, t, m):
     if not crowds:
         return False
     # too close to stop behind a body ahead of it: it stays a ghost (a contact with a
-    # ghost); the room is the crowding test's at a harder braking, so that a vehicle
-    # crowding a body is, for a while, still far enough back to yield (at the whole
-    # clearance at any speed, a crawling recording crowds a standing body only once
-    # already too close to it). A body behind it is no reason to stay a ghost (it did not
-    # see the ghost either: a ramp recording already over the line beside a body closing
-    # fast on it stayed a ghost and was run into, preset E), unless their footprints are
-    # within the clearance at rest: a body is not spawned onto another.
-    if _near(b, core, x, y, speed, length, width, cs.clearance, cs.clearance_at_rest,
+    # ghost); the room is that of a stop at a harder braking than the crowding test's,
+    # to the clearance at rest, so that a vehicle crowding a body is still far enough
+    # back to yield (at the whole clearance at any speed, a crawling recording crowds a
+    # standing body only once already too close to it; so did one drawn at the whole
+    # clearance behind a body as fast as it, which then sped up: too close from its
+    # first step of crowding, it stayed a ghost and ran into the body, SUMO's on-ramp
+    # morning). A body behind it is no reason to stay a ghost (it did not see the ghost
+    # either: a ramp recording already over the line beside a body closing fast on it
+    # stayed a ghost and was run into, preset E), unless their footprints are within
+    # the clearance at rest: a body is not spawned onto another.
+    if _near(b, core, x, y, speed, length, width, cs.clearance_at_rest, cs.clearance_at_rest,
              YIELD_DECEL, 0.0, np.int64(-1), np.bool_(True)) or _near(
         b, core, x, y, speed, length, width, cs.clearance_at_rest, cs.clearance_at_rest,
         math.inf, 0.0, np.int64(-1), np.bool_(False),
