@@ -316,3 +316,36 @@ def test_a_ramp_recording_over_the_line_beside_a_body_closing_on_it_becomes_a_bo
         sim.run()
         assert int(sim.state.episodes.yielded[0]) >= 1
         assert not sim.counters.collisions
+
+
+
+def test_a_ramp_recording_resuming_just_ahead_of_a_body_that_cannot_stop_is_held_back(
+    built_map, tmp_path
+):
+    # SUMO's on-ramp morning, episode 18: a ramp vehicle's track resumed after a gap in
+    # the front ghost cell, crossing into lane -4 half a metre ahead of a body there 5.6
+    # m/s faster; cutting in, it was made a body to merge as the traffic lets it, and was
+    # run into at once. Appearing where a body cannot stop for it, it is held back
+    ego_x, speed = -66.1, 14.0
+    body_x = ego_x + 147.0  # lane -4, at the visible window's front edge, 14 m/s
+    length = 15 * i24.FT
+    at = 1.0  # [s] the ramp track begins, its back 0.5 m ahead of the body's front
+    ramp = vehicle(1, RAMP_LANE, body_x + speed * at + length + 0.5 - 8.8 * at, 8.8,
+                   start=at, seconds=6.0)  # fmt: skip
+    t = np.asarray(ramp["timestamp"]) - (T0 + at)
+    across = np.clip(t, 0.0, 1.0)  # from over the line into lane -4's centre in 1 s
+    ramp["y_position"] = ((18.32 + across * (4.5 * i24.LANE_WIDTH - 18.32)) / i24.FT).tolist()
+    docs = [
+        vehicle(999, -2, ego_x, speed, seconds=60.0),
+        vehicle(2, -4, body_x, speed, seconds=60.0),
+        vehicle(3, -4, ego_x + 200.0, speed, seconds=60.0),  # a ghost ahead: the pace
+        ramp,
+    ]
+    store = make_store(tmp_path, docs)
+    config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=4.0,
+                         world="kinematic")  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        assert int(sim.state.episodes.held[0]) >= 1
+        assert sim.counters.contacts == 0

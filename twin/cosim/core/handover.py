@@ -557,7 +557,9 @@ def enter_and_reload(b, core):
     set is reloaded, the recorded vehicles there or behind it that crowd a body ahead
     made relaxing bodies (:func:`_yields`). A recorded vehicle not drawn a step ago (a
     ghost at the last reload, or a body handed to it since: ``table.drawn``) appears as a
-    ghost only where it would not be on a body nor run into one (:func:`may_appear`): one
+    ghost only where it would not be on a body nor run into one, nor have one that
+    could not stop run into it there or in the lane it goes into (:func:`may_appear`,
+    :func:`_behind_cannot_stop`): one
     that would, most often one that waited for room in the visible window while the
     simulated traffic took its place, is held back and waits as a spawn does
     (``Episodes.held`` counts each time a vehicle is held back). Returns how many were
@@ -618,19 +620,22 @@ def enter_and_reload(b, core):
         lane = lane_of(sy[b, k])
         if lane == 0 or f & SIMULATED:
             continue
-        if relaxing and k < g1 and _yields(b, core, k, t, m):
+        drawn = h >= 0 and core.table.drawn[b, h] >= step - 1
+        if relaxing and k < g1 and _yields(b, core, k, t, m, drawn):
             # simulated now, relaxing behind the body it would run into
             m = _sort_bodies(b, core)
             continue
         if k < a:
             continue  # in the rear margin, not a ghost
         length, width = rec.length[r], rec.width[r]
-        drawn = h >= 0 and core.table.drawn[b, h] >= step - 1
-        if not drawn and not may_appear(b, core, sx[b, k], sy[b, k], sspeed[b, k], length,
-                                        width):  # fmt: skip
-            # not drawn a step ago: appearing now, it would appear on a body or run into
-            # one; it waits for room as a spawn does (tried as a spawn too, back in the
-            # visible window)
+        x, y, speed = sx[b, k], sy[b, k], sspeed[b, k]
+        if not drawn and (
+            not may_appear(b, core, x, y, speed, length, width)
+            or _behind_cannot_stop(b, core, r, t, x, y, speed, length, width)
+        ):
+            # not drawn a step ago: appearing now, it would appear on a body, run into
+            # one or be run into; it waits for room as a spawn does (tried as a spawn
+            # too, back in the visible window)
             if h >= 0 and not f & HELD:
                 ep.held[b] += 1
                 flags[b, h] |= HELD
@@ -655,7 +660,7 @@ def enter_and_reload(b, core):
 
 
 @kernel
-def _yields(b, core, k, t, m):
+def _yields(b, core, k, t, m, drawn):
     """Whether snapshot row ``k``, a recorded vehicle in a ghost cell at unix ``t`` [s],
     crowds a body ahead of it (:func:`crowds`: a simulated vehicle that lags its own
     recording, which the recording behind it does not know of) and so becomes a
@@ -671,7 +676,13 @@ def _yields(b, core, k, t, m):
     of a body that does not know of it; it is handed back once merged and on its
     recording (:func:`twin.cosim.core.relax.settled`). So does one changing into the
     next through lane (:func:`_changing_into`) where it would be that close to a body
-    there: its change is the traffic's too."""
+    there: its change is the traffic's too.
+
+    One not ``drawn`` a step ago (appearing now) is not made a body where a body behind
+    it could not stop for it (:func:`may_appear`'s test): it is held back, as it would
+    be as a ghost (a ramp recording whose track resumed after a gap, crossing into lane
+    -4 half a metre ahead of a body 5.6 m/s faster, was made a body there and run into,
+    SUMO's on-ramp morning)."""
     sn, rec = core.snap, core.rec
     r = sn.r[b, k]
     x, y, speed = sn.x[b, k], sn.y[b, k], sn.speed[b, k]
@@ -701,6 +712,8 @@ def _yields(b, core, k, t, m):
         math.inf, 0.0, np.int64(-1), np.bool_(False),
     ):  # fmt: skip
         return False
+    if not drawn and _behind_cannot_stop(b, core, r, t, x, y, speed, length, width):
+        return False
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:
         core.episodes.skipped_full[b] += 1
@@ -711,6 +724,22 @@ def _yields(b, core, k, t, m):
     return True
 
 
+@kernel(inline=True)
+def _behind_cannot_stop(b, core, r, t, x, y, speed, length, width):
+    """Whether a body could not stop for recording ``r`` appearing at back x, y [m] and
+    ``speed`` [m/s] at unix ``t`` [s] (:func:`may_appear`'s test at braking
+    APPEAR_DECEL), there or, where it goes into another lane (:func:`_going_into`), in
+    that lane."""
+    cs = core.settings
+    rest = cs.clearance_at_rest
+    if _near(b, core, x, y, speed, length, width, rest, rest, APPEAR_DECEL, 0.0,
+             np.int64(-1), np.bool_(False)):  # fmt: skip
+        return True
+    into = _going_into(core, r, t, y)
+    return into != 0 and _near(b, core, x, centre_y(into), speed, length, width, rest, rest,
+                               APPEAR_DECEL, 0.0, np.int64(-1), np.bool_(False))  # fmt: skip
+
+
 @kernel
 def _cuts_in(b, core, r, t, x, y, speed, length, width, skip):
     """Whether recording ``r`` at back x, y [m] and ``speed`` [m/s] at unix ``t`` [s],
@@ -718,13 +747,21 @@ def _cuts_in(b, core, r, t, x, y, speed, length, width, skip):
     (:func:`_changing_into`), would be too close to a body (not slot ``skip``) in the
     lane it goes to, were it there now: the room at YIELD_DECEL with the whole
     clearance at any speed."""
-    lane = lane_of(y)
-    into = np.int64(-N_LANES) if lane == RAMP_LANE else _changing_into(core, r, t, y, lane)
+    into = _going_into(core, r, t, y)
     if into == 0:
         return False
     cs = core.settings
     return _near(b, core, x, centre_y(into), speed, length, width, cs.clearance,
                  cs.clearance, YIELD_DECEL, 0.0, skip, np.bool_(False))  # fmt: skip
+
+
+@kernel(inline=True)
+def _going_into(core, r, t, y):
+    """The lane recording ``r`` at ``y`` [m] at unix ``t`` [s] goes into: lane -4 from an
+    on-ramp's acceleration lane, else the next through lane it is changing into
+    (:func:`_changing_into`); 0 where none."""
+    lane = lane_of(y)
+    return np.int64(-N_LANES) if lane == RAMP_LANE else _changing_into(core, r, t, y, lane)
 
 
 @kernel(inline=True)
