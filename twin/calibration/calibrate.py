@@ -65,6 +65,7 @@ from twin.calibration.model_choice import (
     score,
 )
 from twin.calibration.model_choice import summary as replay_summary
+from twin.calibration.ramp_speeds import describe_ramp_speeds, ramp_speed_section
 from twin.calibration.yielding import describe_yielding, yielding_section
 from twin.core.atomic import atomic_file
 from twin.core.errors import StoreError
@@ -435,6 +436,7 @@ def _road_section(store, road, data, settings, model, car, distributions) -> dic
         "lane_flows": flows,
         "mobil": mobil,
         "merges": merge_section(with_ramps, road),
+        "ramp_speeds": ramp_speed_section(store, road, with_ramps, grid.t0),
         "yielding": yielding_section(grid, with_ramps, model, driver),
     }
     return section
@@ -691,5 +693,6 @@ def describe_calibration(doc: dict | None) -> str:
             lines.append(f"      MOBIL threshold {mobil['note']}")
         lines += describe_flows(section.get("lane_flows", {}))
         lines += describe_merges(section.get("merges", []))
+        lines += describe_ramp_speeds(section.get("ramp_speeds"))
         lines += describe_yielding(section.get("yielding"))
     return "\n".join(lines)

@@ -28,6 +28,7 @@ import numpy as np
 
 from twin.core.errors import TwinError
 from twin.core.i24 import Road, lane_of
+from twin.core.ramps import RAMP_LANE
 from twin.data.store import TrajectoryStore
 
 GRID_DT = 0.1  # [s] the grid the trajectories are resampled on
@@ -112,9 +113,33 @@ def load_grid(
             f"{road.value} data run from {first:.1f} to {last:.1f}"
         )
     samples = store.samples(road, lo, hi)
+    return _grid(store, road, samples, math.floor(lo / dt) * dt, dt, lane_of)
+
+
+def ramp_grid(
+    store: TrajectoryStore, road: Road | str, samples: dict, t0: float, *, dt: float = GRID_DT
+) -> GridTraffic:
+    """The samples of ``samples`` (a store's, sorted by (tid, t), with the ramps':
+    :meth:`~twin.data.store.TrajectoryStore.samples` with ``ramps=True``) on an on-ramp's
+    acceleration lane (lane -5), on the grid from ``t0`` [s] by ``dt``, as
+    :func:`load_grid` gives the through lanes': each ramp vehicle's leader is the next
+    ramp vehicle ahead (pass one ramp's samples: the ramps of a road share lane -5)."""
+    road = Road.parse(road)
+    keep = np.asarray(samples["lane"]) == RAMP_LANE
+    samples = {name: np.asarray(column)[keep] for name, column in samples.items()}
+    return _grid(store, road, samples, t0, dt, _ramp_lane)
+
+
+def _ramp_lane(y: np.ndarray) -> np.ndarray:
+    """Every position of a ramp sample is on lane -5 (the store placed it there)."""
+    return np.full(np.shape(y), RAMP_LANE, np.int8)
+
+
+def _grid(store, road, samples, t0, dt, lanes) -> GridTraffic:
+    """``samples`` (sorted by tid, t) on the grid from ``t0`` [s] by ``dt`` [s], their
+    lanes by ``lanes(y)``, with every vehicle's leader."""
     info = store.trajectory_arrays
-    t0 = math.floor(lo / dt) * dt
-    columns = _resample(samples, t0, dt)
+    columns = _resample(samples, t0, dt, lanes)
     tid = columns["tid"]
     columns["length"] = info["length"][tid].astype(np.float64)
     columns["vehicle_class"] = info["vehicle_class"][tid].astype(np.int64)
@@ -122,11 +147,12 @@ def load_grid(
     return GridTraffic(road=road, dt=dt, t0=t0, leader=leader, gap=gap, **columns)
 
 
-def _resample(samples: dict, t0: float, dt: float) -> dict:
-    """Every trajectory's samples (sorted by tid, t) at the grid steps inside its span."""
+def _resample(samples: dict, t0: float, dt: float, lanes=lane_of) -> dict:
+    """Every trajectory's samples (sorted by tid, t) at the grid steps inside its span,
+    their lanes by ``lanes(y)``."""
     tid = samples["tid"]
     starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]]) if tid.size else np.zeros(0, int)
-    ends = np.r_[starts[1:], tid.size].astype(int)
+    ends = np.r_[starts[1:], tid.size].astype(int)[: starts.size]  # none for no samples
     out = {name: [] for name in ("tid", "k", "x", "speed", "y", "lane")}
     t_all = samples["t"]
     for a, b in zip(starts, ends, strict=True):
@@ -140,7 +166,7 @@ def _resample(samples: dict, t0: float, dt: float) -> dict:
         y = np.interp(tk, t, samples["y"][a:b].astype(np.float64))
         nearest = np.minimum(np.searchsorted(t, tk), t.size - 1)
         near = np.minimum(np.abs(t[nearest] - tk), np.abs(t[np.maximum(nearest - 1, 0)] - tk))
-        lane = np.where(near <= MAX_SAMPLE_GAP, lane_of(y), 0).astype(np.int8)
+        lane = np.where(near <= MAX_SAMPLE_GAP, lanes(y), 0).astype(np.int8)
         out["tid"].append(np.full(k.size, tid[a], dtype=np.int64))
         out["k"].append(k.astype(np.int64))
         out["x"].append(np.interp(tk, t, samples["x"][a:b]))

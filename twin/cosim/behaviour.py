@@ -10,7 +10,10 @@ recording (``twin calibrate``).
   desired speeds from the calibrated desired speeds of the vehicle's lane, MOBIL with
   the calibrated threshold for discretionary changes, and the strategic changes the
   recording's lane-change flows show (a lane left near a place for a reason beyond
-  the window), drawn per vehicle (:mod:`twin.cosim.strategic_targets`).
+  the window), drawn per vehicle (:mod:`twin.cosim.strategic_targets`). A driver on
+  an on-ramp's acceleration lane wants the speed the recording's free ramp drivers
+  drove there, where enough were free (:mod:`twin.calibration.ramp_speeds`), in
+  ``calibrated`` and ``recorded`` alike.
   With ``traffic.calibrated_yielding``, the cooperative layer's drivers who make room
   for an urgent change (``traffic.yield_from``, ``traffic.courtesy``,
   ``traffic.cooperative_decel``) yield as the recording's lane -4 drivers yield to the
@@ -157,6 +160,7 @@ class Behaviour:
         self.strategic_flows: dict | None = None
         self.keep_out: list = []  # lanes kept out of (calibrated): lane_flows.keep_out
         self.merges: list | None = None  # where the on-ramps' vehicles merge (merge_positions)
+        self.ramp_speeds: list | None = None  # the on-ramps' free speeds (ramp_speeds.py)
         self.cooperation: dict[str, float] = {}  # lane -4's yielding to merges (yielding.py)
         self.calibrated_at: str | None = None  # when the calibration driven by was made
         if self.name == "paper":
@@ -190,6 +194,7 @@ class Behaviour:
             self.strategic_flows = flows
             self.keep_out = list(flows.get("keep_out", []))
         self.merges = section.get("merges")
+        self.ramp_speeds = section.get("ramp_speeds")
         self.cooperation = cooperation(section.get("yielding"))
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])

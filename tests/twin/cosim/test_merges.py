@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tests.twin.cosim.scenes import T0, make_store, vehicle
+from tests.twin.cosim.scenes import T0, hold_speed, make_store, vehicle
 from twin.calibration.calibrate import CALIBRATION, FITS
 from twin.calibration.merge_positions import QUANTILES
 from twin.core import i24
@@ -317,6 +317,63 @@ def test_a_ramp_recording_over_the_line_beside_a_body_closing_on_it_becomes_a_bo
         assert int(sim.state.episodes.yielded[0]) >= 1
         assert not sim.counters.collisions
 
+
+@pytest.mark.parametrize("ramp_speed", [None, 12.0])
+def test_a_ramp_driver_wants_the_ramps_speed_there_and_its_own_once_merged(
+    built_map, tmp_path, calibrated_wave_store, ramp_speed
+):
+    # alone on the ramp at 12 m/s, merging near the taper's end: with the ramp's speed
+    # calibrated (its free drivers drove 12 m/s there) it holds 12 m/s along the ramp;
+    # without, it speeds up towards its through-lane speed (on SUMO's on-ramp morning one
+    # ran up to 33 m/s on a ramp whose drivers cruised at 16.7); merged, it wants its own
+    doc = ramp_vehicle(1, -140.0, 12.0, merge_x=RAMP.x_end - 10.0)
+    behind = vehicle(998, -1, -400.0, 12.0, seconds=60.0)  # the data reach the ramp
+    store = make_store(tmp_path, [doc, behind, vehicle(999, -2, 0.0, 12.0, seconds=60.0)])
+    for name in (CALIBRATION, FITS):
+        shutil.copy(calibrated_wave_store.path / name, store.path / name)
+    calibration = json.loads((store.path / CALIBRATION).read_text())
+    road = calibration["roads"]["westbound"]
+    road["merges"] = [{
+        "ramp": RAMP.name, "gore_m": RAMP.x_start, "end_m": RAMP.x_end, "merged": 40,
+        "x_quantiles": [RAMP.x_end - 10.0] * QUANTILES,
+    }]  # fmt: skip
+    free = None if ramp_speed is None else {"count": 9, "mean": ramp_speed, "sd": 0.0,
+                                            "p10": ramp_speed, "p50": ramp_speed,
+                                            "p90": ramp_speed}  # fmt: skip
+    road["ramp_speeds"] = [{"ramp": RAMP.name, "end_m": RAMP.x_end, "free": 9,
+                            "free_speed": free}]  # fmt: skip
+    (store.path / CALIBRATION).write_text(json.dumps(calibration))
+    config = CosimConfig(road="westbound", lane=-2, x=0.0, time=T0, t_max=20.0,
+                         world="kinematic", behaviour="calibrated")  # fmt: skip
+    tid = store.tid_of(f"{1:024x}")
+    on_ramp, merged = [], []  # (desired speed now, own desired speed) of the ramp driver
+    last_on_ramp = None  # [s] the last step before its merge began
+    # the ego held at 12 m/s: the ramp driver stays in the visible window (not relaxing)
+    with Cosimulator(config, EmpiricalTraffic(store), built_map, controller=hold_speed) as sim:
+        sim.reset()
+        while not sim.done:
+            sim.step()
+            ids = sim.manager.ids
+            own = ids[sim.tids_of(ids) == tid]
+            if own.size:
+                pair = (sim.manager.desired_speed(own)[0], sim.base_speeds(own)[0])
+                lane = sim.manager.lanes(own)[0]
+                (on_ramp if lane == RAMP_LANE else merged).append(pair)
+                if lane == RAMP_LANE:
+                    last_on_ramp = sim.sim_time
+        rows = sim.log.vehicles()
+        assert sim.manager.merges == 1 and not sim.counters.collisions
+    assert on_ramp and merged, "it was not simulated on the ramp and merged"
+    wanted, base = np.array(on_ramp).T
+    assert np.all(base > 14.0)  # its own: the through lanes' (calibrated at 25+)
+    assert np.all(wanted == (base if ramp_speed is None else ramp_speed))
+    wanted, base = np.array(merged[1:]).T  # (its wish is set before its merge begins)
+    assert np.all(wanted == base)  # merging or merged: its own again
+    own_rows = rows[(rows["tid"] == tid) & (rows["time"] <= last_on_ramp)]
+    if ramp_speed is None:
+        assert own_rows["speed"].max() > 14.0  # speeding up towards it on the ramp
+    else:
+        assert own_rows["speed"].max() <= 12.1  # holding the ramp's speed
 
 
 def test_a_ramp_recording_resuming_just_ahead_of_a_body_that_cannot_stop_is_held_back(

@@ -20,6 +20,7 @@ import numpy as np
 
 from twin.calibration.following import CELL, CalibrationDataError
 from twin.calibration.merge_positions import MERGE_LEAD, merge_table
+from twin.calibration.ramp_speeds import ramp_speed_table
 from twin.core.i24 import HOV_LANE, LANE_WIDTH, N_LANES
 from twin.core.jit import kernel, normal, uniform
 from twin.core.ramps import RAMP_LANE, SPAN_MARGIN
@@ -44,6 +45,7 @@ SPEED_STREAM = np.int64(0x53)
 AV_STREAM = np.int64(0x41565F)
 STRATEGIC_STREAM = np.int64(0x737472)
 MERGE_STREAM = np.int64(0x6D7267)
+RAMP_SPEED_STREAM = np.int64(0x726D73)
 PAPER, CALIBRATED, RECORDED = 0, 1, 2
 RECORDED_SPAN = 100.0  # [m] a recorded change's urgency grows over this distance
 PLANNED_LATE = 100.0  # [m] a recorded change not started this far past its place is dropped
@@ -66,7 +68,7 @@ BehaviourArrays = namedtuple(
     "dist_low dist_high dist_columns desired_dim speed_source lane_speed_mean "
     "lane_speed_sd lane_speed_own fits fit_ok flows_on flow_edges flow_left flow_right "
     "flow_lanes flow_states "
-    "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x",
+    "plan_start plan_x plan_time plan_from plan_to hov_openings merge_q merge_x ramp_speeds",
 )
 
 
@@ -239,6 +241,31 @@ def merge_target(b, i, core, seed, x):
     drivers.strategic[b, i] = 1  # LEFT
     drivers.strategic_from[b, i] = x_from
     drivers.strategic_by[b, i] = x_by
+
+
+@kernel(inline=True)
+def ramp_speed(b, i, core, seed):
+    """The speed [m/s] slot ``i``'s driver wants on the on-ramp's acceleration lane it is
+    on, or NaN where it wants its own there: a draw per driver from the free-flow speeds
+    the recording's drivers drove on that ramp's lane (``BehaviourArrays.ramp_speeds``,
+    :mod:`twin.calibration.ramp_speeds`; normal, clipped as every trait is, at least 1
+    m/s), for a driver of a calibrated or recorded behaviour; its own desired speed
+    again once it has merged. ``CoreSettings.merges`` rows: (opening, gore, taper
+    start, end) [m]."""
+    beh, merges = core.beh, core.settings.merges
+    table = beh.ramp_speeds
+    if beh.mode == PAPER or table.shape[0] == 0:
+        return math.nan
+    x = core.bodies.x[b, i]
+    for k in range(merges.shape[0]):
+        if x > merges[k, 3]:
+            continue
+        for row in range(table.shape[0]):
+            if abs(table[row, 0] - merges[k, 3]) < 1.0:
+                z = _z(seed, RAMP_SPEED_STREAM, core.traffic.drivers.key[b, i], np.int64(0))
+                return max(table[row, 1] + table[row, 2] * z, 1.0)
+        return math.nan
+    return math.nan
 
 
 @kernel(inline=True)
@@ -561,6 +588,7 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
         plan_time=plan["time"], plan_from=plan["lane_from"], plan_to=plan["lane_to"],
         hov_openings=np.array(traffic_config.hov_openings, np.float64).reshape(-1, 2),
         merge_q=merge_table(behaviour.merges), merge_x=plan["merge_x"],
+        ramp_speeds=ramp_speed_table(behaviour.ramp_speeds),
     )  # fmt: skip
 
 

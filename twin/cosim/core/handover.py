@@ -784,7 +784,8 @@ def lead_speeds(b, core):
     of each lane ahead of the ego (relaxing vehicles are not visible), which takes the
     speed of the ghost ahead of it (its own if none; the larger of the two where the
     lead chases its ghost), through the optional first-order lag (the paper's rule;
-    ``docs/cosim.md``)."""
+    ``docs/cosim.md``), and a driver on an on-ramp's acceleration lane, who wants the
+    ramp's speed where the calibration knows it (:func:`drivers.ramp_speed`)."""
     bo, sl, ep, gh, cs = core.bodies, core.slots, core.episodes, core.ghosts, core.settings
     dr = core.traffic.drivers
     valid, x, ids, lanes = bo.valid, bo.x, bo.id, dr.lane
@@ -799,8 +800,14 @@ def lead_speeds(b, core):
         if not valid[b, i]:
             continue
         params[b, i, 0] = base[b, i]
-        if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i] or lanes[b, i] < -N_LANES:
-            continue  # (an on-ramp's vehicle has the lane's end ahead, not a ghost)
+        if lanes[b, i] < -N_LANES:  # on an on-ramp's lane: the ramp's speed, where known,
+            if dr.ctrl[b, i] == traffic.DRIVER:  # and the lane's end ahead, not a ghost
+                ramp = behaviour.ramp_speed(b, i, core, ep.seed[b])
+                if ramp == ramp:  # not NaN
+                    params[b, i, 0] = ramp
+            continue
+        if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i]:
+            continue
         k = -lanes[b, i] - 1
         lead = leads[b, k]
         if lead < 0 or x[b, i] > x[b, lead] or (x[b, i] == x[b, lead] and ids[b, i] < ids[b, lead]):
