@@ -82,6 +82,23 @@ def merge_section(samples: dict, road: Road | str) -> list[dict]:
     return out
 
 
+def ramp_entries(section: list | None, name: str) -> list:
+    """A road's per-on-ramp section ``name`` of ``calibration.json`` (``merges``,
+    ``ramp_speeds``) as its list of entries; [] where there is none.
+
+    Raises:
+        CalibrationDataError: the section is not a list.
+    """
+    if section is None:
+        return []
+    if not isinstance(section, list):
+        raise CalibrationDataError(
+            f"calibration.json: {name} must be a list of on-ramps, got "
+            f"{type(section).__name__} (calibrate again)"
+        )
+    return section
+
+
 def merge_table(section: list[dict] | None) -> np.ndarray:
     """(k, 1 + QUANTILES) [m] of a road's ``merges`` section for the core: per ramp with
     quantiles, its taper's end then its quantiles (:func:`merge_section`); (0, 1 +
@@ -91,15 +108,8 @@ def merge_table(section: list[dict] | None) -> np.ndarray:
     Raises:
         CalibrationDataError: the section is not as :func:`merge_section` writes it.
     """
-    if section is None:
-        section = []
-    if not isinstance(section, list):
-        raise CalibrationDataError(
-            f"calibration.json: merges must be a list of on-ramps, got {type(section).__name__} "
-            "(calibrate again)"
-        )
     rows = []
-    for entry in section:
+    for entry in ramp_entries(section, "merges"):
         q = entry.get("x_quantiles") if isinstance(entry, dict) else None
         if isinstance(entry, dict) and q is None:
             continue  # too few merges to place

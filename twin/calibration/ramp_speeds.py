@@ -18,7 +18,7 @@ import numpy as np
 
 from twin.calibration.distributions import speed_summary
 from twin.calibration.following import CalibrationDataError, free_flow_speeds, ramp_grid
-from twin.calibration.merge_positions import ramp_of, road_ramps
+from twin.calibration.merge_positions import ramp_entries, ramp_of, road_ramps
 from twin.core.i24 import Road
 from twin.core.ramps import RAMP_LANE, ramp_spans
 
@@ -59,15 +59,8 @@ def ramp_speed_table(section: list[dict] | None) -> np.ndarray:
     Raises:
         CalibrationDataError: the section is not as :func:`ramp_speed_section` writes it.
     """
-    if section is None:
-        section = []
-    if not isinstance(section, list):
-        raise CalibrationDataError(
-            f"calibration.json: ramp_speeds must be a list of on-ramps, got "
-            f"{type(section).__name__} (calibrate again)"
-        )
     rows = []
-    for entry in section:
+    for entry in ramp_entries(section, "ramp_speeds"):
         speed = entry.get("free_speed") if isinstance(entry, dict) else None
         if isinstance(entry, dict) and speed is None:
             continue  # too few free to say

@@ -52,6 +52,22 @@ def _run(built_map, tmp_path, docs, t_max=30.0, lane=-2, speed=12.0, **traffic):
         return sim, store, rows, merge_section(rows, lengths, [RAMP.x_end]), lengths
 
 
+def _run_from(built_map, tmp_path, docs, ego_x, t_max):
+    """A kinematic run of ``docs`` with the ego in lane -2 at ``ego_x`` [m]: how many
+    recordings were made bodies for crowding one (yielded) and held back, and the
+    contacts and collisions."""
+    store = make_store(tmp_path, docs)
+    config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=t_max,
+                         world="kinematic")  # fmt: skip
+    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+        sim.reset()
+        sim.run()
+        ep = sim.state.episodes
+        return {"yielded": int(ep.yielded[0]), "held": int(ep.held[0]),
+                "contacts": sim.counters.contacts,
+                "collisions": list(sim.counters.collisions)}  # fmt: skip
+
+
 def test_the_recording_replays_the_ramp_samples(tmp_path):
     doc = ramp_vehicle(1, 0.0, 15.0, merge_x=100.0)
     store = make_store(tmp_path, [doc])
@@ -308,14 +324,8 @@ def test_a_ramp_recording_over_the_line_beside_a_body_closing_on_it_becomes_a_bo
     docs = [crossing_vehicle(1, x, 1.0, 5.0 * i24.LANE_WIDTH + 0.2, cross_x=x + 2.0),
             vehicle(2, -4, x - 4.7 - 20.0, 9.0),
             vehicle(999, -2, ego_x, 2.0, seconds=60.0)]  # fmt: skip
-    store = make_store(tmp_path, docs)
-    config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=6.0,
-                         world="kinematic")  # fmt: skip
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        sim.reset()
-        sim.run()
-        assert int(sim.state.episodes.yielded[0]) >= 1
-        assert not sim.counters.collisions
+    run = _run_from(built_map, tmp_path, docs, ego_x, t_max=6.0)
+    assert run["yielded"] >= 1 and not run["collisions"]
 
 
 @pytest.mark.parametrize("ramp_speed", [None, 12.0])
@@ -398,11 +408,5 @@ def test_a_ramp_recording_resuming_just_ahead_of_a_body_that_cannot_stop_is_held
         vehicle(3, -4, ego_x + 200.0, speed, seconds=60.0),  # a ghost ahead: the pace
         ramp,
     ]
-    store = make_store(tmp_path, docs)
-    config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=4.0,
-                         world="kinematic")  # fmt: skip
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
-        sim.reset()
-        sim.run()
-        assert int(sim.state.episodes.held[0]) >= 1
-        assert sim.counters.contacts == 0
+    run = _run_from(built_map, tmp_path, docs, ego_x, t_max=4.0)
+    assert run["held"] >= 1 and run["contacts"] == 0
