@@ -9,9 +9,9 @@ ramp driver wanted its through-lane speed on an empty ramp: on SUMO's on-ramp mo
 (a ramp signed for 16.7 m/s, its drivers cruising at it) a ramp vehicle the twin had
 spawned behind no other ran up to 33 m/s, passed its recording by 140 m, found no gap
 at that speed and stopped at the taper's end in front of the ego. Where the recording's
-ramp drivers accelerate along the lane rather than cruise (no driver holds a speed for
-:data:`~twin.calibration.following.FREE_SPREAD`), too few are free and the ramp keeps
-its drivers' own desired speeds.
+ramp drivers accelerate along the lane rather than cruise (no driver's free speeds stay
+within :data:`~twin.calibration.following.FREE_SPREAD` for 5 s), too few are free and
+the ramp keeps its drivers' own desired speeds.
 """
 
 import numpy as np
