@@ -23,6 +23,7 @@ from twin.core.i24 import Road
 from twin.core.ramps import RAMP_LANE, ramp_spans
 
 MIN_FREE = 5  # fewer free ramp vehicles leave the ramp's drivers their own desired speeds
+MAX_RAMP_SPEED = 60.0  # [m/s] no spawn is faster (twin.cosim.core.handover.MAX_SPEED)
 
 
 def ramp_speed_section(store, road: Road | str, samples: dict, t0: float) -> list[dict]:
@@ -65,16 +66,29 @@ def ramp_speed_table(section: list[dict] | None) -> np.ndarray:
         if isinstance(entry, dict) and speed is None:
             continue  # too few free to say
         try:
-            row = np.array([entry["end_m"], speed["mean"], speed["sd"]], dtype=np.float64)
-        except (KeyError, TypeError, ValueError):
+            values = [entry["end_m"], speed["mean"], speed["sd"]]
+        except (KeyError, TypeError):
+            values = None
+        if values is None or not all(_number(v) for v in values):
             row = None
-        if row is None or not np.all(np.isfinite(row)) or row[1] <= 0.0 or row[2] < 0.0:
+        else:
+            row = np.array(values, dtype=np.float64)
+        if (
+            row is None or not np.all(np.isfinite(row))
+            or not 0.0 < row[1] <= MAX_RAMP_SPEED or row[2] < 0.0
+        ):  # fmt: skip
             raise CalibrationDataError(
-                "calibration.json: a ramp_speeds entry needs end_m and a free_speed with a "
-                f"positive mean and an sd >= 0 (or null), got {entry!r:.200} (calibrate again)"
+                "calibration.json: a ramp_speeds entry needs a number end_m and a free_speed "
+                f"with a mean in (0, {MAX_RAMP_SPEED:.0f}] m/s and an sd >= 0 (or null), got "
+                f"{entry!r:.200} (calibrate again)"
             )
         rows.append(row)
     return np.array(rows, np.float64).reshape(-1, 3)
+
+
+def _number(value) -> bool:
+    """Whether ``value`` is a real number as JSON writes one (not a bool, nor a string)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def describe_ramp_speeds(section: list[dict] | None) -> list[str]:

@@ -88,6 +88,9 @@ def test_too_few_free_ramp_drivers_leave_the_ramp_their_own_speeds():
         [{"ramp": "wb", "end_m": 100.0, "free": 9, "free_speed": {"mean": 0.0, "sd": 0.3}}],
         [{"ramp": "wb", "end_m": "far", "free": 9, "free_speed": {"mean": 16.0, "sd": 0.3}}],
         ["wb"],  # an entry not a dict
+        [{"ramp": "wb", "end_m": "144.9", "free": 9, "free_speed": {"mean": 16.0, "sd": 0.3}}],
+        [{"ramp": "wb", "end_m": 100.0, "free": 9, "free_speed": {"mean": 16.0, "sd": True}}],
+        [{"ramp": "wb", "end_m": 100.0, "free": 9, "free_speed": {"mean": 99.0, "sd": 0.3}}],
     ],
 )
 def test_every_malformed_ramp_speeds_section_is_a_clear_error(section):

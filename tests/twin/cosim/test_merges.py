@@ -27,10 +27,11 @@ RAMP = next(r for r in segment_ramps() if r.road == i24.Road.WESTBOUND)
 EGO_X = 120.0  # [m] the visible window (150 m either side) holds the ramp's end
 
 
-def ramp_vehicle(n: int, x: float, speed: float, merge_x: float, seconds: float = 40.0):
+def ramp_vehicle(n: int, x: float, speed: float, merge_x: float, seconds: float = 40.0, **doc):
     """A westbound document: at T0 its back is at ``x`` [m] on the acceleration lane,
-    at constant ``speed``; its recording moves to lane -4 at ``merge_x``."""
-    doc = vehicle(n, RAMP_LANE, x, speed, seconds=seconds)
+    at constant ``speed``; its recording moves to lane -4 at ``merge_x`` (``doc``:
+    :func:`vehicle`'s other settings)."""
+    doc = vehicle(n, RAMP_LANE, x, speed, seconds=seconds, **doc)
     x_m = (i24.SEGMENT_END_MM * i24.FEET_PER_MILE - np.asarray(doc["x_position"])) * i24.FT
     lane_4 = 4.5 * i24.LANE_WIDTH_FT  # lane -4's centre [ft]
     doc["y_position"] = np.where(x_m < merge_x, doc["y_position"], lane_4).tolist()
@@ -52,14 +53,14 @@ def _run(built_map, tmp_path, docs, t_max=30.0, lane=-2, speed=12.0, **traffic):
         return sim, store, rows, merge_section(rows, lengths, [RAMP.x_end]), lengths
 
 
-def _run_from(built_map, tmp_path, docs, ego_x, t_max):
-    """A kinematic run of ``docs`` with the ego in lane -2 at ``ego_x`` [m]: how many
-    recordings were made bodies for crowding one (yielded) and held back, and the
-    contacts and collisions."""
+def _run_from(built_map, tmp_path, docs, ego_x, t_max, controller=None):
+    """A kinematic run of ``docs`` with the ego in lane -2 at ``ego_x`` [m] (driven by
+    ``controller``, else its driver): how many recordings were made bodies for crowding
+    one (yielded) and held back, and the contacts and collisions."""
     store = make_store(tmp_path, docs)
     config = CosimConfig(road="westbound", lane=-2, x=ego_x, time=T0, t_max=t_max,
                          world="kinematic")  # fmt: skip
-    with Cosimulator(config, EmpiricalTraffic(store), built_map) as sim:
+    with Cosimulator(config, EmpiricalTraffic(store), built_map, controller=controller) as sim:
         sim.reset()
         sim.run()
         ep = sim.state.episodes
@@ -410,3 +411,23 @@ def test_a_ramp_recording_resuming_just_ahead_of_a_body_that_cannot_stop_is_held
     ]
     run = _run_from(built_map, tmp_path, docs, ego_x, t_max=4.0)
     assert run["held"] >= 1 and run["contacts"] == 0
+
+
+def test_a_ramp_recording_appearing_behind_a_slower_lane_4_body_is_not_held_back(
+    built_map, tmp_path
+):
+    # a ramp recording whose track begins 10 m behind a body in lane -4 beside it, 10.7
+    # m/s faster, with no body behind it: crowding that body in the lane it goes into,
+    # it is made a body and brakes for it. The test of a body behind that could not stop
+    # is no reason to hold it back here: judging the body ahead as if it were behind
+    # held back every ramp recording appearing beside a crawling lane -4
+    ego_x, speed, at = 0.0, 6.0, 1.0
+    body_x = ego_x - 148.0  # lane -4, at the visible window's rear edge
+    length = 15 * i24.FT
+    # (its recording merges past x 0: a track on the ramp alone is no trajectory)
+    ramp = ramp_vehicle(1, body_x + speed * at - 10.0 - length - 16.7 * at, 16.7, merge_x=0.0,
+                        seconds=12.0, start=at)  # fmt: skip
+    docs = [vehicle(999, -2, ego_x, speed, seconds=60.0),
+            vehicle(2, -4, body_x, speed, seconds=60.0), ramp]  # fmt: skip
+    run = _run_from(built_map, tmp_path, docs, ego_x, t_max=3.0, controller=hold_speed)
+    assert run["held"] == 0 and run["yielded"] == 1 and run["contacts"] == 0

@@ -249,22 +249,24 @@ def ramp_speed(b, i, core, seed):
     on, or NaN where it wants its own there: a draw per driver from the free-flow speeds
     the recording's drivers drove on that ramp's lane (``BehaviourArrays.ramp_speeds``,
     :mod:`twin.calibration.ramp_speeds`; normal, clipped as every trait is, at least 1
-    m/s), for a driver of a calibrated or recorded behaviour; its own desired speed
-    again once it has merged. ``CoreSettings.merges`` rows: (opening, gore, taper
-    start, end) [m]."""
+    m/s), for a driver of a calibrated or recorded behaviour (its own desired speed again
+    once its merge has begun: the caller asks only on lane -5). The ramp is the one
+    whose lane holds its back x, as the calibration placed the samples
+    (``CoreSettings.merges`` rows: (opening, gore, taper start, end) [m]); the draw is
+    the same at every step (the seed, its key, one event)."""
     beh, merges = core.beh, core.settings.merges
     table = beh.ramp_speeds
     if beh.mode == PAPER or table.shape[0] == 0:
         return math.nan
     x = core.bodies.x[b, i]
     for k in range(merges.shape[0]):
-        if x > merges[k, 3]:
+        if not merges[k, 0] - SPAN_MARGIN <= x <= merges[k, 3] + SPAN_MARGIN:
             continue
-        for row in range(table.shape[0]):
-            if abs(table[row, 0] - merges[k, 3]) < 1.0:
-                z = _z(seed, RAMP_SPEED_STREAM, core.traffic.drivers.key[b, i], np.int64(0))
-                return max(table[row, 1] + table[row, 2] * z, 1.0)
-        return math.nan
+        row = _merge_row(table, merges[k, 3])
+        if row < 0:
+            return math.nan
+        z = _z(seed, RAMP_SPEED_STREAM, core.traffic.drivers.key[b, i], np.int64(0))
+        return max(table[row, 1] + table[row, 2] * z, 1.0)
     return math.nan
 
 
@@ -313,7 +315,8 @@ def merging(b, i, core, seed, x, y):
 
 @kernel(inline=True)
 def _merge_row(table, end):
-    """The row of ``merge_q`` of the ramp whose taper ends at ``end`` [m], or -1."""
+    """The row of ``table`` (``merge_q``, ``ramp_speeds``: a ramp's taper's end first)
+    of the ramp whose taper ends at ``end`` [m], or -1."""
     for k in range(table.shape[0]):
         if abs(table[k, 0] - end) < 1.0:
             return k

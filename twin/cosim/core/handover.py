@@ -44,8 +44,8 @@ MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 #: recording is there, and any body this far behind the rear ghost window
 REAR_MARGIN = 50.0
 #: [m/s^2] it becomes a body behind the one it crowds only where it can stop behind it
-#: braking this hard, ``spawn_clearance`` apart (else it stays a ghost: a contact with a
-#: ghost if they touch, counted)
+#: braking this hard, ``spawn_clearance_at_rest`` apart (else it stays a ghost: a contact
+#: with a ghost if they touch, counted)
 YIELD_DECEL = 6.0
 #: [s], [m] a recording moving across its lane (its centre this far off the lane's)
 #: that is in the next lane this long from now is changing into it: where it would be
@@ -726,18 +726,23 @@ def _yields(b, core, k, t, m, drawn):
 
 @kernel(inline=True)
 def _behind_cannot_stop(b, core, r, t, x, y, speed, length, width):
-    """Whether a body could not stop for recording ``r`` appearing at back x, y [m] and
-    ``speed`` [m/s] at unix ``t`` [s] (:func:`may_appear`'s test at braking
-    APPEAR_DECEL), there or, where it goes into another lane (:func:`_going_into`), in
-    that lane."""
-    cs = core.settings
-    rest = cs.clearance_at_rest
-    if _near(b, core, x, y, speed, length, width, rest, rest, APPEAR_DECEL, 0.0,
-             np.int64(-1), np.bool_(False)):  # fmt: skip
-        return True
+    """Whether a body behind recording ``r``, appearing at back x, y [m] and ``speed``
+    [m/s] at unix ``t`` [s], could not stop for it braking at APPEAR_DECEL, the
+    clearance at rest apart (:func:`may_appear`'s test for a body behind), in its lane
+    or, where it goes into another lane (:func:`_going_into`), in that lane. Bodies
+    ahead of it are not this test's: it could brake for them once a body."""
+    rest = core.settings.clearance_at_rest
     into = _going_into(core, r, t, y)
-    return into != 0 and _near(b, core, x, centre_y(into), speed, length, width, rest, rest,
-                               APPEAR_DECEL, 0.0, np.int64(-1), np.bool_(False))  # fmt: skip
+    bo = core.bodies
+    for j in range(bo.top[b]):
+        if not bo.valid[b, j] or bo.x[b, j] >= x:
+            continue
+        if _body_near(b, core, j, x, y, speed, length, width, rest, rest, APPEAR_DECEL, 0.0):
+            return True
+        if into != 0 and _body_near(b, core, j, x, centre_y(into), speed, length, width, rest,
+                                    rest, APPEAR_DECEL, 0.0):  # fmt: skip
+            return True
+    return False
 
 
 @kernel
@@ -800,10 +805,12 @@ def lead_speeds(b, core):
         if not valid[b, i]:
             continue
         params[b, i, 0] = base[b, i]
-        if lanes[b, i] < -N_LANES:  # on an on-ramp's lane: the ramp's speed, where known,
-            if dr.ctrl[b, i] == traffic.DRIVER:  # and the lane's end ahead, not a ghost
+        # on an on-ramp's lane a driver wants the ramp's speed, where the calibration
+        # knows it, and has the lane's end ahead, not a ghost
+        if lanes[b, i] < -N_LANES:
+            if dr.ctrl[b, i] == traffic.DRIVER:
                 ramp = behaviour.ramp_speed(b, i, core, ep.seed[b])
-                if ramp == ramp:  # not NaN
+                if not math.isnan(ramp):
                     params[b, i, 0] = ramp
             continue
         if i == ego or x[b, i] <= ego_x or sl.relaxing[b, i]:
