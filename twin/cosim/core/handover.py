@@ -559,7 +559,7 @@ def enter_and_reload(b, core):
     ghost at the last reload, or a body handed to it since: ``table.drawn``) appears as a
     ghost only where it would not be on a body nor run into one, nor have one that
     could not stop run into it there or in the lane it goes into (:func:`may_appear`,
-    :func:`_behind_cannot_stop`): one
+    :func:`_cannot_stop_where_it_goes`): one
     that would, most often one that waited for room in the visible window while the
     simulated traffic took its place, is held back and waits as a spawn does
     (``Episodes.held`` counts each time a vehicle is held back). Returns how many were
@@ -631,7 +631,7 @@ def enter_and_reload(b, core):
         x, y, speed = sx[b, k], sy[b, k], sspeed[b, k]
         if not drawn and (
             not may_appear(b, core, x, y, speed, length, width)
-            or _behind_cannot_stop(b, core, r, t, x, y, speed, length, width)
+            or _cannot_stop_where_it_goes(b, core, r, t, x, y, speed, length, width)
         ):
             # not drawn a step ago: appearing now, it would appear on a body, run into
             # one or be run into; it waits for room as a spawn does (tried as a spawn
@@ -679,7 +679,8 @@ def _yields(b, core, k, t, m, drawn):
     there: its change is the traffic's too.
 
     One not ``drawn`` a step ago (appearing now) is not made a body where a body behind
-    it could not stop for it (:func:`may_appear`'s test): it is held back, as it would
+    it could not stop for it, in its lane or the one it goes into
+    (:func:`_cannot_stop_for`): it is held back, as it would
     be as a ghost (a ramp recording whose track resumed after a gap, crossing into lane
     -4 half a metre ahead of a body 5.6 m/s faster, was made a body there and run into,
     SUMO's on-ramp morning)."""
@@ -712,7 +713,10 @@ def _yields(b, core, k, t, m, drawn):
         math.inf, 0.0, np.int64(-1), np.bool_(False),
     ):  # fmt: skip
         return False
-    if not drawn and _behind_cannot_stop(b, core, r, t, x, y, speed, length, width):
+    if not drawn and (
+        _cannot_stop_for(b, core, x, y, speed, length, width)
+        or _cannot_stop_where_it_goes(b, core, r, t, x, y, speed, length, width)
+    ):
         return False
     slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
     if slot < 0:
@@ -725,24 +729,30 @@ def _yields(b, core, k, t, m, drawn):
 
 
 @kernel(inline=True)
-def _behind_cannot_stop(b, core, r, t, x, y, speed, length, width):
-    """Whether a body behind recording ``r``, appearing at back x, y [m] and ``speed``
-    [m/s] at unix ``t`` [s], could not stop for it braking at APPEAR_DECEL, the
-    clearance at rest apart (:func:`may_appear`'s test for a body behind), in its lane
-    or, where it goes into another lane (:func:`_going_into`), in that lane. Bodies
-    ahead of it are not this test's: it could brake for them once a body."""
+def _cannot_stop_for(b, core, x, y, speed, length, width):
+    """Whether a body behind a recording appearing at back x, y [m] and ``speed`` [m/s]
+    could not stop for it braking at APPEAR_DECEL, the clearance at rest apart
+    (:func:`may_appear`'s test for a body behind; pass the centre of the lane it goes
+    into as ``y`` to judge it there). Bodies ahead of it are not this test's: it could
+    brake for them once a body."""
     rest = core.settings.clearance_at_rest
-    into = _going_into(core, r, t, y)
     bo = core.bodies
     for j in range(bo.top[b]):
-        if not bo.valid[b, j] or bo.x[b, j] >= x:
-            continue
-        if _body_near(b, core, j, x, y, speed, length, width, rest, rest, APPEAR_DECEL, 0.0):
-            return True
-        if into != 0 and _body_near(b, core, j, x, centre_y(into), speed, length, width, rest,
-                                    rest, APPEAR_DECEL, 0.0):  # fmt: skip
+        if (
+            bo.valid[b, j]
+            and bo.x[b, j] < x
+            and _body_near(b, core, j, x, y, speed, length, width, rest, rest, APPEAR_DECEL, 0.0)
+        ):
             return True
     return False
+
+
+@kernel(inline=True)
+def _cannot_stop_where_it_goes(b, core, r, t, x, y, speed, length, width):
+    """:func:`_cannot_stop_for` in the lane recording ``r`` at ``y`` [m] at unix ``t``
+    [s] goes into (:func:`_going_into`); False where it goes into none."""
+    into = _going_into(core, r, t, y)
+    return into != 0 and _cannot_stop_for(b, core, x, centre_y(into), speed, length, width)
 
 
 @kernel
