@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import pytest
 
+from tests.twin.cosim.scenes import EGO_X, tid_of, vehicle
 from twin.core.errors import TwinError
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.cosim.core import relax
@@ -57,3 +58,26 @@ def test_without_relaxation_the_papers_hand_over_jumps(wave_store, built_map, re
 def test_relax_must_be_true_or_false():
     with pytest.raises(TwinError, match="relax must be true or false"):
         CosimConfig(relax="yes")
+
+
+def test_a_vehicle_far_ahead_of_its_recording_eases_off_without_stopping_in_its_lane(cosim):
+    # SUMO's on-ramp morning, episode 17: a body drove on at its desired speed where its
+    # recording crawled at 8 m/s, left the visible window 160 m ahead of it, braked to a
+    # stand there to wait for it and stopped the visible traffic in its lane behind it.
+    # Here the ego and two recordings in lane -3 crawl at 8 m/s; the two bodies run free
+    # toward 30 m/s, leave the window far ahead of their recordings and relax: each
+    # slows toward its recording no further than EASE_SHARE of its speed (a little more
+    # where its car following brakes it behind the other), and neither stops
+    ahead, behind = vehicle(2, -3, EGO_X + 100.0, 8.0), vehicle(3, -3, EGO_X + 60.0, 8.0)
+    sim = cosim([vehicle(1, -2, EGO_X, 8.0), ahead, behind], world="kinematic", dt=0.1,
+                t_max=30.0)  # fmt: skip
+    sim.run()
+    frame = sim.log.vehicles()
+    section = handover_section(frame, sim.log.windows(), sim.traffic, sim.config.road,
+                               sim.t0, sim.config.dt, sim.limits)  # fmt: skip
+    relaxing = section["relaxing"]
+    assert relaxing["vehicles"] >= 1 and relaxing["distance_m"]["max"] > 50.0  # far ahead
+    for n in (2, 3):
+        rows = frame[frame["tid"] == tid_of(sim, n)]
+        assert len(rows) > 0 and rows["speed"].min() >= relax.EASE_SHARE * 8.0 - 0.5, n
+    assert sim.counters.contacts == 0

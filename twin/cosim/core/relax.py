@@ -13,6 +13,8 @@ closes the distance to its recorded trajectory within physical limits:
   [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`]; braking harder is left to it where its car
   following needs it, behind a body or a ghost (a ghost is drawn: running into one is
   a crash a user sees); its speed never goes below zero (the world's brakes hold it);
+  ahead of its recording it slows for it to no less than :data:`EASE_SHARE` of the
+  recording's speed (its car following may still brake it further);
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
   discretionary change, no strategic target but an on-ramp's merge, which it keeps;
@@ -64,6 +66,12 @@ HAND_BACK_X = 0.3  # [m] along its recording
 HAND_BACK_SPEED = 0.3  # [m/s]
 HAND_BACK_Y = 0.5  # [m] across
 FREE_SPEED = 5.0  # [m/s] a relaxing driver's desired speed lies this far above its target's
+#: a relaxing vehicle ahead of its recording eases off to let it catch up, to no less than
+#: this share of its recording's speed: a driver lets the traffic behind close in, it does
+#: not stop in a live lane (on SUMO's on-ramp morning one ran 160 m ahead of a recording
+#: slowing in lane -3, braked to a stand at the window's front to wait for it and stopped
+#: the visible traffic behind it)
+EASE_SHARE = 0.9
 
 
 @kernel
@@ -159,7 +167,9 @@ def track(b, core):
     """Each relaxing vehicle's command (after the traffic manager's): the tracking law
     toward its recording, never above its car following's command, within
     [ACCEL_LOW, ACCEL_HIGH]; where its car following asks for harder braking, behind a
-    body or a ghost (drawn, so a crash a user sees), it brakes that hard. It does not
+    body or a ghost (drawn, so a crash a user sees), it brakes that hard. Ahead of its
+    recording it brakes toward it only above :data:`EASE_SHARE` of the recording's
+    speed. It does not
     brake toward its recording while a ghost behind it crowds it (a recording, which
     cannot brake for it): it keeps its speed, its car following aside."""
     bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
@@ -182,6 +192,9 @@ def track(b, core):
         )
         if law < 0.0 and _crowded_by_ghost(b, core, i):
             law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
+        if bo.x[b, i] > sl.rec_x[b, i]:  # ahead of it: eases off, no slower for its sake
+            eased = EASE_SHARE * sl.rec_speed[b, i]
+            law = max(law, min((eased - bo.speed[b, i]) / core.settings.dt, 0.0))
         following = accel[b, i]
         floor = min(following, ACCEL_LOW)  # behind a body or a ghost: as hard as needed
         if following < ACCEL_LOW and (
