@@ -14,7 +14,8 @@ closes the distance to its recorded trajectory within physical limits:
   following needs it, behind a body or a ghost (a ghost is drawn: running into one is
   a crash a user sees); its speed never goes below zero (the world's brakes hold it);
   ahead of its recording it slows for it to no less than :data:`EASE_SHARE` of the
-  recording's speed (its car following may still brake it further);
+  recording's speed (where its car following has braked it further, it holds that
+  speed);
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
   discretionary change, no strategic target but an on-ramp's merge, which it keeps;
@@ -169,9 +170,9 @@ def track(b, core):
     [ACCEL_LOW, ACCEL_HIGH]; where its car following asks for harder braking, behind a
     body or a ghost (drawn, so a crash a user sees), it brakes that hard. Ahead of its
     recording it brakes toward it only above :data:`EASE_SHARE` of the recording's
-    speed. It does not
-    brake toward its recording while a ghost behind it crowds it (a recording, which
-    cannot brake for it): it keeps its speed, its car following aside."""
+    speed now (below that, it holds its speed). It does not brake toward its recording
+    while a ghost behind it crowds it (a recording, which cannot brake for it): it
+    keeps its speed, its car following aside."""
     bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
     accel, lanes, lanes_from = dr.accel, dr.lane, dr.lane_from
     for i in range(bo.top[b]):
