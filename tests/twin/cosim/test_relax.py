@@ -6,9 +6,11 @@ session's preset-B recording, kinematic world, 120 s, and a hand-built scene
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
-from tests.twin.cosim.scenes import EGO_X, tid_of, vehicle
+from tests.twin.cosim.scenes import EGO_X, T0, tid_of, vehicle
+from twin.core import i24
 from twin.core.errors import TwinError
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.cosim.core import relax
@@ -82,4 +84,65 @@ def test_a_vehicle_far_ahead_of_its_recording_eases_off_without_stopping_in_its_
         rows = frame[frame["tid"] == tid_of(sim, n)]
         assert len(rows) > 0 and rows["speed"].min() >= relax.EASE_SHARE * 8.0 - 0.5, n
         assert rows["speed"].min() <= relax.EASE_SHARE * 8.0 + 0.1, n  # it did slow for it
+    assert sim.counters.contacts == 0
+
+
+def _speeding_up(doc: dict, at: float, to: float, accel: float) -> dict:
+    """``doc`` (a constant-speed westbound recording) speeding up at ``accel`` [m/s^2]
+    from unix ``at`` [s] until it drives ``to`` [m/s]."""
+    t = np.asarray(doc["timestamp"])
+    x = np.asarray(doc["x_position"])
+    v0 = (x[0] - x[1]) / (t[1] - t[0]) * i24.FT  # [m/s], westbound: x_ft falls
+    rise = np.clip(t - at, 0.0, (to - v0) / accel)
+    extra = 0.5 * accel * rise**2 + (to - v0) * np.clip(t - at - (to - v0) / accel, 0.0, None)
+    x = x - extra / i24.FT
+    return {**doc, "x_position": x.tolist(), "ending_x": float(x[-1])}
+
+
+def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_it_as_it_speeds_up(cosim):
+    # SUMO's on-ramp morning, seed 1, episode 1: bodies that had raced ahead of their
+    # recordings in lane -3 braked behind its queue, moved back into lane -4 and, ahead of
+    # their recordings, held 1.8 and 4.6 m/s for half a minute while their recordings sped
+    # up to 9 m/s and the recorded traffic ahead of them drove at 18: lane -4 crawled
+    # behind them and the ego ended 800 m short of its recording. Here the two recordings
+    # of the test above crawl at 8 m/s, then speed up to 16; the bodies that eased off far
+    # ahead of them speed up too, to EASE_SHARE of their recordings' speed
+    docs = [vehicle(1, -2, EGO_X, 8.0, seconds=70.0)]
+    starts = {2: EGO_X + 100.0, 3: EGO_X + 60.0}
+    for n, x in starts.items():
+        docs.append(_speeding_up(vehicle(n, -3, x, 8.0, seconds=70.0), T0 + 25.0, 16.0, 1.0))
+    sim = cosim(docs, world="kinematic", dt=0.1, t_max=50.0)
+    sim.run()
+    frame = sim.log.vehicles()
+    for n, x in starts.items():
+        rows = frame[frame["tid"] == tid_of(sim, n)]
+        late = rows[rows["time"] >= 33.0]  # its recording at 16 m/s from 33 s
+        assert len(late) > 0, n  # still simulated then
+        best = late.loc[late["speed"].idxmax()]
+        # ahead of its recording: 8 m/s for 25 s, 96 m speeding up, then 16 m/s
+        assert best["x"] > x + 8.0 * 25.0 + 96.0 + 16.0 * (best["time"] - 33.0), n
+        assert best["speed"] >= relax.EASE_SHARE * 16.0 - 1.0, n
+    assert sim.counters.contacts == 0
+
+
+def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_the_recorded_traffic_ahead(cosim):
+    # The same episode: the recorded traffic ahead of those bodies drove 18 m/s where
+    # their own recordings, far behind, crawled. Here a body's recording crawls at 4 m/s
+    # in lane -3 while a stream of recordings drives 12 m/s through the ghost cell ahead
+    # (each appearing 175 m ahead of the ego, 5 s apart); the body, leading its lane,
+    # chases them into the ghost cell and, ahead of its recording, keeps their speed
+    # rather than slowing to EASE_SHARE of its own recording's and holding the lane there
+    docs = [vehicle(1, -2, EGO_X, 8.0, seconds=70.0), vehicle(2, -3, EGO_X + 100.0, 4.0)]
+    for k in range(10):
+        start = 5.0 * k
+        docs.append(vehicle(10 + k, -3, EGO_X + 175.0 - 4.0 * start, 12.0, start=start))
+    sim = cosim(docs, world="kinematic", dt=0.1, t_max=45.0)
+    sim.run()
+    frame = sim.log.vehicles()
+    ego = frame[frame["tid"] == tid_of(sim, 1)].set_index("time")["x"]
+    rows = frame[frame["tid"] == tid_of(sim, 2)]
+    ahead = rows["x"].to_numpy() - ego.loc[rows["time"]].to_numpy()
+    out = rows[ahead > sim.config.w_visible]  # relaxing in the ghost cell
+    assert len(out) > 10  # it got there, far ahead of its recording
+    assert out["speed"].min() >= 0.9 * 12.0, out["speed"].min()
     assert sim.counters.contacts == 0
