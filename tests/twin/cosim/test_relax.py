@@ -87,6 +87,18 @@ def test_a_vehicle_far_ahead_of_its_recording_eases_off_without_stopping_in_its_
     assert sim.counters.contacts == 0
 
 
+def _driven(doc: dict, speed) -> dict:
+    """``doc`` (a westbound recording, sampled at T0) driven at ``speed(t)`` [m/s] (``t``
+    [s] from T0, an array in and out) through where it is at T0."""
+    t = np.asarray(doc["timestamp"]) - T0
+    v = speed(t)
+    travelled = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    at_t0 = int(np.argmin(np.abs(t)))
+    x_ft = doc["x_position"][at_t0] - (travelled - travelled[at_t0]) / i24.FT
+    return {**doc, "x_position": x_ft.tolist(), "starting_x": float(x_ft[0]),
+            "ending_x": float(x_ft[-1])}  # fmt: skip
+
+
 def _speeding_up(doc: dict, at: float, to: float, accel: float) -> dict:
     """``doc`` (a constant-speed westbound recording) speeding up at ``accel`` [m/s^2]
     from unix ``at`` [s] until it drives ``to`` [m/s]."""
@@ -106,7 +118,8 @@ def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_it_as_it_speeds_up(c
     # up to 9 m/s and the recorded traffic ahead of them drove at 18: lane -4 crawled
     # behind them and the ego ended 800 m short of its recording. Here the two recordings
     # of the test above crawl at 8 m/s, then speed up to 16; the bodies that eased off far
-    # ahead of them speed up too, to EASE_SHARE of their recordings' speed
+    # ahead of them speed up too, to EASE_SHARE of their recordings' speed (no recorded
+    # traffic is ahead of them)
     docs = [vehicle(1, -2, EGO_X, 8.0, seconds=70.0)]
     starts = {2: EGO_X + 100.0, 3: EGO_X + 60.0}
     for n, x in starts.items():
@@ -116,12 +129,11 @@ def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_it_as_it_speeds_up(c
     frame = sim.log.vehicles()
     for n, x in starts.items():
         rows = frame[frame["tid"] == tid_of(sim, n)]
-        late = rows[rows["time"] >= 33.0]  # its recording at 16 m/s from 33 s
-        assert len(late) > 0, n  # still simulated then
-        best = late.loc[late["speed"].idxmax()]
-        # ahead of its recording: 8 m/s for 25 s, 96 m speeding up, then 16 m/s
-        assert best["x"] > x + 8.0 * 25.0 + 96.0 + 16.0 * (best["time"] - 33.0), n
-        assert best["speed"] >= relax.EASE_SHARE * 16.0 - 1.0, n
+        # its recording: 8 m/s for 25 s, 96 m speeding up, then 16 m/s from 33 s
+        rec_x = x + 8.0 * 25.0 + 96.0 + 16.0 * (rows["time"] - 33.0)
+        late = rows[(rows["time"] >= 33.0) & (rows["x"] > rec_x)]  # still ahead of it
+        assert len(late) > 0, n
+        assert late["speed"].max() >= relax.EASE_SHARE * 16.0 - 1.0, n
     assert sim.counters.contacts == 0
 
 
@@ -130,8 +142,10 @@ def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_the_recorded_traffic
     # their own recordings, far behind, crawled. Here a body's recording crawls at 4 m/s
     # in lane -3 while a stream of recordings drives 12 m/s through the ghost cell ahead
     # (each appearing 175 m ahead of the ego, 5 s apart); the body, leading its lane,
-    # chases them into the ghost cell and, ahead of its recording, keeps their speed
-    # rather than slowing to EASE_SHARE of its own recording's and holding the lane there
+    # chases them into the ghost cell and, ahead of its recording, keeps up with them
+    # rather than slowing to EASE_SHARE of its own recording's speed and holding the lane
+    # there (on the old law it braked to 3.9 m/s, fell back into the visible window, chased
+    # them again, and so on)
     docs = [vehicle(1, -2, EGO_X, 8.0, seconds=70.0), vehicle(2, -3, EGO_X + 100.0, 4.0)]
     for k in range(10):
         start = 5.0 * k
@@ -144,5 +158,31 @@ def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_the_recorded_traffic
     ahead = rows["x"].to_numpy() - ego.loc[rows["time"]].to_numpy()
     out = rows[ahead > sim.config.w_visible]  # relaxing in the ghost cell
     assert len(out) > 10  # it got there, far ahead of its recording
-    assert out["speed"].min() >= 0.9 * 12.0, out["speed"].min()
+    # their speed less a tenth of its recording's (it still closes in on it a little),
+    # but where one of them appears close ahead of it and its car following brakes it
+    kept = 12.0 - (1.0 - relax.EASE_SHARE) * 4.0
+    assert np.median(out["speed"]) >= kept - 0.1
     assert sim.counters.contacts == 0
+
+
+def test_a_vehicle_a_little_ahead_of_its_recording_behind_recorded_traffic_is_handed_back(cosim):
+    # A body a few metres ahead of its recording, behind recorded traffic driving as its
+    # recording does, still closes in (at a tenth of its recording's speed) and becomes
+    # its recording again, rather than keeping up with that traffic at its offset. Here
+    # the body's recording dips from 8 to 6 m/s and falls 8 m behind a steady drive; the
+    # body does not dip (it leads lane -3, behind a recording at 8 m/s in the ghost cell),
+    # and leaves the slower ego's window 7 m ahead of its recording
+    docs = [
+        vehicle(1, -2, EGO_X, 6.0, seconds=70.0),
+        vehicle(3, -3, EGO_X + 170.0, 8.0, seconds=70.0),
+    ]
+    dip = _driven(vehicle(2, -3, EGO_X + 120.0, 8.0, seconds=70.0),
+                  lambda t: 8.0 - np.clip(np.minimum(t - 4.0, 10.0 - t), 0.0, 2.0))  # fmt: skip
+    docs.append(dip)
+    sim = cosim(docs, world="kinematic", dt=0.1, t_max=40.0)
+    sim.run()
+    frame, ghosts = sim.log.vehicles(), sim.log.ghosts()
+    rows = frame[frame["tid"] == tid_of(sim, 2)]
+    print(rows[["time", "x", "speed"]].iloc[::20].to_string())
+    print(ghosts[ghosts["tid"] == tid_of(sim, 2)].head())
+    assert (ghosts["tid"] == tid_of(sim, 2)).any()  # handed back: a ghost again

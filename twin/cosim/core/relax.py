@@ -13,11 +13,11 @@ closes the distance to its recorded trajectory within physical limits:
   [:data:`ACCEL_LOW`, :data:`ACCEL_HIGH`]; braking harder is left to it where its car
   following needs it, behind a body or a ghost (a ghost is drawn: running into one is
   a crash a user sees); its speed never goes below zero (the world's brakes hold it);
-  ahead of its recording it drives at :data:`EASE_SHARE` of the recording's speed, or
-  at the speed of the ghost just ahead of it in its lane where that is faster (the
-  recorded traffic there): it slows for it no further than that, and where its car
-  following has braked it further (behind a queue it has since left) it speeds up to
-  it again, at ``2 OMEGA`` per metre per second short (the tracking law's speed gain);
+  ahead of its recording it slows for it no further than :data:`EASE_SHARE` of the
+  recording's speed, nor below the speed of the ghost just ahead of it in its lane less
+  a tenth of the recording's (:func:`_eased_speed`), and where its car following has
+  braked it below that (behind a queue it has since left) it speeds up to it again, by
+  1 m/s^2 per m/s short (the tracking law's speed gain), within the limits above;
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
   discretionary change, no strategic target but an on-ramp's merge, which it keeps;
@@ -73,11 +73,7 @@ FREE_SPEED = 5.0  # [m/s] a relaxing driver's desired speed lies this far above 
 #: this share of its recording's speed: a driver lets the traffic behind close in, it does
 #: not stop in a live lane (on SUMO's on-ramp morning one ran 160 m ahead of a recording
 #: slowing in lane -3, braked to a stand at the window's front to wait for it and stopped
-#: the visible traffic behind it); nor slower than the recorded traffic just ahead of it,
-#: and it speeds up to either where its car following braked it below: two bodies that
-#: had raced ahead in lane -3 and braked behind its queue held 1.8 and 4.6 m/s in lane -4
-#: for half a minute, 180 m ahead of recordings speeding up to 9 m/s, with the recorded
-#: traffic ahead of them at 18; lane -4 crawled behind them (seed 1, episode 1)
+#: the visible traffic behind it)
 EASE_SHARE = 0.9
 
 
@@ -175,8 +171,8 @@ def track(b, core):
     toward its recording, never above its car following's command, within
     [ACCEL_LOW, ACCEL_HIGH]; where its car following asks for harder braking, behind a
     body or a ghost (drawn, so a crash a user sees), it brakes that hard. Ahead of its
-    recording it drives toward :func:`_eased_speed`: it brakes toward its recording only
-    above it, and below it speeds up to it. It does not brake toward its recording
+    recording it brakes toward it only above :func:`_eased_speed`, and below that speeds
+    up to it. It does not brake toward its recording
     while a ghost behind it crowds it (a recording, which cannot brake for it): it
     keeps its speed, its car following aside."""
     bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
@@ -199,7 +195,9 @@ def track(b, core):
         )
         if law < 0.0 and _crowded_by_ghost(b, core, i):
             law = 0.0  # a recording close behind it, which cannot brake: no slowing for its own
-        if bo.x[b, i] > sl.rec_x[b, i]:  # ahead of it: eases off, no slower for its sake
+        if bo.x[b, i] > sl.rec_x[b, i]:
+            # ahead of it: brakes for it at most down to the eased speed in one step, and
+            # from below speeds up to it at the tracking law's gain
             short = _eased_speed(b, core, i) - bo.speed[b, i]
             law = max(law, min(short / core.settings.dt, 2.0 * OMEGA * short))
         following = accel[b, i]
@@ -219,16 +217,24 @@ def track(b, core):
 
 @kernel
 def _eased_speed(b, core, i):
-    """[m/s] the speed relaxing slot ``i``, ahead of its recording, drives toward:
-    :data:`EASE_SHARE` of its recording's, or the speed of the ghost just ahead of it in
-    its lane where that is faster (the recorded traffic there, which its own recording,
-    behind, has not reached)."""
+    """[m/s] the speed relaxing slot ``i``, ahead of its recording, slows to no further
+    for it: :data:`EASE_SHARE` of its recording's, or the speed of the ghost just ahead
+    of it in its lane (the recorded traffic there, which its own recording, behind, has
+    not reached) less a tenth of its recording's, where that is faster. Behind recorded
+    traffic that drives as its recording does, it still closes in on it at a tenth of
+    the recording's speed; behind faster recorded traffic it keeps up with it rather
+    than hold the lane at its own recording's pace. On SUMO's on-ramp morning (seed 1,
+    episode 1) two bodies that had raced ahead in lane -3 and braked behind its queue
+    moved back into lane -4 and held 1.8 and 4.6 m/s there for half a minute, 180 m
+    ahead of recordings speeding up to 9 m/s, with the recorded traffic ahead of them at
+    18: lane -4 crawled behind them and the ego ended 800 m short of its recording."""
     bo, sl, sc = core.bodies, core.slots, core.traffic.scratch
-    eased = EASE_SHARE * sl.rec_speed[b, i]
+    own = sl.rec_speed[b, i]
+    eased = EASE_SHARE * own
     ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
                       core.traffic.drivers.lane[b, i], bo.x[b, i])  # fmt: skip
     if ahead >= bo.valid.shape[1]:  # owners from n on are ghosts
-        eased = max(eased, sc.sspeed[b, ahead])
+        eased = max(eased, sc.sspeed[b, ahead] - (1.0 - EASE_SHARE) * own)
     return eased
 
 
