@@ -99,18 +99,6 @@ def _driven(doc: dict, speed) -> dict:
             "ending_x": float(x_ft[-1])}  # fmt: skip
 
 
-def _speeding_up(doc: dict, at: float, to: float, accel: float) -> dict:
-    """``doc`` (a constant-speed westbound recording) speeding up at ``accel`` [m/s^2]
-    from unix ``at`` [s] until it drives ``to`` [m/s]."""
-    t = np.asarray(doc["timestamp"])
-    x = np.asarray(doc["x_position"])
-    v0 = (x[0] - x[1]) / (t[1] - t[0]) * i24.FT  # [m/s], westbound: x_ft falls
-    rise = np.clip(t - at, 0.0, (to - v0) / accel)
-    extra = 0.5 * accel * rise**2 + (to - v0) * np.clip(t - at - (to - v0) / accel, 0.0, None)
-    x = x - extra / i24.FT
-    return {**doc, "x_position": x.tolist(), "ending_x": float(x[-1])}
-
-
 def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_it_as_it_speeds_up(cosim):
     # SUMO's on-ramp morning, seed 1, episode 1: bodies that had raced ahead of their
     # recordings in lane -3 braked behind its queue, moved back into lane -4 and, ahead of
@@ -122,8 +110,12 @@ def test_a_vehicle_far_ahead_of_its_recording_keeps_up_with_it_as_it_speeds_up(c
     # traffic is ahead of them)
     docs = [vehicle(1, -2, EGO_X, 8.0, seconds=70.0)]
     starts = {2: EGO_X + 100.0, 3: EGO_X + 60.0}
+
+    def speeding_up(t):  # [m/s] from 25 s, at 1 m/s^2
+        return np.clip(8.0 + (t - 25.0), 8.0, 16.0)
+
     for n, x in starts.items():
-        docs.append(_speeding_up(vehicle(n, -3, x, 8.0, seconds=70.0), T0 + 25.0, 16.0, 1.0))
+        docs.append(_driven(vehicle(n, -3, x, 8.0, seconds=70.0), speeding_up))
     sim = cosim(docs, world="kinematic", dt=0.1, t_max=50.0)
     sim.run()
     frame = sim.log.vehicles()
