@@ -59,7 +59,10 @@ def plot_lane_flows(flows: dict, out: Path, *, title: str, simulated: dict | Non
         for x in (0.0, SEGMENT_LENGTH):
             ax.axvline(x, color="0.3", ls=":", lw=1.0)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, ncol=2, loc="upper left")
+        if ax.get_legend_handles_labels()[0]:  # a road with no changes has none to name
+            ax.legend(fontsize=7, ncol=2, loc="upper left")
+    if not pairs:
+        top.text(0.5, 0.5, "no lane changes", transform=top.transAxes, ha="center")
     top.text(0.0, 1.0, " segment", transform=top.get_xaxis_transform(), va="top", fontsize=7)
     fig.suptitle(title)
     fig.tight_layout()
