@@ -25,6 +25,14 @@ recording (``twin calibrate``).
   as strategic targets: wanted from the place with a growing urgency, the target
   lane's drivers making room, retried until well past it; it makes no others.
 
+In ``calibrated`` and ``recorded`` a driver wants no less than the speed its recording
+shows where it is spawned (its desired speed is the larger of the two; not on an
+on-ramp's lane, whose drivers want the ramp's speeds): a driver seen driving at 33 m/s
+wants at least that, whatever the lane's drivers want on average. On SUMO's lane-drop
+morning, whose right lanes empty ahead of the drop, its fast drivers there were drawn
+29 m/s and fell back; with this the speed field error in lane -3 fell from 2.06 to
+1.80 m/s and lane -1's from 0.46 to 0.21 (120 kinematic episodes).
+
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
 The calibrated behaviours drive the model the calibration fitted (``twin calibrate
@@ -54,6 +62,7 @@ from twin.calibration.distributions import (
 from twin.calibration.yielding import cooperation
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
+from twin.core.ramps import RAMP_LANE
 from twin.data.store import TrajectoryStore
 from twin.traffic.models import AUTO as AUTO_MODEL
 from twin.traffic.models import UNCALIBRATED
@@ -247,9 +256,14 @@ class Behaviour:
             if p.x[i] > x_now - PLANNED_LATE * 0.5
         ]
 
-    def drivers(self, tid: np.ndarray, vehicle_class: np.ndarray, lane: np.ndarray) -> dict:
+    def drivers(
+        self, tid: np.ndarray, vehicle_class: np.ndarray, lane: np.ndarray, speed=None
+    ) -> dict:
         """Parameters for vehicles spawned from recorded ``tid`` (each (n,)): a dict of
-        the traffic manager's parameter names to (n,) arrays, ``{}`` in ``paper``."""
+        the traffic manager's parameter names to (n,) arrays, ``{}`` in ``paper``.
+        ``speed`` (n,) [m/s]: their recorded speeds at the spawn; a driver off an
+        on-ramp's lane wants no less than that (the module's docstring); None: the draws
+        alone."""
         n = len(tid)
         if self.name == "paper" or n == 0:
             return {}
@@ -272,6 +286,10 @@ class Behaviour:
                 out["desired_speed"] = np.where(own, fitted, drawn)
         if self.speed_source == "free_flow":
             out["desired_speed"] = draw_desired_speeds(self.speeds, lane, self.rng)
+        if speed is not None and "desired_speed" in out:
+            off_ramp = np.asarray(lane) != RAMP_LANE
+            seen = np.where(off_ramp, np.asarray(speed, dtype=np.float64), 0.0)
+            out["desired_speed"] = np.maximum(out["desired_speed"], seen)
         if self.threshold is not None:
             out["threshold"] = np.full(n, self.threshold)
             out["politeness"] = np.full(n, self.politeness)

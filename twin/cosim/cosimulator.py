@@ -247,6 +247,10 @@ class Cosimulator:
         """(k,) [m/s] the own desired speeds of vehicles ``ids`` (before step 3's rule)."""
         return self.state.slots.base_speed[0][self._slots_of(ids)].copy()
 
+    def spawn_speeds(self, ids) -> np.ndarray:
+        """(k,) [m/s] the speeds vehicles ``ids`` were spawned at (their recordings')."""
+        return self.state.slots.spawn_speed[0][self._slots_of(ids)].copy()
+
     def set_base_speeds(self, ids, speed) -> None:
         """Set the own desired speeds [m/s] of vehicles ``ids`` (experiments, tests)."""
         self.state.slots.base_speed[0][self._slots_of(ids)] = speed

@@ -1,6 +1,8 @@
 """Behaviour modes: the paper's drivers, drivers drawn from a store's calibration, and
 each vehicle driving as fitted to its own recording with its recorded lane changes."""
 
+import json
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -179,24 +181,34 @@ def test_a_gipps_calibration_drives_gipps_drivers_and_names_the_model_it_needs(
         sim.close()
 
 
-def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, built_map, tmp_path):
-    # the fits identify more desired speeds than free flow does (a congested morning),
-    # but lane -2's free drivers were seen at 17 m/s: its drivers want that, the other
-    # lanes' the fitted speeds (on SUMO's on-ramp morning the fits said 40.8 m/s where
-    # the HOV lane's free drivers drove 29.3, and its speed field was 4.9 m/s off)
-    import json
-    import shutil
+def _free_speeds(mean: float) -> dict:
+    """A lane's free-flow speeds in the calibration's layout: ``mean`` +/- 0.1 m/s."""
+    return {"count": 12, "mean": mean, "sd": 0.1, "p10": mean - 0.1, "p50": mean,
+            "p90": mean + 0.1}  # fmt: skip
 
+
+def _with_desired_speeds(store, tmp_path, speeds: dict, identified: int) -> TrajectoryStore:
+    """A copy of ``store`` whose westbound calibration has the free-flow ``speeds`` and
+    ``identified`` desired speeds from the car-following fits."""
     folder = tmp_path / "store"
-    shutil.copytree(calibrated_store.path, folder)
+    shutil.copytree(store.path, folder)
     path = folder / "calibration.json"
     doc = json.loads(path.read_text())
     road = doc["roads"]["westbound"]
-    road["car_following"]["desired_speed_identified"] = 1000
-    free = {"count": 12, "mean": 17.0, "sd": 0.1, "p10": 16.9, "p50": 17.0, "p90": 17.1}
-    road["desired_speed"] = {"all": free, "-2": free}
+    road["car_following"]["desired_speed_identified"] = identified
+    road["desired_speed"] = speeds
     path.write_text(json.dumps(doc))
-    sim = _episode(TrajectoryStore(folder), built_map, "calibrated", seconds=0.1)
+    return TrajectoryStore(folder)
+
+
+def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, built_map, tmp_path):
+    # the fits identify more desired speeds than free flow does (a congested morning),
+    # but lane -2's free drivers were seen at 48 m/s: its drivers want that, the other
+    # lanes' the fitted speeds (on SUMO's on-ramp morning the fits said 40.8 m/s where
+    # the HOV lane's free drivers drove 29.3, and its speed field was 4.9 m/s off)
+    free = _free_speeds(48.0)
+    store = _with_desired_speeds(calibrated_store, tmp_path, {"all": free, "-2": free}, 1000)
+    sim = _episode(store, built_map, "calibrated", seconds=0.1)
     try:
         assert sim.behaviour.speed_source == "car_following"
         ids = sim.manager.ids
@@ -204,12 +216,13 @@ def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, b
         lanes, changing = sim.manager.lanes(ids), sim.manager.changing(ids)
         in_2, others = (lanes == -2) & ~changing, (lanes != -2) & ~changing  # as spawned
         assert in_2.any() and others.any()
-        assert np.all(np.abs(base[in_2] - 17.0) <= 0.2 + 1e-9)  # within 2 sd
-        assert np.all(np.abs(base[others] - 17.0) > 0.2)  # the fits' (calibrated at 25+)
+        assert np.all(sim.spawn_speeds(ids) < 47.8)  # each wants its draw (the next test)
+        assert np.all(np.abs(base[in_2] - 48.0) <= 0.2 + 1e-9)  # within 2 sd
+        assert np.all(np.abs(base[others] - 48.0) > 0.2)  # the fits' (calibrated at 25+)
         # the reference draw says the same
         drawn = sim.behaviour.drivers(np.arange(4), np.zeros(4, int), np.array([-2, -2, -3, -1]))
-        assert np.all(np.abs(drawn["desired_speed"][:2] - 17.0) <= 0.2 + 1e-9)
-        assert np.all(np.abs(drawn["desired_speed"][2:] - 17.0) > 0.2)
+        assert np.all(np.abs(drawn["desired_speed"][:2] - 48.0) <= 0.2 + 1e-9)
+        assert np.all(np.abs(drawn["desired_speed"][2:] - 48.0) > 0.2)
         # an on-ramp's driver (lane -5) takes lane -4's, as the compiled draw does
         from twin.calibration.distributions import draw_desired
 
@@ -217,6 +230,41 @@ def test_a_lane_with_free_flow_speeds_of_its_own_drives_them(calibrated_store, b
         lanes = np.array([-4, -5, -3])
         rng = np.random.default_rng(0)
         ramp = draw_desired(speeds, "car_following", np.full(3, 40.0), lanes, rng)
-        assert np.all(np.abs(ramp[:2] - 17.0) <= 0.2 + 1e-9) and ramp[2] == 40.0
+        assert np.all(np.abs(ramp[:2] - 48.0) <= 0.2 + 1e-9) and ramp[2] == 40.0
     finally:
         sim.close()
+
+
+@pytest.mark.parametrize("behaviour", ["calibrated", "recorded"])
+def test_a_driver_wants_no_less_than_its_recording_drove_where_it_was_spawned(
+    calibrated_store, built_map, tmp_path, behaviour
+):
+    # every lane's free drivers were seen at 26 m/s (the window's vehicles are spawned
+    # at 23 to 29): those spawned faster keep their own speed as their desired speed,
+    # slower ones the draw (SUMO's lane drop: fast drivers in its emptied right lanes,
+    # drawn 29 m/s, fell 3 m/s behind)
+    store = _with_desired_speeds(calibrated_store, tmp_path, {"all": _free_speeds(26.0)}, 0)
+    sim = _episode(store, built_map, behaviour, seconds=0.1)
+    try:
+        assert sim.behaviour.speed_source == "free_flow"
+        ids = sim.manager.ids
+        ids = ids[ids != sim.ego_id]  # the ego wants vel_default
+        base, spawned = sim.base_speeds(ids), sim.spawn_speeds(ids)
+        faster, slower = spawned > 26.2, spawned < 25.8
+        assert faster.sum() >= 3 and slower.sum() >= 3
+        assert np.array_equal(base[faster], spawned[faster])
+        assert np.all(np.abs(base[slower] - 26.0) <= 0.2 + 1e-9)
+        # the reference draw says the same
+        lanes = np.array([-2, -2, -3, -5])
+        drawn = sim.behaviour.drivers(
+            np.arange(4), np.zeros(4, int), lanes, speed=np.array([30.0, 5.0, 33.0, 30.0])
+        )["desired_speed"]
+        assert drawn[0] == 30.0 and drawn[2] == 33.0 and abs(drawn[1] - 26.0) <= 0.2 + 1e-9
+        assert abs(drawn[3] - 26.0) <= 0.2 + 1e-9  # an on-ramp's driver: the ramp's draw
+    finally:
+        sim.close()
+    paper = _episode(store, built_map, "paper", seconds=0.1)
+    try:  # the paper's drivers want vel_default whatever they drove
+        assert np.allclose(paper.base_speeds(paper.manager.ids), paper.config.vel_default)
+    finally:
+        paper.close()

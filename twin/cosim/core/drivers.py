@@ -82,9 +82,10 @@ def _z(seed, stream, key, event):
 
 
 @kernel
-def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time):
+def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
     """Slot ``i``'s driver for recorded trajectory ``r`` (store tid ``key``) of
-    ``vehicle_class``, spawned in ``lane`` at the manager's clock ``time``."""
+    ``vehicle_class``, spawned in ``lane`` at the manager's clock ``time`` moving at
+    ``speed`` [m/s] (its recording's)."""
     beh, slots, drivers = core.beh, core.slots, core.traffic.drivers
     model, vel_default = core.traffic.settings.model, core.settings.vel_default
     c = vehicle_class
@@ -124,6 +125,8 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time):
     desired = vel_default
     if beh.mode != PAPER:
         desired = _behaviour_drivers(b, i, core, seed, key, r, c, lane)
+        if lane != RAMP_LANE:  # a driver wants no less than it was seen to drive
+            desired = max(desired, speed)
     slots.base_speed[b, i] = desired
     p[b, i, 0] = desired
     drivers.key[b, i] = key
