@@ -8,14 +8,17 @@ calibrated run draws its drivers from. The choice replays every following run of
 window (:func:`~twin.calibration.following.following_runs`, not only those that crossed
 a wave, which the fit needs): each follower gets a driver drawn from the candidate's
 distributions, with its desired speed from where the twin takes it
-(:func:`~twin.calibration.distributions.draw_desired`), and is driven behind its
-recorded leader. The score is the median over the runs of each run's spacing RMSE: the typical
-follower, as the fit's quality is its median NRMSE. Not the error pooled over every
-step: a few drawn drivers whose desired speed the fits left loose fall back by hundreds
-of metres over a two-minute run and would decide it alone (on a day the synthesiser
-drove with Gipps drivers, pooled spacing RMSE 112 m for Gipps against 60 m for IDM, the
-medians 7 m against 24 m). The lowest wins. A candidate whose car following could not
-be calibrated on the window (nor taken from ``--following-from``) is not a candidate.
+(:func:`~twin.calibration.distributions.draw_desired`; without a run's floor at the
+speed the twin spawns a vehicle at, :mod:`twin.cosim.behaviour`: a follower's run starts
+wherever it began following, not where a window takes it over), and is driven behind its
+recorded leader. The score is the median over the runs of each run's spacing RMSE: the
+typical follower, as the fit's quality is its median NRMSE. Not the error pooled over
+every step: a few drawn drivers whose desired speed the fits left loose fall back by
+hundreds of metres over a two-minute run and would decide it alone (on a day the
+synthesiser drove with Gipps drivers, pooled spacing RMSE 112 m for Gipps against 60 m
+for IDM, the medians 7 m against 24 m). The lowest wins. A candidate whose car following
+could not be calibrated on the window (nor taken from ``--following-from``) is not a
+candidate.
 
 Why a replay of drawn drivers, not the fit's own residual: a model is fitted on the
 followers that stop and go, and its drivers then drive the whole window, calm stretches

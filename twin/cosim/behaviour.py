@@ -25,9 +25,10 @@ recording (``twin calibrate``).
   as strategic targets: wanted from the place with a growing urgency, the target
   lane's drivers making room, retried until well past it; it makes no others.
 
-In ``calibrated`` and ``recorded`` a driver wants no less than the speed its recording
-shows where it is spawned (its desired speed is the larger of the two; not on an
-on-ramp's lane, whose drivers want the ramp's speeds): a driver seen driving at 33 m/s
+In ``calibrated`` and ``recorded``, where the calibration gives desired speeds, a
+driver wants no less than the speed its recording shows where it is spawned (its
+desired speed is the larger of its draw and that; not for a driver spawned on an
+on-ramp's lane, nor for the ego, which wants ``vel_default``): a driver seen driving at 33 m/s
 wants at least that, whatever the lane's drivers want on average. On SUMO's lane-drop
 morning, whose right lanes empty ahead of the drop, its fast drivers there were drawn
 29 m/s and fell back; with this the speed field error in lane -3 fell from 2.06 to
@@ -286,10 +287,10 @@ class Behaviour:
                 out["desired_speed"] = np.where(own, fitted, drawn)
         if self.speed_source == "free_flow":
             out["desired_speed"] = draw_desired_speeds(self.speeds, lane, self.rng)
-        if speed is not None and "desired_speed" in out:
+        if speed is not None and "desired_speed" in out:  # not where the source is paper
             off_ramp = np.asarray(lane) != RAMP_LANE
             seen = np.where(off_ramp, np.asarray(speed, dtype=np.float64), 0.0)
-            out["desired_speed"] = np.maximum(out["desired_speed"], seen)
+            out["desired_speed"] = np.fmax(out["desired_speed"], seen)  # as the kernel
         if self.threshold is not None:
             out["threshold"] = np.full(n, self.threshold)
             out["politeness"] = np.full(n, self.politeness)

@@ -7,7 +7,9 @@ its own recorded changes) as :mod:`twin.cosim.behaviour` and
 
 Every draw is keyed by the run's seed and the vehicle's recorded trajectory (its
 store ``tid``), so a vehicle gets the same driver whenever and in whatever slot it is
-spawned, alone or in a batch (:mod:`twin.core.jit`).
+spawned, alone or in a batch (:mod:`twin.core.jit`); only its desired speed's floor,
+the speed it is spawned at (in ``calibrated`` and ``recorded``, where the calibration
+gives desired speeds), depends on the spawn.
 
 :data:`BehaviourArrays` holds the behaviour as arrays (:func:`behaviour_arrays` makes
 them from a :class:`~twin.cosim.behaviour.Behaviour`).
@@ -125,8 +127,8 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
     desired = vel_default
     if beh.mode != PAPER:
         desired = _behaviour_drivers(b, i, core, seed, key, r, c, lane)
-        if lane != RAMP_LANE:  # a driver wants no less than it was seen to drive
-            desired = max(desired, speed)
+        if lane != RAMP_LANE and beh.speed_source != 0:
+            desired = max(desired, speed)  # no less than it was seen to drive
     slots.base_speed[b, i] = desired
     p[b, i, 0] = desired
     drivers.key[b, i] = key

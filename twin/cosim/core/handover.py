@@ -410,8 +410,9 @@ def spawn(b, core, r, x, y, speed, desired_speed, controller):
     sl.relaxing[b, i] = False
     sl.rec_on[b, i] = False
     lane = lane_of(y)
-    behaviour.init_driver(b, i, core, seed, tid, r, rec.vehicle_class[r], lane, ep.step[b] * cs.dt,
-                          speed)
+    behaviour.init_driver(
+        b, i, core, seed, tid, r, rec.vehicle_class[r], lane, ep.step[b] * cs.dt, speed
+    )
     if controller >= 0:
         if controller != traffic.DRIVER:
             dr.ctrl[b, i] = controller
