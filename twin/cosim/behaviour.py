@@ -26,13 +26,11 @@ recording (``twin calibrate``).
   lane's drivers making room, retried until well past it; it makes no others.
 
 In ``calibrated`` and ``recorded``, where the calibration gives desired speeds, a
-driver wants no less than the speed its recording shows where it is spawned (its
-desired speed is the larger of its draw and that; not for a driver spawned on an
-on-ramp's lane, nor for the ego, which wants ``vel_default``): a driver seen driving at 33 m/s
-wants at least that, whatever the lane's drivers want on average. On SUMO's lane-drop
-morning, whose right lanes empty ahead of the drop, its fast drivers there were drawn
-29 m/s and fell back; with this the speed field error in lane -3 fell from 2.06 to
-1.80 m/s and lane -1's from 0.46 to 0.21 (120 kinematic episodes).
+driver's desired speed is the larger of its draw and the speed its recording shows
+where it is spawned: a driver seen cruising at 33 m/s wants at least that, whatever
+its lane's drivers want on average. Not for a driver spawned on an on-ramp's lane, nor
+for the ego (``vel_default``). The figures are in the calibration page's "What it
+fits".
 
 A road whose car following could not be calibrated keeps the paper's drivers for it
 (its desired speeds and lane-change threshold are still calibrated where they were).
