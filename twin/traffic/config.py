@@ -59,6 +59,17 @@ class TrafficConfig:
             ``yielding``, where identified). Off by default: the twin's merging drivers
             seek no gap of their own, and with the recording's yielding fewer merges
             were done in time (docs: Cooperation).
+        no_pass_right_from: [m/s] from this speed a driver does not pass a slower
+            vehicle in the lane to its left: it follows the nearest one ahead there as
+            a leader of its own (the no-overtaking-on-the-right rule of European roads
+            and of SUMO's LC2013, which applies it above 60 km/h, 16.7 m/s). In lanes
+            -4 and -3 (the HOV lane, behind its double line, is passed). Off (inf) by
+            default: drivers on US freeways pass on the
+            right, as the twin's have always done.
+        calibrated_passing: whether the ``calibrated`` and ``recorded`` behaviours set
+            ``no_pass_right_from`` where the calibration found that the recording's
+            drivers do not pass on the right (``calibration.json``'s
+            ``passing_right``); on by default (docs: What it fits).
         urgent_path: [m] the shortest path of an urgent (strategic) lane change: a
             driver who must leave its lane noses across a queue in about three car
             lengths, where a discretionary change keeps a path made for 5 m/s. A
@@ -89,6 +100,8 @@ class TrafficConfig:
     cooperative_decel: float = 1.5
     courtesy: float = 1.0
     calibrated_yielding: bool = False
+    no_pass_right_from: float = math.inf
+    calibrated_passing: bool = True
     urgent_path: float = 15.0
     seed: int = 0
 
@@ -123,6 +136,11 @@ class TrafficConfig:
             raise ValueError(f"TrafficConfig.yield_from must be >= 0, got {self.yield_from!r}")
         if not 0 <= self.courtesy <= 1:
             raise ValueError(f"TrafficConfig.courtesy must be in 0..1, got {self.courtesy!r}")
+        if math.isnan(self.no_pass_right_from) or self.no_pass_right_from < 0:
+            raise ValueError(
+                "TrafficConfig.no_pass_right_from must be a speed >= 0 [m/s] (inf: off), got "
+                f"{self.no_pass_right_from!r}"
+            )
         if not 0 <= self.hov_share <= 1:
             raise ValueError(f"hov_share must be in 0..1, got {self.hov_share}")
         if not 0 < self.brake_limit <= 1:

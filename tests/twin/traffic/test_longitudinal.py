@@ -157,3 +157,40 @@ def test_a_body_reaching_into_a_lane_is_ahead_of_that_lanes_drivers():
     # lane -4 saw no one ahead and drove into it
     assert _behind_a_body_reaching_across(0.8) < -1.0  # brakes for it
     assert _behind_a_body_reaching_across(0.3) > 0.0  # short of FOOTPRINT_REACH: free road
+
+
+def _passing_command(lane, speed, left_speed, gap=20.0, left=1, **settings):
+    """The command of a car in ``lane`` at ``speed`` [m/s] (wanting 33 m/s, its own lane
+    open), with a car at ``left_speed`` in the lane to its left (``left`` 0: in its own
+    lane) ``gap`` [m] ahead of its front."""
+    lanes = np.array([lane, lane + left])
+    manager, params = point_mass_manager(lanes, 0, auto_lane_change=False, **settings)
+    manager.add([0, 1], 1, lanes, params, desired_speed=33.0)
+    x = np.array([100.0, 100.0 + params.length[0] + gap])
+    states = PointMasses(np.array([0, 1]), x, lane_center(lanes), lanes,
+                         np.array([speed, left_speed]), np.zeros(2))  # fmt: skip
+    return float(manager.step(states).accel[0])
+
+
+def test_a_driver_who_may_not_pass_on_the_right_follows_the_slower_car_on_its_left():
+    rule = dict(no_pass_right_from=60 / 3.6)
+    assert _passing_command(-3, 30.0, 25.0) > 0.0  # by default it passes
+    assert _passing_command(-3, 30.0, 25.0, **rule) < -0.5  # brakes to keep behind it
+    assert _passing_command(-4, 30.0, 25.0, **rule) < -0.5
+    # as if that car were its own lane's leader
+    assert _passing_command(-3, 30.0, 25.0, **rule) == _passing_command(-3, 30.0, 25.0, left=0)
+    assert _passing_command(-3, 14.0, 10.0, **rule) > 0.0  # congested: passes
+    assert _passing_command(-3, 30.0, 31.0, **rule) > 0.0  # not slower: its own road
+    assert _passing_command(-2, 30.0, 25.0, **rule) > 0.0  # the HOV lane is passed
+
+
+def test_not_passing_on_the_right_keeps_a_driver_behind_the_left_lanes_car(world, built_map):
+    manager = make_manager(built_map, auto_lane_change=False, no_pass_right_from=60 / 3.6)
+    ids = spawn(world, manager, 1, [-2, -3], [-200.0, -240.0], [25.0, 30.0],
+                desired_speed=[25.0, 33.0])  # fmt: skip
+    rec = run(world, manager, 30.0)
+    length = world.params_of(ids).length[1]
+    ahead_of_front = rec.x[:, 0] - rec.x[:, 1] - length
+    assert ahead_of_front.min() > 2.0  # never drew level
+    assert rec.speed[-1, 1] == pytest.approx(25.0, abs=0.5)  # at the left car's speed
+    assert rec.contacts == 0

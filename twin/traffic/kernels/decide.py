@@ -42,7 +42,7 @@ TrafficSettings = namedtuple(
     "model max_accel_column dt decision_interval decision_steps lane_change_low "
     "lane_change_high emergency_decel emergency_margin reaction_time brake_limit "
     "lateral_gain path_preview max_lateral_accel cooperate_from yield_from cooperative_decel "
-    "courtesy "
+    "courtesy no_pass_right_from "
     "urgent_path "
     "hov_openings keep_out lane_ends obstacle_cf obstacle_clearance obstacle_clearance_at_rest "
     "action_speed action_gain action_low action_high "
@@ -100,6 +100,7 @@ def settings(
         yield_from=float(config.yield_from),
         cooperative_decel=float(config.cooperative_decel),
         courtesy=float(config.courtesy),
+        no_pass_right_from=float(config.no_pass_right_from),
         urgent_path=float(config.urgent_path),
         hov_openings=np.array(config.hov_openings, dtype=np.float64).reshape(-1, 2),
         keep_out=zones.reshape(-1, 3),

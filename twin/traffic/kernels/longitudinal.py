@@ -161,6 +161,33 @@ def follow(b, t):
         need = required_decel(gap, speed, v_lead, lead_decel, margin, reaction)
         if need > need_of[b, o]:
             need_of[b, o] = need
+    if settings.no_pass_right_from < math.inf:
+        for i in range(vehicles.top[b]):
+            if valid[b, i] and lane_from[b, i] == lane_to[b, i]:
+                cf_accel[b, i] = min(cf_accel[b, i], not_passing_right(t, b, n, i))
+
+
+@kernel(inline=True)
+def not_passing_right(t, b, n, i):
+    """[m/s^2] the car-following acceleration of driver ``i`` behind the nearest vehicle
+    ahead of its front in the lane to its left, where that one is slower and ``i``
+    drives at ``no_pass_right_from`` or faster (``i`` does not pass it on the right);
+    inf otherwise. Only in lanes -4 and -3: the HOV lane behind its double line is not a
+    lane the drivers of lane -2 could move into to pass, so they pass it as SUMO's
+    drivers do (LC2013 applies the rule towards a lane the vehicle may change into)."""
+    sc, settings = t.scratch, t.settings
+    lane = t.drivers.lane[b, i]
+    speed = sc.sspeed[b, i]
+    if speed < settings.no_pass_right_from or not -4 <= lane <= -3:
+        return math.inf
+    front = sc.sx[b, i] + sc.slength[b, i]
+    ahead, _ = around(sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b], b,
+                      lane + 1, front)  # fmt: skip
+    if ahead < 0 or sc.sspeed[b, ahead] >= speed:
+        return math.inf
+    gap = max(sc.sx[b, ahead] - front, MIN_ROOM)
+    return cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, i, speed,
+              sc.sspeed[b, ahead], gap)  # fmt: skip
 
 
 @kernel(inline=True)
