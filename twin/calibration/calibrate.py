@@ -65,6 +65,7 @@ from twin.calibration.model_choice import (
     score,
 )
 from twin.calibration.model_choice import summary as replay_summary
+from twin.calibration.passing import describe_passing, passing_section
 from twin.calibration.ramp_speeds import describe_ramp_speeds, ramp_speed_section
 from twin.calibration.yielding import describe_yielding, yielding_section
 from twin.core.atomic import atomic_file
@@ -400,7 +401,8 @@ def _choose_model(prepared: dict, fitted: dict, candidates: list, fallback: str 
 
 def _road_section(store, road, data, settings, model, car, distributions) -> dict:
     """The road's calibration with its car following ``car`` of ``model``: the desired
-    speeds, lane changes, their flows, MOBIL's threshold, merges and yielding."""
+    speeds, lane changes, their flows, MOBIL's threshold, merges, yielding and passing
+    on the right."""
     grid = data.grid
     driver = _median_driver(model, distributions.get("all"))
     changes = following.lane_changes(grid)
@@ -438,6 +440,7 @@ def _road_section(store, road, data, settings, model, car, distributions) -> dic
         "merges": merge_section(with_ramps, road),
         "ramp_speeds": ramp_speed_section(store, road, with_ramps, grid.t0),
         "yielding": yielding_section(grid, with_ramps, model, driver),
+        "passing_right": passing_section(grid),
     }
     return section
 
@@ -695,4 +698,5 @@ def describe_calibration(doc: dict | None) -> str:
         lines += describe_merges(section.get("merges", []))
         lines += describe_ramp_speeds(section.get("ramp_speeds"))
         lines += describe_yielding(section.get("yielding"))
+        lines += describe_passing(section.get("passing_right"))
     return "\n".join(lines)

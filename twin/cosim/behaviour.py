@@ -19,6 +19,10 @@ recording (``twin calibrate``).
   ``traffic.cooperative_decel``) yield as the recording's lane -4 drivers yield to the
   on-ramps' merging vehicles, where the calibration identified it
   (:mod:`twin.calibration.yielding`), in ``calibrated`` and ``recorded`` alike.
+  Where the recording's drivers do not pass a slower vehicle on their left
+  (:mod:`twin.calibration.passing`), the twin's do not either from the speed the
+  calibration gives (``traffic.no_pass_right_from``; ``traffic.calibrated_passing``,
+  on by default), in ``calibrated`` and ``recorded`` alike.
 - ``recorded``: each vehicle gets the parameters fitted to its own recording (a
   calibrated draw where its fit is missing or was rejected), and makes the lane
   changes its recording makes, where its recording makes them (target lane and place),
@@ -58,6 +62,7 @@ from twin.calibration.distributions import (
     draw_desired_speeds,
     draw_parameters,
 )
+from twin.calibration.passing import no_pass_right
 from twin.calibration.yielding import cooperation
 from twin.core.errors import TwinError
 from twin.core.i24 import Road
@@ -170,6 +175,7 @@ class Behaviour:
         self.merges: list | None = None  # where the on-ramps' vehicles merge (merge_positions)
         self.ramp_speeds: list | None = None  # the on-ramps' free speeds (ramp_speeds.py)
         self.cooperation: dict[str, float] = {}  # lane -4's yielding to merges (yielding.py)
+        self.passing: dict[str, float] = {}  # no passing on the right (passing.py)
         self.calibrated_at: str | None = None  # when the calibration driven by was made
         if self.name == "paper":
             return
@@ -204,6 +210,7 @@ class Behaviour:
         self.merges = section.get("merges")
         self.ramp_speeds = section.get("ramp_speeds")
         self.cooperation = cooperation(section.get("yielding"))
+        self.passing = no_pass_right(section.get("passing_right"))
         self.threshold = float(section["mobil"]["threshold"])
         self.politeness = float(section["mobil"]["politeness"])
         if self.name == "recorded":

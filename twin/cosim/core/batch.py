@@ -145,6 +145,9 @@ class Shared:
         drive = config.traffic
         if drive.calibrated_yielding:
             drive = replace(drive, **beh.cooperation)
+        # no passing on the right where the recording's drivers do not pass there
+        if drive.calibrated_passing:
+            drive = replace(drive, **beh.passing)
         # a lane change in front of a recording leaves it a spawn's room, so that the
         # recording can be made a body that brakes behind it
         ts = traffic_settings(

@@ -1,0 +1,71 @@
+"""``traffic.calibrated_passing``: where the calibration found that the recording's
+drivers do not pass on the right, the calibrated behaviours' drivers do not either."""
+
+import json
+import math
+import shutil
+from dataclasses import replace
+
+import pytest
+
+from twin.calibration.following import CalibrationDataError
+from twin.cosim.config import CosimConfig
+from twin.cosim.core.batch import Shared
+from twin.data.store import TrajectoryStore
+
+PASSING = {
+    "judged": 9000, "free": 11000, "passing": 0.01, "expected": 0.2, "ratio": 0.05,
+    "identified": True, "no_pass_right_from": 16.6667,
+}  # fmt: skip
+
+
+def _store(source, folder, section):
+    shutil.copytree(source.path, folder)
+    path = folder / "calibration.json"
+    doc = json.loads(path.read_text())
+    doc["roads"]["westbound"]["passing_right"] = section
+    path.write_text(json.dumps(doc))
+    return TrajectoryStore(folder)
+
+
+@pytest.fixture(scope="module")
+def store(calibrated_wave_store, tmp_path_factory):
+    """The calibrated wave store whose westbound drivers do not pass on the right."""
+    return _store(calibrated_wave_store, tmp_path_factory.mktemp("passing") / "store", PASSING)
+
+
+def _settings(store, built_map, asked=True, behaviour="calibrated"):
+    config = CosimConfig(world="kinematic", t_max=10.0, behaviour=behaviour)
+    config = replace(config, traffic=replace(config.traffic, calibrated_passing=asked))
+    return Shared.make(store, built_map, config).traffic_settings
+
+
+@pytest.mark.parametrize("behaviour", ["calibrated", "recorded"])
+def test_the_calibrated_behaviours_do_not_pass_where_the_recording_does_not(
+    store, built_map, behaviour
+):
+    assert _settings(store, built_map, behaviour=behaviour).no_pass_right_from == 16.6667
+
+
+def test_asked_not_to_and_in_paper_the_drivers_pass(store, built_map):
+    for ts in (_settings(store, built_map, False), _settings(store, built_map, True, "paper")):
+        assert ts.no_pass_right_from == math.inf
+
+
+def test_a_calibration_whose_drivers_pass_or_that_has_no_section_leaves_them_passing(
+    calibrated_wave_store, built_map, tmp_path
+):
+    passes = _store(calibrated_wave_store, tmp_path / "passes",
+                    {**PASSING, "ratio": 0.9, "no_pass_right_from": None})  # fmt: skip
+    assert _settings(passes, built_map).no_pass_right_from == math.inf
+    older = _store(calibrated_wave_store, tmp_path / "older", None)  # made before the section
+    doc = json.loads((older.path / "calibration.json").read_text())
+    del doc["roads"]["westbound"]["passing_right"]
+    (older.path / "calibration.json").write_text(json.dumps(doc))
+    assert _settings(older, built_map).no_pass_right_from == math.inf
+
+
+def test_a_malformed_passing_section_is_named(calibrated_wave_store, built_map, tmp_path):
+    bad = _store(calibrated_wave_store, tmp_path / "bad", {**PASSING, "no_pass_right_from": -3})
+    with pytest.raises(CalibrationDataError, match="passing_right needs"):
+        _settings(bad, built_map)
