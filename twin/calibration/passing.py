@@ -10,19 +10,20 @@ not above 60 km/h (LC2013 has them follow the slower vehicle on their left as a 
 unless the traffic is congested). A twin whose drivers pass where the recording's do
 not makes the right-hand lanes too fast.
 
-At every 0.1 s step of the calibration window where a vehicle of lane -4 or -3 drives
-at :data:`FROM_SPEED` or faster with its own lane open :data:`OPEN_GAP` metres ahead,
-the nearest vehicle ahead of its front in the lane to its left (the vehicle's
-``left leader``) is either :data:`NEAR` ahead (a judged step) or not within
-:data:`CLEAR` (a free step). ``passing`` is the share of judged steps in which the
-vehicle is :data:`FASTER` than its left leader; ``expected`` is the share it would be,
-were its speed the free steps' (each judged left leader's speed against the free
-steps' speeds). Drivers who pass freely give ``passing`` about ``expected``
-(ratio 1.00 on the embedded morning and on the synthesiser's preset D, whose drivers
-are the twin's); drivers who do not, much less (0.04 and 0.23 on SUMO's on-ramp and
-lane-drop mornings). Where the ratio is under :data:`MAX_RATIO`, the twin's drivers do
-not pass on the right from :data:`FROM_SPEED`. A road with fewer than
-:data:`MIN_STEPS` judged or free steps, or an ``expected`` under
+At every 0.1 s step of the calibration window where a vehicle of lane -4 or -3 drives at
+:data:`FROM_SPEED` or faster with its own lane open :data:`OPEN_GAP` metres ahead, the
+nearest vehicle ahead of its front in the lane to its left (the vehicle's ``left
+leader``) is either at most :data:`NEAR` metres ahead and itself at :data:`FROM_SPEED`
+or faster (a judged step: where the left lane crawls, passing it says nothing of the
+rule) or not within :data:`CLEAR` (a free step). ``passing`` is the share of judged
+steps in which the vehicle is :data:`FASTER` than its left leader; ``expected`` is the
+share it would be, were its speed the free steps' (each judged left leader's speed
+against the free steps' speeds). Drivers who pass freely give ``passing`` about
+``expected`` (ratio 0.95 on the synthesiser's preset D, whose drivers are the twin's);
+drivers who do not, much less (0.00 and 0.22 on SUMO's on-ramp and lane-drop mornings).
+Where the ratio is under :data:`MAX_RATIO`, the twin's drivers do not pass on the right
+from :data:`FROM_SPEED`. A road with fewer than :data:`MIN_STEPS` judged or free steps,
+judged steps of fewer than :data:`MIN_VEHICLES` vehicles, or an ``expected`` under
 :data:`MIN_EXPECTED` (left leaders that are seldom slower: nothing to tell), is not
 identified, and the twin's drivers pass there as they always have.
 
@@ -38,11 +39,12 @@ from twin.calibration.following import CalibrationDataError, GridTraffic
 
 FROM_SPEED = 60.0 / 3.6  # [m/s] the rule holds from this speed (LC2013's congestion speed)
 OPEN_GAP = 80.0  # [m] own lane open at least this far ahead
-NEAR = (0.0, 40.0)  # [m] a judged step's left leader: this far ahead of the front
+NEAR = 40.0  # [m] a judged step's left leader: at most this far ahead of the front
 CLEAR = 60.0  # [m] a free step has no left leader within this of its front
 FASTER = 1.0  # [m/s] passing: faster than the left leader by more than this
 MAX_RATIO = 0.5  # passing under this share of expected: drivers do not pass on the right
 MIN_STEPS = 500  # judged and free steps a road needs (0.1 s each)
+MIN_VEHICLES = 20  # vehicles the judged steps must be of
 MIN_EXPECTED = 0.05  # an expected share under this tells nothing
 LANES = (-4, -3)  # the lanes judged: those whose left lane is one to pass in
 
@@ -79,24 +81,32 @@ def passing_section(grid: GridTraffic) -> dict:
     """``calibration.json``'s ``passing_right`` of a road (module doc): ``judged`` and
     ``free`` steps, ``passing`` and ``expected`` shares and their ``ratio`` (None where
     not identified), ``identified``, and ``no_pass_right_from`` [m/s] (None: the
-    drivers pass on the right)."""
+    drivers pass).
+
+    Args:
+        grid: the road's recording in the calibration window
+            (:func:`~twin.calibration.following.load_grid`).
+    """
     row, gap = left_leaders(grid)
     base = np.isin(grid.lane, LANES) & (grid.speed >= FROM_SPEED) & (grid.gap >= OPEN_GAP)
-    judged = base & (row >= 0) & (gap >= NEAR[0]) & (gap <= NEAR[1])
-    free = base & ~((row >= 0) & (gap >= 0.0) & (gap <= CLEAR))
+    left_speed = np.where(row >= 0, grid.speed[np.maximum(row, 0)], np.nan)
+    judged = base & (row >= 0) & (gap <= NEAR) & (left_speed >= FROM_SPEED)
+    free = base & ~((row >= 0) & (gap <= CLEAR))
     n_judged, n_free = int(judged.sum()), int(free.sum())
+    vehicles = int(np.unique(grid.tid[judged]).size)
     out = {
         "judged": n_judged,
         "free": n_free,
+        "vehicles": vehicles,
         "passing": None,
         "expected": None,
         "ratio": None,
         "identified": False,
         "no_pass_right_from": None,
     }
-    if n_judged < MIN_STEPS or n_free < MIN_STEPS:
+    if n_judged < MIN_STEPS or n_free < MIN_STEPS or vehicles < MIN_VEHICLES:
         return out
-    v, v_left = grid.speed[judged], grid.speed[row[judged]]
+    v, v_left = grid.speed[judged], left_speed[judged]
     speeds = np.sort(grid.speed[free])
     passing = float(np.mean(v - v_left > FASTER))
     faster_free = 1.0 - np.searchsorted(speeds, v_left + FASTER, side="right") / speeds.size
@@ -122,14 +132,19 @@ def no_pass_right(section: dict | None) -> dict[str, float]:
     if section is None:
         return {}
     try:
-        identified, speed = bool(section["identified"]), section["no_pass_right_from"]
+        identified, speed = section["identified"], section["no_pass_right_from"]
         speed = None if speed is None else float(speed)
     except (KeyError, TypeError, ValueError):
         identified, speed = None, math.nan
-    if identified is None or (speed is not None and not (math.isfinite(speed) and speed >= 0)):
+    if (
+        not isinstance(identified, bool)
+        or (speed is not None and not (math.isfinite(speed) and speed >= 0))
+        or (speed is not None and not identified)
+    ):
         raise CalibrationDataError(
-            "calibration.json: passing_right needs identified and no_pass_right_from (a speed "
-            f">= 0 [m/s] or null), got {section!r:.200} (calibrate again)"
+            "calibration.json: passing_right needs identified (true or false) and "
+            "no_pass_right_from (a speed >= 0 [m/s], or null; null where not identified), "
+            f"got {section!r:.200} (calibrate again)"
         )
     if not identified or speed is None:
         return {}
@@ -141,7 +156,10 @@ def describe_passing(section: dict | None) -> list[str]:
     if not isinstance(section, dict):
         return [] if section is None else [f"    passing on the right: malformed {section!r:.120}"]
     try:
-        steps = f"{section['judged']} steps judged, {section['free']} free"
+        steps = (
+            f"{section['judged']} steps of {section['vehicles']} vehicles judged, "
+            f"{section['free']} free"
+        )
         if not section["identified"]:
             return [f"    passing on the right: not identified ({steps}): drivers pass"]
         shares = (

@@ -59,13 +59,14 @@ class TrafficConfig:
             ``yielding``, where identified). Off by default: the twin's merging drivers
             seek no gap of their own, and with the recording's yielding fewer merges
             were done in time (docs: Cooperation).
-        no_pass_right_from: [m/s] from this speed a driver does not pass a slower
-            vehicle in the lane to its left: it follows the nearest one ahead there as
-            a leader of its own (the no-overtaking-on-the-right rule of European roads
-            and of SUMO's LC2013, which applies it above 60 km/h, 16.7 m/s). In lanes
-            -4 and -3 (the HOV lane, behind its double line, is passed). Off (inf) by
-            default: drivers on US freeways pass on the
-            right, as the twin's have always done.
+        no_pass_right_from: [m/s] from this speed of its own a driver does not pass a
+            slower vehicle in the lane to its left: it follows the nearest one ahead
+            there as a leader of its own, braking no harder than ``cooperative_decel``
+            (the no-overtaking-on-the-right rule of European roads and of SUMO's
+            LC2013, which applies it above 60 km/h, 16.7 m/s). In lanes -4 and -3 (the
+            HOV lane, behind its double line, is passed); not while changing lanes,
+            nor for a vehicle a controller drives. Off (inf) by default: drivers on US
+            freeways pass on the right, as the twin's have always done.
         calibrated_passing: whether the ``calibrated`` and ``recorded`` behaviours set
             ``no_pass_right_from`` where the calibration found that the recording's
             drivers do not pass on the right (``calibration.json``'s

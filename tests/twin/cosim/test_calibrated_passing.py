@@ -14,7 +14,7 @@ from twin.cosim.core.batch import Shared
 from twin.data.store import TrajectoryStore
 
 PASSING = {
-    "judged": 9000, "free": 11000, "passing": 0.01, "expected": 0.2, "ratio": 0.05,
+    "judged": 9000, "free": 11000, "vehicles": 700, "passing": 0.01, "expected": 0.2, "ratio": 0.05,
     "identified": True, "no_pass_right_from": 16.6667,
 }  # fmt: skip
 
@@ -23,7 +23,10 @@ def _store(source, folder, section):
     shutil.copytree(source.path, folder)
     path = folder / "calibration.json"
     doc = json.loads(path.read_text())
-    doc["roads"]["westbound"]["passing_right"] = section
+    if section is None:  # a calibration made before the section
+        del doc["roads"]["westbound"]["passing_right"]
+    else:
+        doc["roads"]["westbound"]["passing_right"] = section
     path.write_text(json.dumps(doc))
     return TrajectoryStore(folder)
 
@@ -58,10 +61,7 @@ def test_a_calibration_whose_drivers_pass_or_that_has_no_section_leaves_them_pas
     passes = _store(calibrated_wave_store, tmp_path / "passes",
                     {**PASSING, "ratio": 0.9, "no_pass_right_from": None})  # fmt: skip
     assert _settings(passes, built_map).no_pass_right_from == math.inf
-    older = _store(calibrated_wave_store, tmp_path / "older", None)  # made before the section
-    doc = json.loads((older.path / "calibration.json").read_text())
-    del doc["roads"]["westbound"]["passing_right"]
-    (older.path / "calibration.json").write_text(json.dumps(doc))
+    older = _store(calibrated_wave_store, tmp_path / "older", None)
     assert _settings(older, built_map).no_pass_right_from == math.inf
 
 

@@ -6,6 +6,7 @@ import pytest
 
 from tests.twin.traffic.conftest import PointMasses, make_manager, point_mass_manager, run, spawn
 from twin.core.i24 import LANE_WIDTH, lane_center
+from twin.traffic.config import TrafficConfig
 from twin.traffic.controller_api import EgoCommand
 from twin.traffic.scene import Obstacles
 
@@ -177,11 +178,20 @@ def test_a_driver_who_may_not_pass_on_the_right_follows_the_slower_car_on_its_le
     assert _passing_command(-3, 30.0, 25.0) > 0.0  # by default it passes
     assert _passing_command(-3, 30.0, 25.0, **rule) < -0.5  # brakes to keep behind it
     assert _passing_command(-4, 30.0, 25.0, **rule) < -0.5
-    # as if that car were its own lane's leader
-    assert _passing_command(-3, 30.0, 25.0, **rule) == _passing_command(-3, 30.0, 25.0, left=0)
+    # as if that car were its own lane's leader, braking no harder than cooperative_decel
+    far = _passing_command(-3, 30.0, 25.0, gap=90.0, left=0)
+    assert -1.5 < far < 0.0
+    assert _passing_command(-3, 30.0, 25.0, gap=90.0, **rule) == far
+    assert _passing_command(-3, 30.0, 25.0, **rule) == -1.5
     assert _passing_command(-3, 14.0, 10.0, **rule) > 0.0  # congested: passes
     assert _passing_command(-3, 30.0, 31.0, **rule) > 0.0  # not slower: its own road
     assert _passing_command(-2, 30.0, 25.0, **rule) > 0.0  # the HOV lane is passed
+
+
+@pytest.mark.parametrize("speed", [float("nan"), -1.0])
+def test_a_speed_from_which_not_to_pass_must_be_one(speed):
+    with pytest.raises(ValueError, match="no_pass_right_from"):
+        TrafficConfig(no_pass_right_from=speed)
 
 
 def test_not_passing_on_the_right_keeps_a_driver_behind_the_left_lanes_car(world, built_map):

@@ -5,7 +5,8 @@ batch: what every vehicle does next, decided from where everything is now.
 
     finish_changes   lane changes whose path has ended are over
     gather, sort     the lane entries of vehicles and obstacles, sorted (neighbours)
-    follow           car following behind every leader, and the emergency need
+    follow           car following behind every leader (and a slower car on the left
+                     not to pass, where asked), and the emergency need
     cooperate        drivers behind an urgent change make room
     emergency        braking as hard as staying clear needs, where that is much
     change_lanes     MOBIL, strategic targets, the HOV rule (on the decision grid)

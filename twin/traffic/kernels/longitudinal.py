@@ -1,5 +1,6 @@
 """Longitudinal decisions of the traffic manager, as compiled kernels: each driver's
-car-following acceleration behind every leader it has (one per lane it occupies), the
+car-following acceleration behind every leader it has (one per lane it occupies, and a
+slower car on its left it may not pass on the right), the
 deceleration it would need to stay clear of them (emergency braking), and the
 cooperation of the drivers behind an urgent (strategic) lane change.
 
@@ -108,8 +109,10 @@ def cf(model, params, obstacle, b, n, owner, v, v_lead, gap):
 
 @kernel
 def follow(b, t):
-    """Each vehicle's acceleration behind its most constraining leader (``cf_accel``)
-    and the deceleration staying clear of all of them needs (``need``)."""
+    """Each vehicle's acceleration behind its most constraining leader (``cf_accel``),
+    with a slower car on its left it may not pass (:func:`not_passing_right`, where
+    ``no_pass_right_from`` is set), and the deceleration staying clear of its leaders
+    needs (``need``)."""
     vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
     valid, body_lane = vehicles.valid, vehicles.lane
     lane_to, lane_from, params = drivers.lane, drivers.lane_from, drivers.cf
@@ -170,11 +173,15 @@ def follow(b, t):
 @kernel(inline=True)
 def not_passing_right(t, b, n, i):
     """[m/s^2] the car-following acceleration of driver ``i`` behind the nearest vehicle
-    ahead of its front in the lane to its left, where that one is slower and ``i``
-    drives at ``no_pass_right_from`` or faster (``i`` does not pass it on the right);
-    inf otherwise. Only in lanes -4 and -3: the HOV lane behind its double line is not a
-    lane the drivers of lane -2 could move into to pass, so they pass it as SUMO's
-    drivers do (LC2013 applies the rule towards a lane the vehicle may change into)."""
+    (or recording) whose back is ahead of ``i``'s front in the lane to its left, where
+    that one is slower and ``i`` drives at ``no_pass_right_from`` or faster (``i`` does
+    not pass it on the right), braking no harder than ``cooperative_decel`` (it drops
+    back as it would for a merging driver: one it cannot stay behind so gently, it
+    passes); inf otherwise. A car already level with ``i`` is not judged, nor is the
+    rule part of the emergency need: it is a driver's choice, not a collision to avoid.
+    Only in lanes -4 and -3: the HOV lane behind its double line is not a lane the
+    drivers of lane -2 could move into to pass, so they pass it as SUMO's drivers do
+    (LC2013 applies the rule towards a lane the vehicle may change into)."""
     sc, settings = t.scratch, t.settings
     lane = t.drivers.lane[b, i]
     speed = sc.sspeed[b, i]
@@ -186,8 +193,9 @@ def not_passing_right(t, b, n, i):
     if ahead < 0 or sc.sspeed[b, ahead] >= speed:
         return math.inf
     gap = max(sc.sx[b, ahead] - front, MIN_ROOM)
-    return cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, i, speed,
-              sc.sspeed[b, ahead], gap)  # fmt: skip
+    behind_it = cf(settings.model, t.drivers.cf, settings.obstacle_cf, b, n, i, speed,
+                   sc.sspeed[b, ahead], gap)  # fmt: skip
+    return max(behind_it, -settings.cooperative_decel)
 
 
 @kernel(inline=True)
