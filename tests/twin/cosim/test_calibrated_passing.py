@@ -1,17 +1,12 @@
 """``traffic.calibrated_passing``: where the calibration found that the recording's
 drivers do not pass on the right, the calibrated behaviours' drivers do not either."""
 
-import json
 import math
-import shutil
-from dataclasses import replace
 
 import pytest
 
+from tests.twin.cosim.sections import settings, with_section
 from twin.calibration.following import CalibrationDataError
-from twin.cosim.config import CosimConfig
-from twin.cosim.core.batch import Shared
-from twin.data.store import TrajectoryStore
 
 PASSING = {
     "judged": 9000, "free": 11000, "vehicles": 700, "passing": 0.01, "expected": 0.2, "ratio": 0.05,
@@ -20,15 +15,7 @@ PASSING = {
 
 
 def _store(source, folder, section):
-    shutil.copytree(source.path, folder)
-    path = folder / "calibration.json"
-    doc = json.loads(path.read_text())
-    if section is None:  # a calibration made before the section
-        del doc["roads"]["westbound"]["passing_right"]
-    else:
-        doc["roads"]["westbound"]["passing_right"] = section
-    path.write_text(json.dumps(doc))
-    return TrajectoryStore(folder)
+    return with_section(source, folder, "passing_right", section)
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +25,7 @@ def store(calibrated_wave_store, tmp_path_factory):
 
 
 def _settings(store, built_map, asked=True, behaviour="calibrated"):
-    config = CosimConfig(world="kinematic", t_max=10.0, behaviour=behaviour)
-    config = replace(config, traffic=replace(config.traffic, calibrated_passing=asked))
-    return Shared.make(store, built_map, config).traffic_settings
+    return settings(store, built_map, behaviour, calibrated_passing=asked)
 
 
 @pytest.mark.parametrize("behaviour", ["calibrated", "recorded"])

@@ -1,16 +1,10 @@
 """``traffic.calibrated_yielding``: the calibrated behaviours drive lane -4's yielding
 to merges as the calibration measured it, only where asked."""
 
-import json
-import shutil
-from dataclasses import replace
-
 import pytest
 
+from tests.twin.cosim.sections import settings, with_section
 from twin.calibration.following import CalibrationDataError
-from twin.cosim.config import CosimConfig
-from twin.cosim.core.batch import Shared
-from twin.data.store import TrajectoryStore
 
 YIELDING = {
     "merges": 40, "steps": 900, "yielding_steps": 300, "identified": True,
@@ -22,18 +16,11 @@ YIELDING = {
 def store(calibrated_wave_store, tmp_path_factory):
     """The calibrated wave store with a measured yielding on westbound."""
     folder = tmp_path_factory.mktemp("yielding") / "store"
-    shutil.copytree(calibrated_wave_store.path, folder)
-    path = folder / "calibration.json"
-    doc = json.loads(path.read_text())
-    doc["roads"]["westbound"]["yielding"] = YIELDING
-    path.write_text(json.dumps(doc))
-    return TrajectoryStore(folder)
+    return with_section(calibrated_wave_store, folder, "yielding", YIELDING)
 
 
 def _settings(store, built_map, asked: bool, behaviour="calibrated"):
-    config = CosimConfig(world="kinematic", t_max=10.0, behaviour=behaviour)
-    config = replace(config, traffic=replace(config.traffic, calibrated_yielding=asked))
-    return Shared.make(store, built_map, config).traffic_settings
+    return settings(store, built_map, behaviour, calibrated_yielding=asked)
 
 
 @pytest.mark.parametrize("behaviour", ["calibrated", "recorded"])
@@ -50,11 +37,6 @@ def test_by_default_and_in_paper_the_settings_stand(store, built_map):
 
 
 def test_a_malformed_yielding_is_named(store, built_map, tmp_path):
-    folder = tmp_path / "store"
-    shutil.copytree(store.path, folder)
-    path = folder / "calibration.json"
-    doc = json.loads(path.read_text())
-    doc["roads"]["westbound"]["yielding"] = {**YIELDING, "courtesy": 3.0}
-    path.write_text(json.dumps(doc))
+    bad = with_section(store, tmp_path / "store", "yielding", {**YIELDING, "courtesy": 3.0})
     with pytest.raises(CalibrationDataError, match="yielding needs"):
-        _settings(TrajectoryStore(folder), built_map, True)
+        _settings(bad, built_map, True)
