@@ -194,8 +194,9 @@ def policy(config):
     """The policy of ``[controller.policy] model`` driving the ego: a linear speed
     policy file (``.json``, :mod:`twin.control.policy`, numpy alone) or a
     stable-baselines3 model (``.zip``, the ``rl`` extra); by default the policy the
-    twin ships (:data:`twin.control.policy.DEFAULT`, the MLP ``wave_es_mlp_robust``; the
-    MLP ``wave_es_mlp`` and the linear ``wave_ars`` by name); a name without a suffix is one of
+    twin ships (:data:`twin.control.policy.DEFAULT`, the MLP ``wave_es_mlp_margin``; the
+    MLPs ``wave_es_mlp_robust`` and ``wave_es_mlp`` and the linear ``wave_ars`` by
+    name); a name without a suffix is one of
     the policies the twin ships (``twin/control/policies/NAME.json``). A ``.json`` is a
     linear speed policy (:mod:`twin.control.policy`) or an MLP speed policy
     (:mod:`twin.control.mlp`, ``twin train --algorithm es``), by its format."""

@@ -286,8 +286,8 @@ class PolicySettings:
         model: path of a policy: a linear or MLP speed policy of ``twin train``
             (``.json``) or a stable-baselines3 model (``.zip``) trained on
             ``i24twin/WaveDampening-v0``; or the name of one the twin ships
-            (``wave_es_mlp_robust``, ``wave_es_mlp``, ``wave_ars``); empty: the default it
-            ships (``wave_es_mlp_robust``).
+            (``wave_es_mlp_margin``, ``wave_es_mlp_robust``, ``wave_es_mlp``, ``wave_ars``);
+            empty: the default it ships (``wave_es_mlp_margin``).
         action: a stable-baselines3 model's action in the env: ``accel`` or ``speed``.
         obs_noise: [-] an MLP policy's observation noise, as the env's: every value it
             sees multiplied by ``1 + obs_noise N(0, 1)`` (0: none; robustness studies).

@@ -273,19 +273,23 @@ def test_the_default_policy_is_the_shipped_mlp_and_says_how_it_was_trained():
     from twin.control.rl import policy as policy_factory
 
     shipped = MLPPolicy.load(DEFAULT)
-    assert DEFAULT.stem == "wave_es_mlp_robust"
-    # fine-tuned from wave_es_mlp: over 20 million env steps within the hour in all
+    assert DEFAULT.stem == "wave_es_mlp_margin"
+    # fine-tuned from wave_es_mlp_robust, itself from wave_es_mlp: over 20 million env
+    # steps within the hour in all
     assert shipped.about["env_steps_in_all"] >= 20_000_000
     assert shipped.about["wall_s_in_all"] <= 3600.0
     assert "twin train --algorithm es" in shipped.about["command"]
-    assert "--seed 1" in shipped.about["command"] and "--start" in shipped.about["command"]
+    assert "--seed 3" in shipped.about["command"] and "--start" in shipped.about["command"]
+    assert "--time-gap-p90-max 3.5" in shipped.about["command"]
     assert (shipped.smoothing, shipped.jerk_from) == (2.0, "command")
     assert shipped.about["config"]["obs_noise"] == 0.05
     assert shipped.about["config"]["latency_steps"] == 2
     driver = policy_factory(SCENARIO_B)
     assert isinstance(driver, MLPDriver) and np.array_equal(driver.policy.weights, shipped.weights)
     assert driver._actor.smoothing == 2.0  # it drives with its memory
-    first = MLPPolicy.load(DEFAULT.with_name("wave_es_mlp.json"))  # kept by name
+    robust = MLPPolicy.load(DEFAULT.with_name("wave_es_mlp_robust.json"))  # kept by name
+    assert "--seed 1" in robust.about["command"]
+    first = MLPPolicy.load(DEFAULT.with_name("wave_es_mlp.json"))
     assert first.about["env_steps"] >= 20_000_000 and "--seed 0" in first.about["command"]
 
 
