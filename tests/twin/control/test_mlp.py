@@ -281,6 +281,11 @@ def test_the_default_policy_is_the_shipped_mlp_and_says_how_it_was_trained():
     assert "twin train --algorithm es" in shipped.about["command"]
     assert "--seed 3" in shipped.about["command"] and "--start" in shipped.about["command"]
     assert "--time-gap-p90-max 3.5" in shipped.about["command"]
+    # the command written down is the one the trainer recorded, with no local paths
+    config = shipped.about["config"]
+    assert (config["time_gap_p90_max"], config["seed"]) == (3.5, 3)
+    assert config["start"] == "twin/control/policies/wave_es_mlp_robust.json"
+    assert "/work" not in json.dumps(shipped.about) and "/tmp" not in json.dumps(shipped.about)
     assert (shipped.smoothing, shipped.jerk_from) == (2.0, "command")
     assert shipped.about["config"]["obs_noise"] == 0.05
     assert shipped.about["config"]["latency_steps"] == 2
