@@ -287,8 +287,7 @@ def test_the_default_policy_is_the_shipped_mlp_and_says_how_it_was_trained():
     assert config["start"] == "twin/control/policies/wave_es_mlp_robust.json"
     assert "/work" not in json.dumps(shipped.about) and "/tmp" not in json.dumps(shipped.about)
     assert (shipped.smoothing, shipped.jerk_from) == (2.0, "command")
-    assert shipped.about["config"]["obs_noise"] == 0.05
-    assert shipped.about["config"]["latency_steps"] == 2
+    assert (config["obs_noise"], config["latency_steps"]) == (0.05, 2)
     driver = policy_factory(SCENARIO_B)
     assert isinstance(driver, MLPDriver) and np.array_equal(driver.policy.weights, shipped.weights)
     assert driver._actor.smoothing == 2.0  # it drives with its memory
