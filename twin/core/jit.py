@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from numba.core import cgutils, imputils, types
+from numba.core import caching, cgutils, imputils, types
 from numba.core.datamodel import default_manager, models
 from numba.core.extending import (
     NativeValue,
@@ -118,6 +118,34 @@ def _cache_folder() -> str:
 
 
 numba.config.CACHE_DIR = _cache_folder()
+
+
+def _locked_save(save):
+    """Numba's ``IndexDataCacheFile.save`` under a lock between processes on the index.
+
+    Numba reads a function's index, picks the first free data file name for a new
+    signature and writes the index back, with nothing between processes: two processes
+    compiling two signatures of one kernel at once (test workers, the workers of an
+    evaluation, the first run's second process) both picked ``NAME.1.nbc``, the second
+    overwrote the first's machine code and the index kept one of them, so a later
+    process could load one signature's code for the other. Under an ``flock`` on a file
+    beside the index, the read, the choice and both writes are one step."""
+    import fcntl
+
+    def locked(self, key, data):
+        with open(self._index_path + ".lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                return save(self, key, data)
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+    locked.__wrapped__ = save
+    return locked
+
+
+if not hasattr(caching.IndexDataCacheFile.save, "__wrapped__"):
+    caching.IndexDataCacheFile.save = _locked_save(caching.IndexDataCacheFile.save)
 
 
 INLINE_IR = os.environ.get("TWIN_INLINE_IR") == "1"

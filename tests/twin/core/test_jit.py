@@ -59,3 +59,36 @@ def test_the_twins_kernels_compile_into_the_folder_of_their_digest(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.stdout.strip() == str(tmp_path / "numba" / key), out.stderr
+
+
+def test_two_processes_saving_two_signatures_at_once_keep_both(tmp_path, monkeypatch):
+    """Numba's cache index is read, given a new entry and written back: two compiles of
+    one kernel's two signatures at once (two test workers, an evaluation's workers) both
+    took the first free data file name, and one signature's machine code replaced the
+    other's. Under the twin's lock the second save waits and takes the next name."""
+    import threading
+    import time
+
+    from numba.core import caching
+
+    read_index = caching.IndexDataCacheFile._load_index
+
+    def slow_read(self):  # both saves read the index before either writes it
+        index = read_index(self)
+        time.sleep(0.3)
+        return index
+
+    monkeypatch.setattr(caching.IndexDataCacheFile, "_load_index", slow_read)
+
+    def save(key):  # each as its own process would: its own cache file object
+        caching.IndexDataCacheFile(str(tmp_path), "kern.f-7", "stamp").save(key, key * 100)
+
+    savers = [threading.Thread(target=save, args=(key,)) for key in ("a", "b")]
+    for saver in savers:
+        saver.start()
+    for saver in savers:
+        saver.join()
+    cache = caching.IndexDataCacheFile(str(tmp_path), "kern.f-7", "stamp")
+    assert cache.load("a") == "a" * 100
+    assert cache.load("b") == "b" * 100
+    assert len(list(tmp_path.glob("*.nbc"))) == 2
