@@ -9,13 +9,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.core import i24
+from twin.core import i24, jit
 from twin.core.i24 import SCENARIO_TIME
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import PRESET_A, PRESET_B, synthesize, write_i24_json
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+#: The session's compiled kernels, for a command run in a subprocess with a cache folder
+#: of its own (``$I24_TWIN_CACHE``): it loads them instead of compiling every kernel
+#: again (a minute of a core). Only tests/test_first_run.py compiles afresh, as a new
+#: user's first run does.
+KERNEL_CACHE = {"NUMBA_CACHE_DIR": os.path.dirname(jit.numba.config.CACHE_DIR)}
 
 
 def make_doc(

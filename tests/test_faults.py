@@ -25,12 +25,13 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import KERNEL_CACHE
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
 from twin.cli import EXIT_USER_ERROR, main
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The environment of the commands run as processes: this checkout's twin.
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), **KERNEL_CACHE}
 #: How the one line names each fault's cause.
 CAUSE = {errno.EROFS: "read-only", errno.ENOSPC: "no space left", errno.EACCES: "permission"}
 SCENE = [vehicle(1, -2, EGO_X, 20.0), vehicle(2, -3, EGO_X + 40.0, 22.0)]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, make_store, vehicle
+from twin.core.paths import cache_dir
 from twin.cosim.config import CosimConfig
 from twin.cosim.core.batch import Batch, CoreError, Shared
 
@@ -162,7 +163,10 @@ def test_no_kernel_reads_or_writes_out_of_bounds(tmp_path):
         print("spawned", batch.state.episodes.spawned.tolist())
         """
     )
-    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    # a cache of its own (a checked build is never loaded by, or loads, unchecked code),
+    # kept in the twin's cache folder: compiled once a machine, as the unchecked kernels
+    checked = cache_dir() / "kernels-boundscheck"
+    env = dict(os.environ, NUMBA_BOUNDSCHECK="1", NUMBA_CACHE_DIR=str(checked))
     done = subprocess.run(
         [sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=900,
         cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(__file__)))),
