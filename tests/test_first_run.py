@@ -136,7 +136,11 @@ def test_the_test_extra_is_missing_for_the_fresh_user(user):
 def test_the_first_twin_run_prints_only_the_twins_summary(fresh):
     lines = assert_clean(fresh.first)
     assert len(lines) <= MAX_LINES, "\n".join(lines)
-    assert lines[0].startswith("building the embedded data")
+    # the kernels compile in other processes while the data and the map are built,
+    # said once, and timed on a line of their own
+    assert lines[0].startswith("compiling the traffic core's kernels in the background")
+    assert lines[1].startswith("building the embedded data")
+    assert len([line for line in lines if line.startswith("compiled the kernels in")]) == 1
     assert "scenario B, behaviour paper, the ego driven by the traffic manager" in lines
     assert any(line.startswith("simulated 30.0 s") for line in lines)
     # it ends by listing what it wrote
@@ -146,6 +150,19 @@ def test_the_first_twin_run_prints_only_the_twins_summary(fresh):
         "bev.png",
     ]  # fmt: skip
     assert (fresh.cwd / "runs" / "B" / "metrics.json").is_file()
+
+
+@pytest.mark.slow
+def test_the_first_run_bench_reads_what_the_first_run_prints(fresh):
+    """``twin bench first-run`` times this run; its compile time and real-time factors
+    are read from the lines the run prints."""
+    from twin.perf.first_run import COMPILED, REAL_TIME
+
+    compiled, factor = COMPILED.search(fresh.first.stdout), REAL_TIME.search(fresh.first.stdout)
+    assert compiled and float(compiled.group(1)) > 0
+    assert factor and float(factor.group(1)) > 0
+    again = fresh.run("run", "--out", "again")  # the kernels are cached now: said nothing of
+    assert not any("compil" in line for line in assert_clean(again))
 
 
 @pytest.mark.slow

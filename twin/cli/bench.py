@@ -208,6 +208,17 @@ def _register_commands(benchmarks) -> None:
     _repeats(p, 3)
     p.set_defaults(handler=_env)
     p = benchmarks.add_parser(
+        "first-run",
+        help="a new user's first twin run on a fresh cache (data, map, kernels) and a second",
+        description="Time `twin run` twice in a new process with an empty cache folder, as "
+        "on a fresh machine after pip install: the first builds the embedded data and the "
+        "map and compiles the kernels, the second finds them cached (about a minute a "
+        "repeat).",
+    )
+    add_world(p)
+    _repeats(p, 3)
+    p.set_defaults(handler=_first_run)
+    p = benchmarks.add_parser(
         "worlds",
         help="the kinematic world against the physics world: twin eval in both, compared",
         description="Run the same evaluation (with --controller: the paired benchmark) in "
@@ -369,6 +380,13 @@ def _run(args) -> int:
         duration=args.duration, sumo=args.sumo,
     )  # fmt: skip
     return _emit("run", figures, args)
+
+
+def _first_run(args) -> int:
+    from twin.perf.bench import first_run_bench
+
+    figures = first_run_bench(world=args.world or "physics", repeats=args.repeats)
+    return _emit("first-run", figures, args)
 
 
 def _camera(args) -> int:

@@ -147,12 +147,28 @@ def _run_config(args):
 
 
 def _run(args) -> int:
+    from mapgen.build import default_map
+    from twin.runners import precompile
     from twin.runners.run import run_episode, summary
 
     config = _run_config(args)
-    store = open_data(args.data, progress=not args.quiet)
     out = args.out if args.out is not None else Path("runs") / config.scenario
-    result = run_episode(config, store, out, progress=not args.quiet)
+    compiling = precompile.start(config.world)
+    if compiling is not None:
+        print(f"compiling the traffic core's kernels in the background, once per machine "
+              f"(cached in {compiling.cache})")  # fmt: skip
+    try:
+        store = open_data(args.data, progress=not args.quiet)
+        bundle = default_map(progress=not args.quiet)
+        if compiling is not None:
+            seconds = compiling.wait()
+            print(f"compiled the kernels in {seconds:.1f} s" if seconds is not None else
+                  f"the second process could not compile the kernels ({compiling.error}): "
+                  "this run compiles what it calls itself")  # fmt: skip
+    finally:
+        if compiling is not None:
+            compiling.stop()
+    result = run_episode(config, store, out, bundle=bundle, progress=not args.quiet)
     print(summary(result))
     return 0
 

@@ -1,0 +1,215 @@
+"""Compiling the batched core's kernels for a first run, in two other processes.
+
+A new machine has no compiled kernels: the first ``twin run`` compiled them on its first
+step (Numba, 40 to 55 s of one core), after building the embedded data and the map on
+that same core while the other idled. :func:`start` has them compiled by two other
+processes instead, while the run builds the data and the map: on a few hand-made
+vehicles (not the run's data: the kernels' types depend only on the code) and the
+default map, in the run's world, so that every kernel the run calls is in the kernel
+cache (:mod:`twin.core.jit`) when it starts, and it loads each in a fraction of a second.
+
+::
+
+    compiling = start("physics")          # None when the cache already holds them
+    store, bundle = ..., ...              # the data and the map, meanwhile
+    if compiling:
+        seconds = compiling.wait()        # then the run loads every kernel from the cache
+
+The work is shared by two processes, one a core: the ``episode`` part runs the
+episode (and compiles the reset on the way), the ``step`` part compiles the kernels of
+a step for the same state without running them; each loads from the cache what the
+other wrote first. ``python -m twin.runners.precompile WORLD PART`` is one of them.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+WORLDS = ("physics", "kinematic")
+
+
+def marker(world: str) -> Path:
+    """The file that says the kernels a run in ``world`` calls are in the cache: written
+    in the cache folder of this version of the kernels (``numba.config.CACHE_DIR``, which
+    :mod:`twin.core.jit` names by the digest of their sources) once they are."""
+    import numba
+
+    import twin.core.jit  # noqa: F401  (sets numba.config.CACHE_DIR)
+
+    return Path(numba.config.CACHE_DIR) / f"compiled-{world}"
+
+
+def compiled(world: str) -> bool:
+    """Whether this machine's kernel cache holds what a run in ``world`` calls."""
+    return marker(world).is_file()
+
+
+class Compilation:
+    """The processes compiling the kernels of ``world`` (see the module doc): the
+    ``episode`` part and the ``step`` part, one a core, started at once."""
+
+    def __init__(self, world: str):
+        if world not in WORLDS:
+            raise ValueError(f"world must be one of {WORLDS}, got {world!r}")
+        self.world = world
+        self.error = ""
+        self.cache = marker(world).parent
+        self.started = time.perf_counter()
+        self._parts = []
+        for part in PARTS:
+            log = tempfile.TemporaryFile()  # noqa: SIM115  (as long as the process)
+            process = subprocess.Popen(
+                [sys.executable, "-m", "twin.runners.precompile", world, part],
+                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+            )  # fmt: skip
+            self._parts.append((part, process, log))
+
+    def wait(self) -> float | None:
+        """Wait for the processes; the seconds since they started, or None where the
+        ``episode`` part failed (the run then compiles what it calls itself, as it would
+        have without them, and :attr:`error` holds the last line that part printed). A
+        failed ``step`` part costs only time: the ``episode`` part compiles everything."""
+        codes = {}
+        for part, process, log in self._parts:
+            codes[part] = process.wait()
+            log.seek(0)
+            lines = log.read().decode(errors="replace").strip().splitlines()
+            log.close()
+            if codes[part] != 0 and part == "episode":
+                self.error = lines[-1] if lines else f"exit status {codes[part]}"
+        if codes["episode"] != 0:
+            return None
+        return time.perf_counter() - self.started
+
+    def stop(self) -> None:
+        """End the processes that still run (the run failed or was interrupted)."""
+        for _, process, log in self._parts:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+            if not log.closed:
+                log.close()
+
+
+def start(world: str) -> Compilation | None:
+    """A :class:`Compilation` of the kernels of ``world``, or None where the cache holds
+    them already."""
+    return None if compiled(world) else Compilation(world)
+
+
+# -- the second process --------------------------------------------------------------
+
+_SPEED = 25.0  # [m/s] the hand-made vehicles' constant speed
+_SECONDS = 12.0  # [s] each vehicle's recording
+_RATE = 25.0  # [Hz] samples a second, as I-24 MOTION records
+
+
+def _document(n: int, lane: int, x: float, t0: float) -> dict:
+    """An I-24 MOTION document: a westbound car whose back centre is at road-frame ``x``
+    [m] in ``lane`` at ``t0`` and drives at a constant speed from 2 s before."""
+    from twin.core import i24
+
+    t = t0 - 2.0 + np.arange(int(_SECONDS * _RATE)) / _RATE
+    x_m = x + _SPEED * (t - t0)
+    x_ft = (i24.SEGMENT_END_MM * i24.MILE - x_m) / i24.FT
+    y_ft = (-lane + 0.5) * i24.LANE_WIDTH_FT
+    return {
+        "_id": {"$oid": f"{n:024x}"},
+        "timestamp": t.tolist(),
+        "x_position": x_ft.tolist(),
+        "y_position": [y_ft] * len(t),
+        "first_timestamp": float(t[0]),
+        "last_timestamp": float(t[-1]),
+        "starting_x": float(x_ft[0]),
+        "ending_x": float(x_ft[-1]),
+        "length": 15.0,
+        "width": 6.0,
+        "height": 5.0,
+        "coarse_vehicle_class": 0,
+        "fine_vehicle_class": 0,
+        "direction": -1,
+        "merged_ids": [],
+        "flags": [],
+    }
+
+
+def _simulator(world: str, folder: Path):
+    """A cosimulator in ``world`` on a few hand-made vehicles (a store in ``folder``),
+    not reset, and its store."""
+    from mapgen.build import default_map
+    from twin.core.i24 import SCENARIO_TIME
+    from twin.cosim.config import CosimConfig
+    from twin.cosim.cosimulator import Cosimulator
+    from twin.data.empirical import EmpiricalTraffic
+    from twin.data.ingest import ingest
+    from twin.data.store import TrajectoryStore
+
+    places = [(lane, x) for lane in (-1, -2, -3, -4) for x in (420.0, 560.0, 700.0, 840.0, 980.0)]
+    docs = [_document(n, lane, x, SCENARIO_TIME) for n, (lane, x) in enumerate(places, 1)]
+    day = folder / "day.json"
+    day.write_text(json.dumps(docs))
+    ingest([day], folder / "store", progress=False)
+    store = TrajectoryStore(folder / "store")
+    config = CosimConfig(road="westbound", lane=-2, x=700.0, time=SCENARIO_TIME,
+                         world=world, t_max=1.0)  # fmt: skip
+    return Cosimulator(config, EmpiricalTraffic(store), default_map(progress=False)), store
+
+
+def _episode(world: str, folder: Path) -> None:
+    """Part ``episode``: one second of a run in ``world``, measured as a run is, so that
+    every kernel a run calls is compiled on the way (those the ``step`` part has cached
+    by then are loaded)."""
+    from twin.metrics.measure import measure
+
+    sim, store = _simulator(world, folder)
+    with sim:
+        sim.run()
+        measure(sim, store, 1.0, 1.0)
+
+
+def _step(world: str, folder: Path) -> None:
+    """Part ``step``: the kernels of a step in ``world``, compiled for the cosimulator's
+    packed state without running them, while the ``episode`` part compiles the reset
+    (the two share the work on two cores; each loads what the other cached first)."""
+    import numba
+
+    from twin.cosim.core import step
+
+    sim, _ = _simulator(world, folder)
+    with sim:
+        core = numba.typeof(sim.core)
+        if world == "physics":
+            for kernel in (step.before_world, step.after_world):
+                kernel.compile((numba.typeof(0), core))
+        else:
+            step.step_batch.compile((core,))
+
+
+PARTS = {"episode": _episode, "step": _step}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = argv if argv is not None else sys.argv[1:]
+    if len(args) != 2 or args[0] not in WORLDS or args[1] not in PARTS:
+        print(f"usage: python -m twin.runners.precompile {{{','.join(WORLDS)}}} "
+              f"{{{','.join(PARTS)}}}", file=sys.stderr)  # fmt: skip
+        return 2
+    world, part = args
+    with tempfile.TemporaryDirectory(prefix="twin-compile-") as folder:
+        PARTS[part](world, Path(folder))
+    if part == "episode":
+        done = marker(world)
+        partial = done.with_name(f".{done.name}.{os.getpid()}")
+        partial.write_text(f"{time.time():.0f}\n")
+        partial.replace(done)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
