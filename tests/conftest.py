@@ -11,6 +11,7 @@ import pytest
 
 from twin.core import i24, jit
 from twin.core.i24 import SCENARIO_TIME
+from twin.core.locks import build_lock
 from twin.data.ingest import ingest
 from twin.data.store import TrajectoryStore
 from twin.data.synth import PRESET_A, PRESET_B, synthesize, write_i24_json
@@ -21,6 +22,23 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 #: again (a minute of a core). Only tests/test_first_run.py compiles afresh, as a new
 #: user's first run does.
 KERNEL_CACHE = {"NUMBA_CACHE_DIR": os.path.dirname(jit.numba.config.CACHE_DIR)}
+
+
+def pytest_configure(config):
+    """With workers (pytest-xdist), the kernels of both worlds are compiled before they
+    start, where this version of them is not cached yet (a clean clone, a changed kernel):
+    by the first run's two processes (twin.runners.precompile), instead of every worker
+    compiling the same kernels at once."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    if config.option.collectonly:
+        return
+    from twin.runners import precompile
+
+    for world in precompile.WORLDS:  # a failure shows in the tests that call the kernel
+        compiling = precompile.start(world)
+        if compiling is not None:
+            compiling.wait()
 
 
 def make_doc(
@@ -86,12 +104,30 @@ def wave_config():
     return replace(PRESET_B, start=SCENARIO_TIME - 240.0, minutes=7.0)
 
 
+def built_once(tmp_path_factory, name: str, build) -> Path:
+    """The folder ``name`` that ``build(folder)`` fills, built once for the whole test
+    run: by the first of the run's workers (pytest-xdist) to ask, while any other waits
+    for it, and then read by all. Nothing of it may be written by a test."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # the workers' folders share a parent
+        root = root.parent
+    folder = root / name
+    with build_lock(folder):
+        if not (folder / ".built").is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir(parents=True)
+            build(folder)
+            (folder / ".built").write_text("")
+    return folder
+
+
 @pytest.fixture(scope="session")
 def wave_store(tmp_path_factory, wave_config) -> TrajectoryStore:
-    folder = tmp_path_factory.mktemp("wave")
-    day = write_i24_json(synthesize(wave_config), folder / "wave.json")
-    ingest([day], folder / "store", progress=False)
-    return TrajectoryStore(folder / "store")
+    def build(folder):
+        day = write_i24_json(synthesize(wave_config), folder / "wave.json")
+        ingest([day], folder / "store", progress=False)
+
+    return TrajectoryStore(built_once(tmp_path_factory, "wave", build) / "store")
 
 
 @pytest.fixture
@@ -139,13 +175,12 @@ def built_map(tmp_path_factory):
 @pytest.fixture(scope="session")
 def calibrated_wave_store(tmp_path_factory, wave_store) -> TrajectoryStore:
     """A copy of ``wave_store`` calibrated on its westbound road (``twin calibrate``)."""
-    import shutil
-
     from twin.calibration.calibrate import calibrate, write_calibration
 
-    folder = tmp_path_factory.mktemp("calibrated") / "store"
-    shutil.copytree(wave_store.path, folder)
-    store = TrajectoryStore(folder)
-    doc, fits = calibrate(store, ["westbound"])
-    write_calibration(store, doc, fits)
-    return store
+    def build(folder):
+        shutil.copytree(wave_store.path, folder / "store")
+        store = TrajectoryStore(folder / "store")
+        doc, fits = calibrate(store, ["westbound"])
+        write_calibration(store, doc, fits)
+
+    return TrajectoryStore(built_once(tmp_path_factory, "calibrated", build) / "store")

@@ -205,6 +205,7 @@ def test_an_episode_depends_on_the_seed_and_its_index_only(wave_store, built_map
     assert other != few
 
 
+@pytest.mark.slow  # a dataset made twice by new processes, one killed (about 12 s)
 def test_a_killed_run_resumes_to_the_same_dataset(dataset, wave_store, tmp_path):
     """kill -9 of the whole run in the middle; the rerun skips the complete episodes
     and ends with a dataset identical, file by file, to the uninterrupted one."""
@@ -252,6 +253,7 @@ def test_a_killed_run_resumes_to_the_same_dataset(dataset, wave_store, tmp_path)
     assert files_of(out) == files_of(dataset.folder)
 
 
+@pytest.mark.slow  # a local Ray cluster started and stopped (about 10 s)
 def test_ray_makes_the_same_dataset(dataset, wave_store, built_map, tmp_path):
     try:
         import ray  # noqa: F401
