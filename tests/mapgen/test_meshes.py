@@ -185,10 +185,10 @@ def test_terrain_seam_has_no_gap_for_rays(built_map, parts):
         world.close()
 
 
-def test_terrain_is_seeded(tmp_path):
+def test_terrain_is_seeded(built_map, tmp_path):
     from mapgen.build import build_map
 
-    a = build_map(tmp_path / "a", seed=1)
+    a = built_map  # the session's, of seed 0
     b = build_map(tmp_path / "b", seed=2)
     terrain = {m.name: m.visual.read_bytes() for m in a.parts}
     other = {m.name: m.visual.read_bytes() for m in b.parts}
