@@ -87,3 +87,27 @@ def test_a_memory_mapped_recording_has_the_in_memory_ones_kernel_types(store, mo
     before = mapped.x[0]
     recording.clear_loaded()
     assert recording.load_recording(store, "westbound").x[0] == before  # the file unchanged
+
+
+def test_a_replay_is_its_recorded_samples_interpolated(wave_store):
+    """At any time a trajectory is where, and as fast as, the line between its two
+    recorded samples around that time says, in the wave's braking and speeding up: a
+    replay (every ghost, every spawn's speed) reads the frames around its time, not the
+    next ones (one frame, 0.04 s, is 1 m at 25 m/s and up to 0.09 m/s in the wave).
+    The tolerances are the recording's resampling to its 25 Hz grid (at most 0.045 m
+    and 0.007 m/s on these trajectories)."""
+    rec = recording.load_recording(wave_store, "westbound")
+    rng = np.random.default_rng(7)
+    changing = 0
+    for r in rng.choice(rec.tid.size, 40, replace=False).tolist():
+        samples = wave_store.trajectory(int(rec.tid[r]))
+        t = samples["t"]
+        times = rng.uniform(t[0], t[-1], 20)
+        replayed = np.array([recording.replay(rec, r, s) for s in times], dtype=float)
+        assert replayed[:, 0].all()  # present
+        x = np.interp(times, t, samples["x"])
+        speed = np.maximum(np.interp(times, t, samples["speed"].astype(np.float64)), 0.0)
+        np.testing.assert_allclose(replayed[:, 1], x, rtol=0, atol=0.1)
+        np.testing.assert_allclose(replayed[:, 3], speed, rtol=0, atol=0.01)
+        changing += np.ptp(samples["speed"]) > 1.0
+    assert changing >= 10  # the wave's: their speeds change between samples
