@@ -392,7 +392,8 @@ def _description(name: str) -> str:
     in :mod:`twin.perf.bench`, in Markdown."""
     from twin.perf import bench
 
-    function = getattr(bench, f"{name}_bench", None) or getattr(bench, name, None)
+    key = name.replace("-", "_")  # first-run: first_run_bench
+    function = getattr(bench, f"{key}_bench", None) or getattr(bench, key, None)
     doc = inspect.getdoc(function) if callable(function) else None
     if not doc:
         return "see `twin bench " + name + " --help`."
