@@ -16,9 +16,9 @@ cache (:mod:`twin.core.jit`) when it starts, and it loads each in a fraction of 
         seconds = compiling.wait()        # then the run loads every kernel from the cache
 
 The work is shared by two processes, one a core: the ``episode`` part runs the
-episode (and compiles the reset on the way), the ``step`` part compiles the kernels of
-a step for the same state without running them; each loads from the cache what the
-other wrote first. ``python -m twin.runners.precompile WORLD PART`` is one of them.
+episode, the ``step`` part compiles the kernels of a step for the same state without
+running them while the ``episode`` part compiles the reset, which then waits for it and
+loads them. ``python -m twin.runners.precompile WORLD PART STEPS_DONE`` is one of them.
 """
 
 import json
@@ -62,10 +62,12 @@ class Compilation:
         self.cache = marker(world).parent
         self.started = time.perf_counter()
         self._parts = []
+        self._folder = tempfile.TemporaryDirectory(prefix="twin-compiling-")
+        steps_done = str(Path(self._folder.name) / "steps-done")
         for part in PARTS:
             log = tempfile.TemporaryFile()  # noqa: SIM115  (as long as the process)
             process = subprocess.Popen(
-                [sys.executable, "-m", "twin.runners.precompile", world, part],
+                [sys.executable, "-m", "twin.runners.precompile", world, part, steps_done],
                 stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
             )  # fmt: skip
             self._parts.append((part, process, log))
@@ -83,6 +85,7 @@ class Compilation:
             log.close()
             if codes[part] != 0 and part == "episode":
                 self.error = lines[-1] if lines else f"exit status {codes[part]}"
+        self._folder.cleanup()
         if codes["episode"] != 0:
             return None
         return time.perf_counter() - self.started
@@ -95,6 +98,7 @@ class Compilation:
                 process.wait()
             if not log.closed:
                 log.close()
+        self._folder.cleanup()
 
 
 def start(world: str) -> Compilation | None:
@@ -105,6 +109,7 @@ def start(world: str) -> Compilation | None:
 
 # -- the second process --------------------------------------------------------------
 
+WAIT_S = 180.0  # [s] the longest the episode part waits for the step part
 _SPEED = 25.0  # [m/s] the hand-made vehicles' constant speed
 _SECONDS = 12.0  # [s] each vehicle's recording
 _RATE = 25.0  # [Hz] samples a second, as I-24 MOTION records
@@ -161,34 +166,42 @@ def _simulator(world: str, folder: Path):
     return Cosimulator(config, EmpiricalTraffic(store), default_map(progress=False)), store
 
 
-def _episode(world: str, folder: Path) -> None:
+def _episode(world: str, folder: Path, steps_done: Path) -> None:
     """Part ``episode``: one second of a run in ``world``, measured as a run is, so that
-    every kernel a run calls is compiled on the way (those the ``step`` part has cached
-    by then are loaded)."""
+    every kernel a run calls is compiled on the way. It resets (compiling the reset),
+    then waits until the ``step`` part says it is done (``steps_done`` exists; at most
+    :data:`WAIT_S`), so that it loads the step's kernels instead of compiling them too."""
     from twin.metrics.measure import measure
 
     sim, store = _simulator(world, folder)
     with sim:
+        sim.reset()
+        deadline = time.monotonic() + WAIT_S
+        while not steps_done.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
         sim.run()
         measure(sim, store, 1.0, 1.0)
 
 
-def _step(world: str, folder: Path) -> None:
+def _step(world: str, folder: Path, steps_done: Path) -> None:
     """Part ``step``: the kernels of a step in ``world``, compiled for the cosimulator's
-    packed state without running them, while the ``episode`` part compiles the reset
-    (the two share the work on two cores; each loads what the other cached first)."""
+    packed state without running them, while the ``episode`` part compiles the reset;
+    ``steps_done`` is made when it ends, done or not."""
     import numba
 
     from twin.cosim.core import step
 
-    sim, _ = _simulator(world, folder)
-    with sim:
-        core = numba.typeof(sim.core)
-        if world == "physics":
-            for kernel in (step.before_world, step.after_world):
-                kernel.compile((numba.typeof(0), core))
-        else:
-            step.step_batch.compile((core,))
+    try:
+        sim, _ = _simulator(world, folder)
+        with sim:
+            core = numba.typeof(sim.core)
+            if world == "physics":
+                for kernel in (step.before_world, step.after_world):
+                    kernel.compile((numba.typeof(0), core))
+            else:
+                step.step_batch.compile((core,))
+    finally:
+        steps_done.touch()
 
 
 PARTS = {"episode": _episode, "step": _step}
@@ -196,13 +209,13 @@ PARTS = {"episode": _episode, "step": _step}
 
 def main(argv: list[str] | None = None) -> int:
     args = argv if argv is not None else sys.argv[1:]
-    if len(args) != 2 or args[0] not in WORLDS or args[1] not in PARTS:
+    if len(args) != 3 or args[0] not in WORLDS or args[1] not in PARTS:
         print(f"usage: python -m twin.runners.precompile {{{','.join(WORLDS)}}} "
-              f"{{{','.join(PARTS)}}}", file=sys.stderr)  # fmt: skip
+              f"{{{','.join(PARTS)}}} STEPS_DONE", file=sys.stderr)  # fmt: skip
         return 2
-    world, part = args
+    world, part, steps_done = args
     with tempfile.TemporaryDirectory(prefix="twin-compile-") as folder:
-        PARTS[part](world, Path(folder))
+        PARTS[part](world, Path(folder), Path(steps_done))
     if part == "episode":
         done = marker(world)
         partial = done.with_name(f".{done.name}.{os.getpid()}")

@@ -17,17 +17,19 @@ def test_a_run_starts_no_compilation_where_the_marker_says_the_kernels_are_cache
 
 def test_the_step_part_compiles_the_step_of_the_state_a_run_packs(tmp_path):
     """The ``step`` part compiles the step kernel for the cosimulator's packed state (a
-    load, where the session compiled it already) without writing the marker, which is
-    the ``episode`` part's to write."""
+    load, where the session compiled it already), says it is done, and leaves the
+    marker to the ``episode`` part."""
     from twin.cosim.core import step
 
     before = precompile.marker("kinematic").is_file()
-    assert precompile.main(["kinematic", "step"]) == 0
+    done = tmp_path / "steps-done"
+    assert precompile.main(["kinematic", "step", str(done)]) == 0
     assert step.step_batch.signatures
+    assert done.is_file()  # what the episode part waits for
     assert precompile.marker("kinematic").is_file() == before
 
 
-@pytest.mark.parametrize("argv", [["air"], ["physics", "all"], ["kinematic"]])
+@pytest.mark.parametrize("argv", [["air", "step", "d"], ["physics", "all", "d"], ["kinematic"]])
 def test_an_unknown_world_or_part_is_a_usage_error(argv, capsys):
     assert precompile.main(argv) == 2
     assert "usage: python -m twin.runners.precompile" in capsys.readouterr().err
