@@ -75,7 +75,7 @@ class FreshUser:
         self.missing = modules_of_the_test_extra()
         (hide / "sitecustomize.py").write_text(SITECUSTOMIZE.format(modules=sorted(self.missing)))
         self.env = {
-            **os.environ,
+            **{k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"},  # none yet
             "I24_TWIN_CACHE": str(root / "cache"),
             "MPLCONFIGDIR": str(root / "matplotlib"),
             "PYTHONPATH": os.pathsep.join(
