@@ -11,13 +11,13 @@ import os
 import re
 import subprocess
 import sys
-import sysconfig
 import tomllib
 from importlib.metadata import packages_distributions
 from pathlib import Path
-from shutil import which
 
 import pytest
+
+from twin.perf.first_run import twin_script
 
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = re.compile(  # what libraries print on their own: never part of the twin's output
@@ -82,10 +82,10 @@ class FreshUser:
                 p for p in (str(hide), os.environ.get("PYTHONPATH", "")) if p
             ),
         }
-        script = Path(sysconfig.get_path("scripts")) / "twin"
-        self.twin = str(script) if script.exists() else which("twin")
-        if self.twin is None:
-            pytest.fail("the console script `twin` is not installed: pip install -e .")
+        try:
+            self.twin = twin_script()
+        except FileNotFoundError as missing:
+            pytest.fail(str(missing))
 
     def run(self, *args: str, timeout: float = 600.0) -> subprocess.CompletedProcess:
         return subprocess.run(

@@ -21,7 +21,6 @@ running them while the ``episode`` part compiles the reset, which then waits for
 loads them. ``python -m twin.runners.precompile WORLD PART STEPS_DONE`` is one of them.
 """
 
-import json
 import os
 import subprocess
 import sys
@@ -115,50 +114,35 @@ _SECONDS = 12.0  # [s] each vehicle's recording
 _RATE = 25.0  # [Hz] samples a second, as I-24 MOTION records
 
 
-def _document(n: int, lane: int, x: float, t0: float) -> dict:
-    """An I-24 MOTION document: a westbound car whose back centre is at road-frame ``x``
-    [m] in ``lane`` at ``t0`` and drives at a constant speed from 2 s before."""
-    from twin.core import i24
+def _tracks(t0: float) -> list:
+    """(t [s unix], x [m], y [m]) of cars in the four westbound lanes, 140 m apart around
+    the ego's place at ``t0``, each at a constant speed from 2 s before it."""
+    from twin.core.i24 import LANE_WIDTH
 
     t = t0 - 2.0 + np.arange(int(_SECONDS * _RATE)) / _RATE
-    x_m = x + _SPEED * (t - t0)
-    x_ft = (i24.SEGMENT_END_MM * i24.MILE - x_m) / i24.FT
-    y_ft = (-lane + 0.5) * i24.LANE_WIDTH_FT
-    return {
-        "_id": {"$oid": f"{n:024x}"},
-        "timestamp": t.tolist(),
-        "x_position": x_ft.tolist(),
-        "y_position": [y_ft] * len(t),
-        "first_timestamp": float(t[0]),
-        "last_timestamp": float(t[-1]),
-        "starting_x": float(x_ft[0]),
-        "ending_x": float(x_ft[-1]),
-        "length": 15.0,
-        "width": 6.0,
-        "height": 5.0,
-        "coarse_vehicle_class": 0,
-        "fine_vehicle_class": 0,
-        "direction": -1,
-        "merged_ids": [],
-        "flags": [],
-    }
+    return [
+        (t, x + _SPEED * (t - t0), np.full(t.size, (-lane + 0.5) * LANE_WIDTH))
+        for lane in (-1, -2, -3, -4)
+        for x in (420.0, 560.0, 700.0, 840.0, 980.0)
+    ]
 
 
 def _simulator(world: str, folder: Path):
     """A cosimulator in ``world`` on a few hand-made vehicles (a store in ``folder``),
     not reset, and its store."""
     from mapgen.build import default_map
-    from twin.core.i24 import SCENARIO_TIME
+    from twin.core.i24 import SCENARIO_TIME, Road
     from twin.cosim.config import CosimConfig
     from twin.cosim.cosimulator import Cosimulator
+    from twin.data.day_files import write_day
     from twin.data.empirical import EmpiricalTraffic
     from twin.data.ingest import ingest
     from twin.data.store import TrajectoryStore
 
-    places = [(lane, x) for lane in (-1, -2, -3, -4) for x in (420.0, 560.0, 700.0, 840.0, 980.0)]
-    docs = [_document(n, lane, x, SCENARIO_TIME) for n, (lane, x) in enumerate(places, 1)]
-    day = folder / "day.json"
-    day.write_text(json.dumps(docs))
+    tracks = _tracks(SCENARIO_TIME)
+    n = len(tracks)
+    day = write_day(folder / "day.json", Road.WESTBOUND, SCENARIO_TIME, np.arange(1, n + 1),
+                    tracks, np.zeros(n, np.int64), np.tile([4.6, 1.85, 1.5], (n, 1)))  # fmt: skip
     ingest([day], folder / "store", progress=False)
     store = TrajectoryStore(folder / "store")
     config = CosimConfig(road="westbound", lane=-2, x=700.0, time=SCENARIO_TIME,
