@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.vehicle_classes import VehicleClassTable
+from twin.traffic.kernels.models import N_PARAMS
 
 CLIP_SD = 2.0  # draws are clipped to this many standard deviations
 
@@ -117,3 +118,24 @@ class DriverDistribution:
         return DriverTraits(
             desired_speed, time_headway, min_gap, max_accel, decel, np.full(n, self.delta)
         )
+
+
+def mean_driver_row(drivers: DriverDistribution, model, classes: VehicleClassTable) -> np.ndarray:
+    """(N_PARAMS,) the class table's mean driver (shares weighting the classes' desired
+    speed, time headway and maximum acceleration; ``drivers``' minimum gap, comfortable
+    deceleration and exponent) in the parameters of ``model`` (a
+    :class:`~twin.traffic.models.base.CarFollowingModel`), padded with zeros: the row
+    the kernels judge obstacles (the ghosts) by, as if they drove like one."""
+    share = classes.column("share")
+    traits = DriverTraits(
+        desired_speed=float(share @ classes.column("desired_speed_mps")),
+        time_headway=float(share @ classes.column("time_headway_s")),
+        min_gap=drivers.min_gap,
+        max_accel=float(share @ classes.column("max_accel_mps2")),
+        comfortable_decel=drivers.comfortable_decel,
+        delta=drivers.delta,
+    )
+    params = model.from_traits(traits)
+    row = np.zeros(N_PARAMS)
+    row[: len(model.names)] = [float(getattr(params, name)) for name in model.names]
+    return row

@@ -4,6 +4,11 @@ A vehicle occupies every lane it is in: its own, and during a lane change the la
 leaves as well, so followers in both lanes see it. Entries are sorted by (road, lane,
 x); the leader of an entry is the next entry of the same lane. Positions are the
 I-24 MOTION reference, the back centre, so a vehicle covers ``[x, x + length]``.
+
+This is the synthesiser's neighbour search (:mod:`twin.data.synth`), in numpy, with its
+own MOBIL (:mod:`twin.traffic.mobil`): test data made apart from the twin's traffic. The
+twin's traffic and its calibration find neighbours with the kernels'
+(:mod:`twin.traffic.kernels.neighbours`), whose sort key this shares.
 """
 
 from dataclasses import dataclass
@@ -11,8 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.i24 import N_LANES
-
-LANE_KEY = 1.0e6  # [m] spacing of the lanes in the sort key, beyond any road-frame x
+from twin.traffic.kernels.neighbours import LANE_KEY
 
 
 def lane_group(road: np.ndarray, lane: np.ndarray) -> np.ndarray:

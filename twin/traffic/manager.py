@@ -36,7 +36,7 @@ from twin.physics.vehicle import VehicleParams
 from twin.traffic.config import MOBIL_FIELDS, TrafficConfig
 from twin.traffic.controlled import apply_controllers
 from twin.traffic.controller_api import EgoController, lane_change_direction
-from twin.traffic.drivers import DriverTraits
+from twin.traffic.drivers import mean_driver_row
 from twin.traffic.kernels import state
 from twin.traffic.kernels.decide import decide_from_python
 from twin.traffic.kernels.decide import settings as kernel_settings
@@ -534,20 +534,7 @@ class TrafficManager:
     def _mean_driver(self) -> np.ndarray:
         """The model's parameter row of the class table's mean driver (obstacles are
         judged as if they drove like one); read once: the table is fixed."""
-        drivers = self.config.drivers
-        share = self.classes.column("share")
-        traits = DriverTraits(
-            desired_speed=float(share @ self.classes.column("desired_speed_mps")),
-            time_headway=float(share @ self.classes.column("time_headway_s")),
-            min_gap=drivers.min_gap,
-            max_accel=float(share @ self.classes.column("max_accel_mps2")),
-            comfortable_decel=drivers.comfortable_decel,
-            delta=drivers.delta,
-        )
-        params = self.model.from_traits(traits)
-        row = np.zeros(N_PARAMS)
-        row[: len(self.model.names)] = [float(getattr(params, name)) for name in self.model.names]
-        return row
+        return mean_driver_row(self.config.drivers, self.model, self.classes)
 
     def _index(self, ids) -> np.ndarray:
         ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))

@@ -32,7 +32,6 @@ from twin.data import recording as recording_module
 from twin.physics import kernels as physics
 from twin.traffic.kernels import state as kinds
 from twin.traffic.kernels.decide import settings as traffic_settings
-from twin.traffic.kernels.models import N_PARAMS
 
 SLOTS = 256  # vehicles an episode can hold at once (the visible window's)
 GHOSTS = 128  # ghosts an episode can hold at once
@@ -167,24 +166,12 @@ class Shared:
 
 def _mean_driver(config, model) -> np.ndarray:
     """(N_PARAMS,) the class table's mean driver in the model's parameters (obstacles
-    are judged as if they drove like one; :meth:`TrafficManager._mean_driver`)."""
+    are judged as if they drove like one; :func:`twin.traffic.drivers.mean_driver_row`,
+    as the traffic manager's)."""
     from twin.core.vehicle_classes import vehicle_classes
-    from twin.traffic.drivers import DriverTraits
+    from twin.traffic.drivers import mean_driver_row
 
-    classes = vehicle_classes()
-    share = classes.column("share")
-    traits = DriverTraits(
-        desired_speed=float(share @ classes.column("desired_speed_mps")),
-        time_headway=float(share @ classes.column("time_headway_s")),
-        min_gap=config.drivers.min_gap,
-        max_accel=float(share @ classes.column("max_accel_mps2")),
-        comfortable_decel=config.drivers.comfortable_decel,
-        delta=config.drivers.delta,
-    )
-    params = model.from_traits(traits)
-    row = np.zeros(N_PARAMS)
-    row[: len(model.names)] = [float(getattr(params, name)) for name in model.names]
-    return row
+    return mean_driver_row(config.drivers, model, vehicle_classes())
 
 
 _TABLES: dict = {}
