@@ -1,19 +1,18 @@
 """Lane changes in a recording: their rates, and the MOBIL threshold at which MOBIL,
 judging the recorded scenes with the calibrated drivers' model, starts as many."""
 
-import itertools
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from twin.calibration.following import SPEED_BIN_NAMES, GridTraffic, LaneChanges
 from twin.core.i24 import HOV_LANE, LANES
+from twin.traffic.config import TrafficConfig
 from twin.traffic.drivers import CLIP_SD
-from twin.traffic.lanes import Occupancy
-from twin.traffic.mobil import MOBILParams, mobil_incentive, mobil_safe
+from twin.traffic.judge import Scenes, judge_scenes
+from twin.traffic.mobil import MOBILParams
 from twin.traffic.models.base import CarFollowingModel, take
 
-MIN_LANE_CHANGE_GAP = 1.0  # [m] as the traffic manager: to each new neighbour
 DRIVERS_SEED = 0x6D6F62  # the drivers drawn for the threshold's fit: one fixed draw
 
 
@@ -98,71 +97,62 @@ def recorded_incentives(
     mobil: MOBILParams,
     every: float = 1.0,
     drivers: tuple[np.ndarray, object] | None = None,
+    traffic: TrafficConfig | None = None,
 ) -> Incentives:
     """MOBIL's incentives on the recorded scenes every ``every`` seconds, and no
     threshold (:meth:`Incentives.changes` applies it): with the same driver
     (``model``'s parameters ``driver``, scalars) for everyone, or with ``drivers``,
     (tids sorted, ``model``'s parameters as arrays of their length): one driver per
-    recorded vehicle (:func:`drawn_drivers`)."""
+    recorded vehicle (:func:`drawn_drivers`).
+
+    The scenes are judged by the traffic kernels' own lane-change rule
+    (:func:`twin.traffic.judge.judge_scenes`: MOBIL with the room to reach the middle
+    of a change, the new follower's room behind, the gaps, the HOV rule), with the
+    settings of ``traffic`` (default: a run's, :class:`TrafficConfig`) and ``mobil``'s
+    politeness, safe deceleration and keep-right bias, so that the threshold fitted is
+    the one the twin's drivers drive by. A vehicle may use the HOV lane where the
+    recording shows it there."""
     stride = max(1, round(every / grid.dt))
-    rows_all = np.flatnonzero((grid.lane != 0) & (grid.k % stride == 0))
-    rows_all = rows_all[np.argsort(grid.k[rows_all], kind="stable")]
-    bounds = np.flatnonzero(np.r_[True, np.diff(grid.k[rows_all]) != 0, True])
-    out = {name: [] for name in ("tid", "decision", "direction", "gain", "possible", "x", "lane")}
-    road = np.int8(grid.road.direction)
-    for a, b in itertools.pairwise(bounds):
-        rows = rows_all[a:b]
-        x, v, lane, length = grid.x[rows], grid.speed[rows], grid.lane[rows], grid.length[rows]
-        roads = np.full(rows.size, road)
-        occupancy = Occupancy.build(roads, x, [lane])
-        ahead_now, behind_now = occupancy.around(roads, lane.astype(np.int64), x)
-        own = None
-        if drivers is not None:  # the drivers of this time's vehicles
-            own = take(drivers[1], np.searchsorted(drivers[0], grid.tid[rows]))
-
-        def accel(i, j, gap, v=v, own=own):  # the model's, of vehicles i behind j (j = -1: free)
-            return _accel_behind(v, i, j, gap, model, driver if own is None else take(own, i))
-
-        me = np.arange(rows.size)
-        gap_now = np.where(ahead_now >= 0, x[np.maximum(ahead_now, 0)] - x - length, np.inf)
-        own_now = accel(me, ahead_now, gap_now)
-        behind = np.maximum(behind_now, 0)
-        old_now = np.where(behind_now >= 0, own_now[behind], 0.0)
-        old_gap = x[np.maximum(ahead_now, 0)] - x[behind] - length[behind]
-        old_after = np.where(behind_now >= 0, accel(behind, ahead_now, old_gap), 0.0)
-        k = int(grid.k[rows[0]] // stride)
-        for direction in (1, -1):
-            target = lane.astype(np.int64) + direction
-            exists = (target <= -1) & (target >= -4) & (target != HOV_LANE) & (lane != HOV_LANE)
-            ahead, behind_new = occupancy.around(roads, np.clip(target, -4, -1), x)
-            gap_ahead = np.where(ahead >= 0, x[np.maximum(ahead, 0)] - x - length, np.inf)
-            new_f = np.maximum(behind_new, 0)
-            gap_behind = np.where(behind_new >= 0, x - x[new_f] - length[new_f], np.inf)
-            own_after = accel(me, ahead, gap_ahead)
-            new_after = np.where(behind_new >= 0, accel(new_f, me, gap_behind), 0.0)
-            new_now = np.where(behind_new >= 0, own_now[new_f], 0.0)
-            gain = mobil_incentive(
-                own_now, own_after, new_now, new_after, old_now, old_after,
-                np.full(rows.size, direction < 0), replace(mobil, threshold=0.0),
-            )  # fmt: skip
-            safe = (
-                mobil_safe(new_after, mobil)
-                & (own_after >= -mobil.safe_decel)
-                & (gap_ahead >= MIN_LANE_CHANGE_GAP)
-                & (gap_behind >= MIN_LANE_CHANGE_GAP)
-            )
-            out["tid"].append(grid.tid[rows])
-            out["decision"].append(np.full(rows.size, k))
-            out["direction"].append(np.full(rows.size, direction, dtype=np.int8))
-            out["gain"].append(gain)
-            out["possible"].append(exists & safe)
-            out["x"].append(x)
-            out["lane"].append(lane)
-    if not out["tid"]:
+    rows = np.flatnonzero((grid.lane != 0) & (grid.k % stride == 0))
+    rows = rows[np.lexsort((grid.x[rows], grid.k[rows]))]
+    if rows.size == 0:
         return Incentives(*(np.zeros(0) for _ in range(7)))
-    columns = {name: np.concatenate(parts) for name, parts in out.items()}
+    if drivers is None:
+        params = take_rows(driver, np.zeros(rows.size, np.int64), model)
+    else:
+        params = take_rows(drivers[1], np.searchsorted(drivers[0], grid.tid[rows]), model)
+    in_hov = np.unique(grid.tid[grid.lane == HOV_LANE])
+    config = replace(traffic or TrafficConfig(), car_following=model.name,
+                     mobil=replace(mobil, threshold=0.0))  # fmt: skip
+    scenes = Scenes(
+        scene=grid.k[rows] // stride, x=grid.x[rows], speed=grid.speed[rows],
+        lane=grid.lane[rows].astype(np.int64), length=grid.length[rows], cf=params,
+        hov_eligible=np.isin(grid.tid[rows], in_hov),
+    )  # fmt: skip
+    gain, possible = judge_scenes(scenes, config)
+    tid, lane, x = grid.tid[rows], grid.lane[rows], grid.x[rows]
+    decision = (grid.k[rows] // stride).astype(np.int64)
+    columns = {
+        "tid": np.concatenate([tid, tid]),
+        "decision": np.concatenate([decision, decision]),
+        "direction": np.repeat(np.array([1, -1], np.int8), rows.size),
+        "gain": np.concatenate([gain[:, 0], gain[:, 1]]),
+        "possible": np.concatenate([possible[:, 0], possible[:, 1]]),
+        "x": np.concatenate([x, x]),
+        "lane": np.concatenate([lane, lane]),
+    }
     order = np.lexsort((columns["decision"], columns["direction"], columns["tid"]))
     return Incentives(**{name: values[order] for name, values in columns.items()})
+
+
+def take_rows(params, index: np.ndarray, model: CarFollowingModel) -> np.ndarray:
+    """(len(index), k) ``model``'s parameters ``params`` (arrays or scalars) of the
+    drivers at ``index``, one row each in the model's order, as the kernels hold them."""
+    chosen = take(params, index) if index.size else params
+    return np.column_stack(
+        [np.broadcast_to(np.asarray(getattr(chosen, name), float), index.shape)
+         for name in model.names]
+    )  # fmt: skip
 
 
 def drawn_drivers(tids: np.ndarray, distribution, model: CarFollowingModel):
@@ -185,12 +175,6 @@ def drawn_drivers(tids: np.ndarray, distribution, model: CarFollowingModel):
     draws = distribution.draw(tids.size, np.random.default_rng(DRIVERS_SEED), clip_sd=CLIP_SD)
     order = [distribution.names.index(p.name) for p in model.fitted]
     return tids, model.from_fitted(draws[:, order])
-
-
-def _accel_behind(v, i, j, gap, model: CarFollowingModel, driver) -> np.ndarray:
-    """The model's acceleration of vehicles ``i`` behind vehicles ``j`` (-1: a free road)."""
-    lead_speed = np.where(j >= 0, v[np.maximum(j, 0)], 0.0)
-    return model.accel(v[i], lead_speed, np.where(j >= 0, gap, np.inf), driver)
 
 
 def fit_threshold(

@@ -4,6 +4,14 @@
 change is safe for the new follower and the driver's own gain in acceleration, less
 a politeness share of what the followers lose, beats a threshold. A keep-right bias
 favours moves to the right (toward lane -4).
+
+:class:`MOBILParams` are the parameters every driver of the twin starts with. The
+functions here are the synthesiser's MOBIL (:mod:`twin.data.synth`), kept apart on
+purpose: test data made by a model that is not the twin's own. The twin's traffic
+decides by its kernels (:mod:`twin.traffic.kernels.lane_change`: room to reach the
+middle of a change, an urgency-scaled accepted deceleration, room behind), and the
+calibration fits its threshold with that same rule (:mod:`twin.traffic.judge`), not
+with these.
 """
 
 from dataclasses import dataclass

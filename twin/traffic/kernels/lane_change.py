@@ -26,11 +26,12 @@ from twin.traffic.kernels.longitudinal import (
     MIN_SPEED_PATH,
     accepted_decel,
     cf,
+    follow,
     lane_end_gap,
     room_behind,
     urgency,
 )
-from twin.traffic.kernels.neighbours import around
+from twin.traffic.kernels.neighbours import around, gather, sort_entries
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
 # An urgent path is at least this many of the vehicle's lengths: along a shorter one the
@@ -161,12 +162,29 @@ def change_lanes(b, time, seed, t):
 @kernel
 def _choose(b, i, x, urge, t, n):
     """The direction driver ``i`` at back ``x`` [m] with urgency ``urge`` changes to
-    (LEFT, RIGHT), or 0."""
+    (LEFT, RIGHT), or 0: the safe option of the highest gain above 0
+    (:func:`lane_option`)."""
+    room, old_now, old_after, accepted, asked = _situation(b, i, x, urge, t, n)
+    best, choice = 0.0, 0
+    for step in (LEFT, RIGHT):
+        allowed, gain, safe = lane_option(b, i, x, urge, step, room, old_now, old_after,
+                                          accepted, asked, t, n)  # fmt: skip
+        if allowed and safe and gain > best:
+            best, choice = gain, step
+    return choice
+
+
+@kernel(inline=True)
+def _situation(b, i, x, urge, t, n):
+    """What driver ``i`` at back ``x`` [m] with urgency ``urge`` weighs both ways by:
+    whether it has room to reach the middle of a change behind the leader it still
+    follows, its old lane's follower's acceleration now and once it has left [m/s^2],
+    the deceleration it accepts of a new follower [m/s^2] and the direction it is asked
+    to change to (0: none)."""
     drivers, sc, settings = t.drivers, t.scratch, t.settings
     key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
     sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
     params, model, obstacle = drivers.cf, settings.model, settings.obstacle_cf
-    strategic = drivers.strategic[b, i]
     lane = drivers.lane[b, i]
     speed = sspeed[b, i]
     length = slength[b, i]
@@ -192,52 +210,104 @@ def _choose(b, i, x, urge, t, n):
                        old_gap)  # fmt: skip
     asked = drivers.requested[b, i]
     if asked == 0 and urgent:
-        asked = strategic
-    safe_decel = drivers.safe_decel[b, i]
+        asked = drivers.strategic[b, i]
     # an urgent driver takes a harder gap, never past emergency braking
-    accepted = accepted_decel(safe_decel, urge, settings.emergency_decel)
-    best, choice = 0.0, 0
-    for step in (LEFT, RIGHT):
-        target = lane + step
-        if not -N_LANES <= target <= -1:
-            continue
-        if not hov_allows(drivers.hov_eligible[b, i], lane, target, x, settings.hov_openings):
-            continue
-        if asked != 0 and asked != step:
-            continue
-        if urgent and strategic == -step:  # never away from its target
-            continue
-        if asked != step and kept_out(settings.keep_out, target, x):
-            continue
-        # MOBIL in the target lane: its new leader and follower
-        t_ahead, t_behind = around(key, group, owner, count, b, target, x)
-        gap_ahead = sx[b, t_ahead] - x - length if t_ahead >= 0 else math.inf
-        gap_behind = x - sx[b, t_behind] - slength[b, t_behind] if t_behind >= 0 else math.inf
-        v_ahead = sspeed[b, t_ahead] if t_ahead >= 0 else speed
-        own_after = cf(model, params, obstacle, b, n, i, speed, v_ahead, gap_ahead)
-        new_now, new_after = 0.0, 0.0
-        if t_behind >= 0:
-            new_now = cf_accel[b, t_behind] if t_behind < n else 0.0
-            new_after = cf(model, params, obstacle, b, n, t_behind, sspeed[b, t_behind], speed,
-                           gap_behind)  # fmt: skip
-        safe = (
-            room
-            and new_after >= -accepted
-            and own_after >= -safe_decel
-            and gap_ahead >= MIN_LANE_CHANGE_GAP
-            and gap_behind >= room_behind(t, b, n, t_behind, min(speed, v_ahead))
-        )
-        bias = drivers.keep_right[b, i] if step == RIGHT else -drivers.keep_right[b, i]
-        others = (new_after - new_now) + (old_after - old_now)
-        gain = (
-            own_after - cf_accel[b, i] + drivers.politeness[b, i] * others + bias
-            - drivers.threshold[b, i]
-        )  # fmt: skip
-        if asked == step:
-            gain = math.inf
-        if safe and gain > best:
-            best, choice = gain, step
-    return choice
+    accepted = accepted_decel(drivers.safe_decel[b, i], urge, settings.emergency_decel)
+    return room, old_now, old_after, accepted, asked
+
+
+@kernel(inline=True)
+def lane_option(b, i, x, urge, step, room, old_now, old_after, accepted, asked, t, n):
+    """Driver ``i``'s option of a change one lane ``step`` (LEFT, RIGHT) in its
+    :func:`_situation`: whether the rules allow it at all (the road, the HOV rule, what
+    it is asked, its strategic target, the keep-out zones), MOBIL's gain [m/s^2] (its
+    own, less its threshold, plus its politeness share of its followers', plus the
+    keep-right bias; infinite where asked) and whether it is safe (room, the new
+    follower's braking within ``accepted``, its own within its ``safe_decel``, the gaps).
+    The one rule both the traffic (:func:`change_lanes`) and the calibration
+    (:func:`judge_scenes`) apply."""
+    drivers, sc, settings = t.drivers, t.scratch, t.settings
+    key, group, owner, count = sc.entry_key, sc.entry_group, sc.entry_owner, sc.entry_count[b]
+    sx, slength, sspeed, cf_accel = sc.sx, sc.slength, sc.sspeed, sc.cf_accel
+    params, model, obstacle = drivers.cf, settings.model, settings.obstacle_cf
+    strategic = drivers.strategic[b, i]
+    lane = drivers.lane[b, i]
+    speed = sspeed[b, i]
+    length = slength[b, i]
+    urgent = urge >= 0.0
+    target = lane + step
+    if not -N_LANES <= target <= -1:
+        return False, 0.0, False
+    if not hov_allows(drivers.hov_eligible[b, i], lane, target, x, settings.hov_openings):
+        return False, 0.0, False
+    if asked != 0 and asked != step:
+        return False, 0.0, False
+    if urgent and strategic == -step:  # never away from its target
+        return False, 0.0, False
+    if asked != step and kept_out(settings.keep_out, target, x):
+        return False, 0.0, False
+    safe_decel = drivers.safe_decel[b, i]
+    # MOBIL in the target lane: its new leader and follower
+    t_ahead, t_behind = around(key, group, owner, count, b, target, x)
+    gap_ahead = sx[b, t_ahead] - x - length if t_ahead >= 0 else math.inf
+    gap_behind = x - sx[b, t_behind] - slength[b, t_behind] if t_behind >= 0 else math.inf
+    v_ahead = sspeed[b, t_ahead] if t_ahead >= 0 else speed
+    own_after = cf(model, params, obstacle, b, n, i, speed, v_ahead, gap_ahead)
+    new_now, new_after = 0.0, 0.0
+    if t_behind >= 0:
+        new_now = cf_accel[b, t_behind] if t_behind < n else 0.0
+        new_after = cf(model, params, obstacle, b, n, t_behind, sspeed[b, t_behind], speed,
+                       gap_behind)  # fmt: skip
+    safe = (
+        room
+        and new_after >= -accepted
+        and own_after >= -safe_decel
+        and gap_ahead >= MIN_LANE_CHANGE_GAP
+        and gap_behind >= room_behind(t, b, n, t_behind, min(speed, v_ahead))
+    )
+    bias = drivers.keep_right[b, i] if step == RIGHT else -drivers.keep_right[b, i]
+    others = (new_after - new_now) + (old_after - old_now)
+    gain = (
+        own_after - cf_accel[b, i] + drivers.politeness[b, i] * others + bias
+        - drivers.threshold[b, i]
+    )  # fmt: skip
+    if asked == step:
+        gain = math.inf
+    return True, gain, safe
+
+
+@kernel(nrt=True)
+def judge_scenes(t, gain, possible):
+    """MOBIL's options in still scenes, by the rule the traffic drives
+    (:func:`lane_option`): each episode of the packed traffic ``t`` is one scene (its
+    vehicles where they are, none mid-change, no strategic target), each of its drivers
+    is judged as at a decision, both ways. Writes ``gain`` (B, N, 2) [m/s^2] and
+    ``possible`` (B, N, 2) bool (allowed and safe), [..., 0] to the left and [..., 1] to
+    the right; a slot not valid gets gain -inf and not possible."""
+    vehicles, drivers, sc = t.vehicles, t.drivers, t.scratch
+    n = vehicles.valid.shape[1]
+    for b in range(vehicles.valid.shape[0]):
+        gather(b, t)
+        sort_entries(b, t)
+        follow(b, t)
+        for i in range(n):
+            for k in range(2):
+                gain[b, i, k] = -math.inf
+                possible[b, i, k] = False
+            if i >= vehicles.top[b] or not vehicles.valid[b, i]:
+                continue
+            x = sc.sx[b, i]
+            centre = x + 0.5 * sc.slength[b, i]
+            urge = urgency(drivers.strategic, drivers.strategic_from, drivers.strategic_by,
+                           b, i, centre)  # fmt: skip
+            room, old_now, old_after, accepted, asked = _situation(b, i, x, urge, t, n)
+            for k in range(2):
+                step = LEFT if k == 0 else RIGHT
+                allowed, g, safe = lane_option(b, i, x, urge, step, room, old_now, old_after,
+                                               accepted, asked, t, n)  # fmt: skip
+                if allowed:
+                    gain[b, i, k] = g
+                    possible[b, i, k] = safe
 
 
 @kernel
