@@ -323,3 +323,31 @@ def test_a_change_in_front_of_a_recording_foresees_it_speeding_up():
     # one braking is judged at its speed now, not at the crawl it will reach (where the
     # room at rest, 0.3 m, would let the change in 1.5 m ahead of it)
     assert _overtaker_beside_a_recording(1.5, clearance=2.0, accel=-5.0) == -3
+
+
+def _overtaker_beside(ghost_x):
+    """The lane the overtaker of :func:`_overtaker_kept_out` ends in with lane -2 kept
+    out of, the slow car staying in its lane and a recording (an obstacle) at back x
+    ``ghost_x`` [m] in lane -4 (None: none), the overtaker's back at 100 m."""
+    from twin.traffic.scene import Obstacles
+
+    manager, params = point_mass_manager(np.full(2, -3), 0)
+    manager.add([0, 1], 1, -3, params, desired_speed=[30.0, 10.0])
+    manager.set_auto_lane_change([1], False)
+    manager.set_keep_out(1, [{"lane": -2, "x0": 0.0, "x1": 500.0}])
+    ghost = None if ghost_x is None else Obstacles.make(1, -4, ghost_x, 4.5, 25.0)
+    for _ in range(300):
+        commands = manager.step(point_states([0, 1], [100.0, 190.0], [-3, -3], [25.0, 10.0]),
+                                ghost)  # fmt: skip
+        if commands.changing[0]:
+            break
+    return int(commands.lane[0])
+
+
+def test_a_recording_level_with_a_driver_blocks_its_change():
+    # an entry exactly at the asking driver's x was taken for its own, so a recording
+    # level with it in the lane it moved to was neither ahead nor behind: it changed
+    # into it (the scene the recordings' tests above set up)
+    assert _overtaker_beside(None) == -4  # lane -4 free: it goes
+    assert _overtaker_beside(100.0) == -3  # level with it: it stays
+    assert _overtaker_beside(99.0) == -3 and _overtaker_beside(101.0) == -3

@@ -31,7 +31,7 @@ from twin.traffic.kernels.longitudinal import (
     room_behind,
     urgency,
 )
-from twin.traffic.kernels.neighbours import around, gather, sort_entries
+from twin.traffic.kernels.neighbours import around, around_other, gather, sort_entries
 
 LEFT, RIGHT = 1, -1  # toward lane -1, toward lane -4
 # An urgent path is at least this many of the vehicle's lengths: along a shorter one the
@@ -248,7 +248,8 @@ def lane_option(b, i, x, urge, step, room, old_now, old_after, accepted, asked, 
         return False, 0.0, False
     safe_decel = drivers.safe_decel[b, i]
     # MOBIL in the target lane: its new leader and follower
-    t_ahead, t_behind = around(key, group, owner, count, b, target, x)
+    # (one level with it there is ahead of it: a vehicle is never beside itself)
+    t_ahead, t_behind = around_other(key, group, owner, count, b, target, x, i)
     gap_ahead = sx[b, t_ahead] - x - length if t_ahead >= 0 else math.inf
     gap_behind = x - sx[b, t_behind] - slength[b, t_behind] if t_behind >= 0 else math.inf
     v_ahead = sspeed[b, t_ahead] if t_ahead >= 0 else speed

@@ -214,3 +214,29 @@ def around(key, group, owner, count, b, lane, x):
     ahead = owner[b, after] if after < count and group[b, after] == grp else -1
     behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
     return ahead, behind
+
+
+@kernel(inline=True)
+def around_other(key, group, owner, count, b, lane, x, me):
+    """(ahead, behind) of owner ``me`` at road-frame ``x`` [m] in ``lane``, as
+    :func:`around`, except that an entry exactly at ``x`` is ``me``'s own only if ``me``
+    owns it: another's (a vehicle or an obstacle level with it in a lane it moves to)
+    is ahead, overlapping it, not invisible."""
+    grp = group_of(lane)
+    if grp < 0:
+        return -1, -1
+    query = grp * LANE_KEY + x
+    lo, hi = 0, count  # first entry with key >= query
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if key[b, mid] < query:
+            lo = mid + 1
+        else:
+            hi = mid
+    before = lo - 1
+    after = lo
+    while after < count and key[b, after] == query and owner[b, after] == me:
+        after += 1
+    ahead = owner[b, after] if after < count and group[b, after] == grp else -1
+    behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
+    return ahead, behind
