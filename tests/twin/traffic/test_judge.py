@@ -93,7 +93,7 @@ def test_the_judge_sees_changes_and_no_moves_off_the_road_or_across_the_hov_line
 
 def test_scenes_name_what_is_wrong_with_them():
     good = random_scenes(0, "idm", scenes=1)
-    with pytest.raises(ValueError, match="lanes must be -1..-4"):
+    with pytest.raises(ValueError, match=r"lanes must be -1\.\.-4"):
         replace(good, lane=np.zeros_like(good.lane))
     with pytest.raises(ValueError, match="non-finite"):
         replace(good, x=np.full_like(good.x, np.nan))

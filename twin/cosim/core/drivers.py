@@ -24,24 +24,21 @@ from twin.calibration.following import CELL, CalibrationDataError
 from twin.calibration.merge_positions import MERGE_LEAD, merge_table
 from twin.calibration.ramp_speeds import ramp_speed_table
 from twin.core.i24 import HOV_LANE, LANE_WIDTH, N_LANES
-from twin.core.jit import kernel, normal, uniform
+from twin.core.jit import kernel, uniform
 from twin.core.ramps import RAMP_LANE, SPAN_MARGIN
 from twin.traffic.drivers import CLIP_SD
+from twin.traffic.kernels.drivers import clipped_normal, draw_driver, first_decision, hov_lucky
 from twin.traffic.kernels.lane_change import (
     DURATION_STREAM,
-    FIRST_DECISION_STREAM,
     clear_target,
     path_length,
     shortest_urgent,
 )
 from twin.traffic.kernels.longitudinal import lane_end_gap
-from twin.traffic.kernels.models import GIPPS
 from twin.traffic.kernels.steering import centre_y
 
 # The random streams of the draws made at a spawn (numpy integers: a kernel called with
 # a Python int constant is compiled once per value)
-TRAIT_STREAM = np.int64(0x54)
-HOV_STREAM = np.int64(0x48)
 BEHAVIOUR_STREAM = np.int64(0x42)
 SPEED_STREAM = np.int64(0x53)
 AV_STREAM = np.int64(0x41565F)
@@ -77,12 +74,6 @@ BehaviourArrays = namedtuple(
 # -- a spawned vehicle's driver -------------------------------------------------------------
 
 
-@kernel(inline=True)
-def _z(seed, stream, key, event):
-    """A standard normal draw clipped to +/- CLIP_SD (no driver is absurd)."""
-    return min(max(normal(seed, stream, key, event), -CLIP_SD), CLIP_SD)
-
-
 @kernel
 def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
     """Slot ``i``'s driver for recorded trajectory ``r`` (store tid ``key``) of
@@ -91,34 +82,10 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
     beh, slots, drivers = core.beh, core.slots, core.traffic.drivers
     model, vel_default = core.traffic.settings.model, core.settings.vel_default
     c = vehicle_class
-    # the class table's traits (twin.traffic.drivers.DriverDistribution.draw)
-    v0 = beh.v0_scale * (
-        beh.class_v0[c] + beh.class_v0_sd[c] * _z(seed, TRAIT_STREAM, key, np.int64(0))
-    )
-    headway = (
-        beh.time_headway_scale * beh.class_time_headway[c]
-        * math.exp(beh.time_headway_sd_log * _z(seed, TRAIT_STREAM, key, np.int64(1)))
-    )  # fmt: skip
-    min_gap = beh.min_gap + beh.min_gap_sd * _z(seed, TRAIT_STREAM, key, np.int64(2))
-    max_accel = (
-        beh.max_accel_scale * beh.class_max_accel[c]
-        * math.exp(beh.max_accel_sd_log * _z(seed, TRAIT_STREAM, key, np.int64(3)))
-    )  # fmt: skip
-    decel = beh.decel
-    if beh.decel_sd > 0.0:
-        decel += beh.decel_sd * _z(seed, TRAIT_STREAM, key, np.int64(4))
-    p = drivers.cf
-    if model == GIPPS:  # twin.traffic.models.gipps.from_traits
-        p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, max_accel, 2.0 * decel
-        p[b, i, 3], p[b, i, 4], p[b, i, 5] = headway * (2.0 / 3.0), min_gap, 0.0
-    else:
-        p[b, i, 0], p[b, i, 1], p[b, i, 2] = v0, headway, min_gap
-        p[b, i, 3], p[b, i, 4], p[b, i, 5] = max_accel, decel, beh.delta
-    lucky = uniform(seed, HOV_STREAM, key, np.int64(0)) < beh.hov_share
+    draw_driver(beh, model, drivers.cf[b, i], seed, key, c)  # the class table's traits
+    lucky = hov_lucky(beh, seed, key)
     drivers.hov_eligible[b, i] = lane == HOV_LANE or (beh.class_hov[c] and lucky)
-    drivers.next_decision[b, i] = time + beh.decision_interval * uniform(
-        seed, FIRST_DECISION_STREAM, key, np.int64(0)
-    )
+    drivers.next_decision[b, i] = time + first_decision(beh, seed, key)
     drivers.politeness[b, i] = beh.politeness
     drivers.threshold[b, i] = beh.threshold
     drivers.safe_decel[b, i] = beh.safe_decel
@@ -130,7 +97,7 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
         if lane != RAMP_LANE and beh.speed_source != 0:
             desired = max(desired, speed)  # no less than it was seen to drive
     slots.base_speed[b, i] = desired
-    p[b, i, 0] = desired
+    drivers.cf[b, i, 0] = desired
     drivers.key[b, i] = key
     drivers.lane[b, i] = lane
     drivers.lane_from[b, i] = lane
@@ -164,7 +131,9 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
             else:
                 log = beh.dist_mean[group, d]
                 for j in range(k):
-                    log += beh.dist_matrix[group, d, j] * _z(seed, BEHAVIOUR_STREAM, key, j)
+                    log += beh.dist_matrix[group, d, j] * clipped_normal(
+                        seed, BEHAVIOUR_STREAM, key, j
+                    )
                 log = min(max(log, beh.dist_low[group, d]), beh.dist_high[group, d])
                 value = math.exp(log)
             if d == beh.desired_dim:
@@ -177,7 +146,7 @@ def _behaviour_drivers(b, i, core, seed, key, r, c, lane):
     # of a lane with free-flow speeds of its own (a drawn driver's, not a vehicle's own fit)
     drawn_fit = beh.speed_source == 2 and not own
     if beh.speed_source == 1 or (drawn_fit and beh.lane_speed_own[k]):
-        z = _z(seed, SPEED_STREAM, key, np.int64(0))
+        z = clipped_normal(seed, SPEED_STREAM, key, np.int64(0))
         desired = max(beh.lane_speed_mean[k] + beh.lane_speed_sd[k] * z, 1.0)
     return desired
 
@@ -270,7 +239,7 @@ def ramp_speed(b, i, core, seed):
         row = _merge_row(table, merges[k, 3])
         if row < 0:
             return math.nan
-        z = _z(seed, RAMP_SPEED_STREAM, core.traffic.drivers.key[b, i], np.int64(0))
+        z = clipped_normal(seed, RAMP_SPEED_STREAM, core.traffic.drivers.key[b, i], np.int64(0))
         return max(table[row, 1] + table[row, 2] * z, 1.0)
     return math.nan
 

@@ -64,3 +64,18 @@ def follow_accel(model, v, v_lead, gap, p0, p1, p2, p3, p4, p5):
     if model == GIPPS:
         return gipps_accel(v, v_lead, gap, p0, p1, p2, p3, p4)
     return idm_accel(v, v_lead, gap, p0, p1, p2, p3, p4, p5, model == IDM)
+
+
+@kernel(inline=True)
+def from_traits(model, row, v0, time_headway, min_gap, max_accel, decel, delta):
+    """Write into ``row`` (N_PARAMS,) the ``model``'s parameters of a driver with these
+    traits (desired speed [m/s], time headway [s], minimum gap [m], maximum
+    acceleration and comfortable deceleration [m/s^2], IDM's exponent): the kernels'
+    form of each model's ``from_traits`` (:mod:`twin.traffic.models`; Gipps: reaction
+    time 2/3 of the headway, most severe braking twice the comfortable deceleration)."""
+    if model == GIPPS:
+        row[0], row[1], row[2] = v0, max_accel, 2.0 * decel
+        row[3], row[4], row[5] = time_headway * (2.0 / 3.0), min_gap, 0.0
+    else:
+        row[0], row[1], row[2] = v0, time_headway, min_gap
+        row[3], row[4], row[5] = max_accel, decel, delta

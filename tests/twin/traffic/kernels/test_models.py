@@ -38,3 +38,28 @@ def test_kernel_acceleration_is_the_models(name):
         [follow_accel(MODEL_IDS[name], v[i], v_lead[i], gap[i], *row[i]) for i in range(n)]
     )
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_kernel_parameters_from_traits_are_the_models(name):
+    """The batched core's drivers get their parameters from the kernels' from_traits:
+    the same row as the model's own from_traits gives the traffic manager."""
+    from twin.traffic.drivers import DriverTraits
+    from twin.traffic.kernels.models import from_traits
+
+    model = MODELS[name]
+    rng = np.random.default_rng(11)
+    n = 50
+    traits = DriverTraits(rng.uniform(0.0, 40.0, n), rng.uniform(0.5, 3.0, n),
+                          rng.uniform(0.5, 5.0, n), rng.uniform(0.3, 3.0, n),
+                          rng.uniform(0.5, 4.0, n), rng.uniform(1.0, 8.0, n))  # fmt: skip
+    params = model.from_traits(traits)
+    expected = np.zeros((n, N_PARAMS))
+    for column, p in enumerate(model.names):
+        expected[:, column] = getattr(params, p)
+    got = np.zeros((n, N_PARAMS))
+    for i in range(n):
+        from_traits(MODEL_IDS[name], got[i], traits.desired_speed[i], traits.time_headway[i],
+                    traits.min_gap[i], traits.max_accel[i], traits.comfortable_decel[i],
+                    traits.delta[i])  # fmt: skip
+    np.testing.assert_array_equal(got, expected)
