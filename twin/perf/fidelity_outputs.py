@@ -289,21 +289,20 @@ def plot(frame, summary: dict, path: Path) -> None:
         ax.set_xticks(range(1, len(behaviours) + 1), behaviours)
         ax.set_xlim(0.4, len(behaviours) + 0.6)
         if name in RATIOS:
+            low, high = ax.get_ylim()
             ax.set_yscale("log")
+            ax.set_ylim(min(low, RATIO_LIMITS[0]) / 1.3, max(high, RATIO_LIMITS[1]) * 1.3)
             ax.axhspan(*RATIO_BAND, color="green", alpha=0.15, label="target band (80 % of days)")
             for limit in RATIO_LIMITS:
                 ax.axhline(limit, color="red", ls="--", lw=1)
         else:
-            ax.set_ylim(bottom=0.0)
-            ax.axhline(bounds[name], color="red", ls="--", lw=1, label="target, every day")
+            _target(ax, bounds[name], "target, every day")
         _finish(ax, title, unit)
     ax = axes.flat[len(MAIN_FIGURES)]
     _days(ax, 1, rows.drop_duplicates("day")["calibrate_s"], log=False)
     ax.set_xticks([1], ["days"])
     ax.set_xlim(0.4, 1.6)
-    ax.set_ylim(bottom=0.0)
-    ax.axhline(CALIBRATION_TARGET.bound, color="red", ls="--", lw=1,
-               label="target, on a 15-minute window")  # fmt: skip
+    _target(ax, CALIBRATION_TARGET.bound, "target, on a 15-minute window")
     _finish(ax, "calibration's wall time", "s")
     _safety(axes.flat[-1], summary)
     fig.suptitle(
@@ -326,11 +325,18 @@ def _days(ax, position: int, values, *, log: bool) -> None:
                 color=f"C{position - 1}", alpha=0.7)  # fmt: skip
 
 
+def _target(ax, bound: float, label: str) -> None:
+    """The target ``bound`` as a dashed line, on a y axis from 0 with room above the
+    days and the bound."""
+    ax.set_ylim(0.0, 1.15 * max(ax.get_ylim()[1], bound))
+    ax.axhline(bound, color="red", ls="--", lw=1, label=label)
+
+
 def _finish(ax, title: str, unit: str) -> None:
     ax.set_title(title, fontsize=10)
     ax.set_ylabel(f"{title} [{unit}]", fontsize=9)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="best")
 
 
 def _safety(ax, summary: dict) -> None:
