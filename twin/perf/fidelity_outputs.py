@@ -289,9 +289,10 @@ def plot(frame, summary: dict, path: Path) -> None:
         ax.set_xticks(range(1, len(behaviours) + 1), behaviours)
         ax.set_xlim(0.4, len(behaviours) + 0.6)
         if name in RATIOS:
-            low, high = ax.get_ylim()
+            shown = rows[name].to_numpy(dtype=float)
+            shown = shown[np.isfinite(shown) & (shown > 0)]
             ax.set_yscale("log")
-            ax.set_ylim(min(low, RATIO_LIMITS[0]) / 1.3, max(high, RATIO_LIMITS[1]) * 1.3)
+            ax.set_ylim(min([*shown, RATIO_LIMITS[0]]) / 1.3, max([*shown, RATIO_LIMITS[1]]) * 1.3)
             ax.axhspan(*RATIO_BAND, color="green", alpha=0.15, label="target band (80 % of days)")
             for limit in RATIO_LIMITS:
                 ax.axhline(limit, color="red", ls="--", lw=1)
