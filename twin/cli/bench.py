@@ -16,6 +16,7 @@ from twin.cli.options import (
     add_workers,
     add_world,
     at_least_one,
+    check_seed,
     checked_data,
     checked_road,
     listed,
@@ -248,6 +249,7 @@ def _register_commands(benchmarks) -> None:
     add_worker_counts(p)
     _repeats(p, 1)
     p.set_defaults(handler=_eval)
+    _register_fidelity(benchmarks)
     p = benchmarks.add_parser("calibrate", help="wall time of twin calibrate on one road")
     add_data(p, STORE_HELP)
     p.add_argument("--road", default="westbound", help="eastbound or westbound")
@@ -262,6 +264,54 @@ def _register_commands(benchmarks) -> None:
     )
     _repeats(p, 3)
     p.set_defaults(handler=_ingest)
+
+
+def _register_fidelity(benchmarks) -> None:
+    """``twin bench fidelity``: calibrate and evaluate many days, against the targets."""
+    p = benchmarks.add_parser(
+        "fidelity",
+        help="the twin's fidelity over many days: each calibrated on its first half and "
+        "evaluated on its second, against the issue's targets",
+        description="For each day file (or folder of day files, such as a family made by "
+        "twin data sumo --family): ingest it, calibrate its road on the recording's first "
+        "half (a day that cannot be calibrated is recorded as 'not calibrated' with the "
+        "reason) and evaluate the second half with the calibrated and the paper's "
+        "behaviours, in the kinematic world and on the first episodes in the physics world. "
+        "Writes OUT/days.parquet and days.md (one row per day and behaviour), "
+        "OUT/summary.json (each figure's median and worst over the days, the targets met "
+        "or not) and OUT/fidelity.png. Rerun the same command to resume: a day done is "
+        "not done again.",
+    )
+    p.add_argument(
+        "--days",
+        nargs="+",
+        required=True,
+        metavar="DAY_OR_DIR",
+        help="I-24 MOTION day files (.json, .json.gz), or folders of them (their *.json "
+        "less *.params.json and family.json; a day's NAME.params.json beside it is copied "
+        "into its rows)",
+    )
+    p.add_argument(
+        "--episodes", type=at_least_one, default=40, help="kinematic episodes per day (default 40)"
+    )
+    p.add_argument(
+        "--physics-episodes",
+        type=int,
+        default=2,
+        help="of those, how many also run in the physics world, for its collisions and "
+        "stalls (default 2; 0: none)",
+    )
+    p.add_argument("--duration", type=float, default=120.0, help="episode length [s] (default 120)")
+    p.add_argument("--road", default="westbound", help="the carriageway (default westbound)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of every day's episode draw and runs (default 0)"
+    )
+    add_workers(p, "processes of each evaluation (default: the cores)")
+    p.add_argument(
+        "--out", type=Path, required=True, help="the benchmark's folder (required; resumable)"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress (default: shown)")
+    p.set_defaults(handler=_fidelity)
 
 
 def _register_report(benchmarks) -> None:
@@ -459,6 +509,28 @@ def _worlds(args) -> int:
         progress=not args.quiet,
     )
     return _emit("worlds", figures, args)
+
+
+def _fidelity(args) -> int:
+    from twin.perf.bench import fidelity_bench
+    from twin.perf.fidelity import FidelitySettings
+
+    check_seed(args.seed)
+    settings = FidelitySettings(
+        episodes=args.episodes,
+        physics_episodes=args.physics_episodes,
+        duration=args.duration,
+        seed=args.seed,
+        road=args.road,
+    )
+    figures = fidelity_bench(
+        args.days,
+        args.out,
+        settings,
+        workers=workers_or_cores(args.workers),
+        progress=not args.quiet,
+    )
+    return _emit("fidelity", figures, args)
 
 
 def _eval(args) -> int:

@@ -7,13 +7,16 @@ measure: :mod:`twin.perf.data` (queries, synthesiser, ingest, calibration),
 :mod:`twin.perf.simulation` (map, physics, traffic, cosimulation),
 :mod:`twin.perf.camera`, :mod:`twin.perf.runners` (datasets and evaluations by
 workers), :mod:`twin.perf.env_steps` (the env) and :mod:`twin.perf.first_run` (a new
-user's first ``twin run``), on :mod:`twin.perf.common`.
+user's first ``twin run``), on :mod:`twin.perf.common`; :mod:`twin.perf.fidelity` (the
+twin's fidelity over many days against the issue's targets) writes a folder of results
+beside its line.
 """
 
 from twin.perf.camera import camera_bench
 from twin.perf.common import context
 from twin.perf.data import calibrate_bench, ingest_bench, query, synth_bench
 from twin.perf.env_steps import env_bench
+from twin.perf.fidelity import fidelity_bench
 from twin.perf.first_run import first_run_bench
 from twin.perf.runners import dataset_bench, eval_bench
 from twin.perf.simulation import map_bench, physics_bench, run_bench, traffic_bench
@@ -25,6 +28,7 @@ __all__ = [
     "dataset_bench",
     "env_bench",
     "eval_bench",
+    "fidelity_bench",
     "first_run_bench",
     "ingest_bench",
     "map_bench",
