@@ -694,6 +694,16 @@ def describe_calibration(doc: dict | None) -> str:
         )
         if mobil.get("note"):
             lines.append(f"      MOBIL threshold {mobil['note']}")
+        fit = mobil.get("twin_fit")
+        if fit and "note" in fit:
+            lines.append(f"      through the twin: {fit['note']}")
+        elif fit:
+            lines.append(
+                f"      through the twin: {fit['simulated']} lane changes simulated against "
+                f"{fit['recorded']} recorded in {fit['episodes']} kinematic episodes (the "
+                f"scenes' threshold {mobil['scenes_threshold']:.2f} m/s^2 made "
+                f"{fit['trials'][0][1]})"
+            )
         lines += describe_flows(section.get("lane_flows", {}))
         lines += describe_merges(section.get("merges", []))
         lines += describe_ramp_speeds(section.get("ramp_speeds"))

@@ -306,6 +306,13 @@ def _register_fidelity(benchmarks) -> None:
     p.add_argument(
         "--seed", type=int, default=0, help="seed of every day's episode draw and runs (default 0)"
     )
+    p.add_argument(
+        "--lane-changes",
+        choices=["scenes", "twin"],
+        default="scenes",
+        help="how each day's calibration fits MOBIL's threshold (twin calibrate "
+        "--lane-changes; default scenes)",
+    )
     add_workers(p, "processes of each evaluation (default: the cores)")
     p.add_argument(
         "--out", type=Path, required=True, help="the benchmark's folder (required; resumable)"
@@ -522,6 +529,7 @@ def _fidelity(args) -> int:
         duration=args.duration,
         seed=args.seed,
         road=args.road,
+        lane_changes=args.lane_changes,
     )
     figures = fidelity_bench(
         args.days,

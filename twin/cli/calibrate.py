@@ -68,6 +68,15 @@ def register(commands) -> None:
         "their flows, the threshold, desired speeds and merges are still fitted here "
         "(default: none, such a road is not calibrated)",
     )
+    p.add_argument(
+        "--lane-changes",
+        choices=["scenes", "twin"],
+        default="scenes",
+        help="how MOBIL's threshold is fitted: scenes, on the recorded scenes judged still "
+        "by the twin's rule; twin, then through the twin's own kinematic episodes of the "
+        "window, to start as many lane changes as the recording makes in them (20 "
+        "episodes, about 10 s a road; default scenes)",
+    )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
 
@@ -108,6 +117,11 @@ def _calibrate(args) -> int:
         following=following,
     )
     path = write_calibration(store, doc, fits)
+    if args.lane_changes == "twin":
+        from mapgen.build import default_map
+        from twin.runners.lane_change_fit import refit_store
+
+        doc = refit_store(open_store(args.store), default_map(), progress=not args.quiet)
     pictures = draw_lane_flows(store, doc)
     print(describe_calibration(doc))
     print(f"written: {', '.join(map(str, [path, *pictures]))}")

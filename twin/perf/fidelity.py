@@ -69,6 +69,9 @@ class FidelitySettings:
         duration: [s] each episode's length.
         seed: the evaluations' seed (episode ``i`` of every day draws from ``(seed, i)``).
         road: the carriageway calibrated and evaluated.
+        lane_changes: how the calibration fits MOBIL's threshold: ``scenes`` (on the
+            recorded scenes) or ``twin`` (then through the twin's episodes,
+            :mod:`twin.runners.lane_change_fit`; ``twin calibrate --lane-changes``).
     """
 
     episodes: int = 40
@@ -76,6 +79,7 @@ class FidelitySettings:
     duration: float = 120.0
     seed: int = 0
     road: str = "westbound"
+    lane_changes: str = "scenes"
 
     def __post_init__(self):
         for name in ("episodes", "physics_episodes", "seed"):
@@ -100,6 +104,10 @@ class FidelitySettings:
             object.__setattr__(self, "road", Road.parse(self.road).value)
         except ValueError as error:
             raise FidelityBenchError(f"--road: {error}") from None
+        if self.lane_changes not in ("scenes", "twin"):
+            raise FidelityBenchError(
+                f"--lane-changes must be scenes or twin, got {self.lane_changes!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -263,7 +271,8 @@ def run_day(
         )
     first, last = store.time_range(road)
     split = 0.5 * (first + last)
-    calibration = _calibrated(store, folder / "calibrate.json", road, first, split)
+    calibration = _calibrated(store, folder / "calibrate.json", road, first, split,
+                              settings.lane_changes)  # fmt: skip
     common = {
         "day": day.name,
         "file": str(day.path),
@@ -299,7 +308,8 @@ def _ingested(day: Day, store: Path) -> Path:
     return store
 
 
-def _calibrated(store, record: Path, road: Road, first: float, split: float) -> dict:
+def _calibrated(store, record: Path, road: Road, first: float, split: float,
+                lane_changes: str = "scenes") -> dict:  # fmt: skip
     """The calibration of ``road`` on ``first`` to ``split`` (unix seconds), made and
     written into ``store`` unless ``record`` says it was: whether it is
     (``calibrated``), the reason where not, the model chosen and its wall time
@@ -321,6 +331,12 @@ def _calibrated(store, record: Path, road: Road, first: float, split: float) -> 
         }
     else:
         write_calibration(store, doc, fits)
+        if lane_changes == "twin":  # the threshold fitted again, through the twin
+            from mapgen.build import default_map
+            from twin.data.store import open_store
+            from twin.runners.lane_change_fit import refit_store
+
+            doc = refit_store(open_store(store.path), default_map())
         outcome = {
             "calibrated": True,
             "reason": None,

@@ -337,6 +337,12 @@ def _episode(config: EvalConfig, spec: EpisodeSpec, arm: tuple):
     return cosim, row
 
 
+def episode_cosim(config: EvalConfig, spec: EpisodeSpec, behaviour: str):
+    """The cosimulation configuration of episode ``spec`` driven by ``behaviour``, no
+    controller: what ``twin eval`` runs (:func:`_episode`)."""
+    return _episode(config, spec, (behaviour, behaviour, ""))[0]
+
+
 def _run_chunk(config: EvalConfig, chunk: list, arm: tuple, location) -> list[dict]:
     """Episodes ``chunk`` of ``arm``: their cosimulations and metrics as flat rows, with
     the ego's and its followers' speeds each second (for the pictures); in the batched
