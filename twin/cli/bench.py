@@ -273,14 +273,14 @@ def _register_fidelity(benchmarks) -> None:
         help="the twin's fidelity over many days: each calibrated on its first half and "
         "evaluated on its second, against the fidelity targets",
         description="For each day file (or folder of day files, such as a family of SUMO "
-        "days whose drivers and demand vary): ingest it, calibrate its road on the recording's first "
-        "half (a day that cannot be calibrated is recorded as 'not calibrated' with the "
-        "reason) and evaluate the second half with the calibrated and the paper's "
-        "behaviours, in the kinematic world and on the first episodes in the physics world. "
-        "Writes OUT/days.parquet and days.md (one row per day and behaviour), "
-        "OUT/summary.json (each figure's median and worst over the days, the targets met "
-        "or not) and OUT/fidelity.png. Rerun the same command to resume: a day done is "
-        "not done again.",
+        "days whose drivers and demand vary): ingest it, calibrate its road on the "
+        "recording's first half (a day "
+        "that cannot be calibrated is recorded as 'not calibrated' with the reason) and "
+        "evaluate the second half with the calibrated and the paper's behaviours, in the "
+        "kinematic world and on the first episodes in the physics world. Writes "
+        "OUT/days.parquet and days.md (one row per day and behaviour), OUT/summary.json (each "
+        "figure's median and worst over the days, the targets met or not) and OUT/fidelity.png."
+        " Rerun the same command to resume: a day done is not done again.",
     )
     p.add_argument(
         "--days",
