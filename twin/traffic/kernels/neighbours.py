@@ -200,13 +200,7 @@ def around(key, group, owner, count, b, lane, x):
     if grp < 0:
         return -1, -1
     query = grp * LANE_KEY + x
-    lo, hi = 0, count  # first entry with key >= query
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if key[b, mid] < query:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _first_not_before(key, count, b, query)
     before = lo - 1
     after = lo
     while after < count and key[b, after] == query:
@@ -226,13 +220,7 @@ def around_other(key, group, owner, count, b, lane, x, me):
     if grp < 0:
         return -1, -1
     query = grp * LANE_KEY + x
-    lo, hi = 0, count  # first entry with key >= query
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if key[b, mid] < query:
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = _first_not_before(key, count, b, query)
     before = lo - 1
     after = lo
     while after < count and key[b, after] == query and owner[b, after] == me:
@@ -240,3 +228,17 @@ def around_other(key, group, owner, count, b, lane, x, me):
     ahead = owner[b, after] if after < count and group[b, after] == grp else -1
     behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
     return ahead, behind
+
+
+@kernel(inline=True)
+def _first_not_before(key, count, b, query):
+    """The first of the ``count`` sorted entries of episode ``b`` whose key is at least
+    ``query`` (``count`` where none is): a binary search."""
+    lo, hi = 0, count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if key[b, mid] < query:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
