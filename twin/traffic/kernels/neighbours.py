@@ -196,18 +196,7 @@ def around(key, group, owner, count, b, lane, x):
     ``lane`` among the ``count`` sorted entries (``key``, ``group``, ``owner``), -1
     where the lane is empty that way; an entry exactly at ``x`` (the asking vehicle)
     is neither."""
-    grp = group_of(lane)
-    if grp < 0:
-        return -1, -1
-    query = grp * LANE_KEY + x
-    lo = _first_not_before(key, count, b, query)
-    before = lo - 1
-    after = lo
-    while after < count and key[b, after] == query:
-        after += 1
-    ahead = owner[b, after] if after < count and group[b, after] == grp else -1
-    behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
-    return ahead, behind
+    return _around(key, group, owner, count, b, lane, x, -1, True)
 
 
 @kernel(inline=True)
@@ -216,6 +205,13 @@ def around_other(key, group, owner, count, b, lane, x, me):
     :func:`around`, except that an entry exactly at ``x`` is ``me``'s own only if ``me``
     owns it: another's (a vehicle or an obstacle level with it in a lane it moves to)
     is ahead, overlapping it, not invisible."""
+    return _around(key, group, owner, count, b, lane, x, me, False)
+
+
+@kernel(inline=True)
+def _around(key, group, owner, count, b, lane, x, me, any_level):
+    """:func:`around` (``any_level``: every entry exactly at ``x`` is skipped) and
+    :func:`around_other` (only ``me``'s is)."""
     grp = group_of(lane)
     if grp < 0:
         return -1, -1
@@ -223,7 +219,7 @@ def around_other(key, group, owner, count, b, lane, x, me):
     lo = _first_not_before(key, count, b, query)
     before = lo - 1
     after = lo
-    while after < count and key[b, after] == query and owner[b, after] == me:
+    while after < count and key[b, after] == query and (any_level or owner[b, after] == me):
         after += 1
     ahead = owner[b, after] if after < count and group[b, after] == grp else -1
     behind = owner[b, before] if before >= 0 and group[b, before] == grp else -1
