@@ -69,10 +69,11 @@ MAX_FLOW = 3000.0  # [veh/h] the most a lane's demand may be (SynthConfig's limi
 GEOMETRIES = ("plain", "drop_one", "drop_two", "on_ramp")
 #: The car-following models that decide at their drawn action step, and the only one
 #: SL2015 changes lanes with. IDM and EIDM decide every 0.1 s step: with longer action
-#: steps EIDM's drivers collide (918 pairs on a lane-drop day at 0.7 s, none at 0.1 s)
-#: and IDM's brake in emergency (39,354 times), and at 0.1 s steps SUMO's sublane model
-#: takes six times LC2013's time (212 s against 35 s for that 12-minute day): a family
-#: of 20 would not be made in 15 minutes on 2 cores.
+#: steps EIDM's drivers collide (on a lane-drop day at 0.7 s, 1,175 pairs with LC2013
+#: and 918 with SL2015; none at 0.1 s) and IDM's brake in emergency (39,354 times), and
+#: at 0.1 s steps SUMO's sublane model takes six times LC2013's time (212 s against
+#: 35 s for that 12-minute day): a family of 20 would not be made in 15 minutes on 2
+#: cores.
 STEPPED = ("Krauss",)
 #: SUMO's (car-following, lane-changing) models a day may have
 MODELS = (("Krauss", "LC2013"), ("Krauss", "SL2015"), ("IDM", "LC2013"), ("EIDM", "LC2013"))
@@ -166,7 +167,7 @@ RANGES: dict[str, Range] = {
     "drop_x": Range(round(0.5 * _SEGMENT, 1), round(_SEGMENT + 500.0, 1), "m", 1, "presets"),
     # the slow stretch past the recorded range: an incident or a work zone's lane shift
     # passed at 9 to 18 mph; the queue behind it moves as slowly, so its drivers stop
-    # and go (behind stretches passed at 27 to 45 mph none of 8 days' followers stopped)
+    # and go (behind stretches passed at 27 to 45 mph, on 7 of 8 days no follower stopped)
     "stretch_x": Range(_RECORDED_END + 100.0, _RECORDED_END + 600.0, "m", 1, "presets"),
     "stretch_length": Range(200.0, 500.0, "m", 1, "presets"),
     "stretch_speed": Range(4.0, 8.0, "m/s", 2, "design"),
