@@ -7,6 +7,7 @@ import json
 import shutil
 import xml.etree.ElementTree as ET
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,6 +120,14 @@ def test_every_drawn_number_lies_in_its_published_range():
     assert {(draw_day(s).drivers.car_following, draw_day(s).geometry)
             for s in range(1000, 1000 + CELLS)} == {(m[0], g) for m in MODELS
                                                      for g in GEOMETRIES}  # fmt: skip
+
+
+def test_the_documentation_gives_every_range():
+    page = Path(__file__).parents[3] / "docs" / "data" / "synthetic.md"
+    rows = [line for line in page.read_text().splitlines() if line.startswith("| `")]
+    for name, r in RANGES.items():
+        row = next(line for line in rows if f"`{name}`" in line.split("|")[1])
+        assert f"{r.low:g} to {r.high:g}" in row, (name, row)
 
 
 def _vtypes(work):
