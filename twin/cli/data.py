@@ -9,6 +9,8 @@ from twin.cli.options import (
     add_quiet,
     add_start,
     add_store,
+    add_workers,
+    at_least_one,
     check_seed,
     checked_road,
     open_store,
@@ -197,53 +199,123 @@ def _preset(args, changes: dict):
 def _register_sumo(commands) -> None:
     p = commands.add_parser(
         "sumo",
-        help="write an I-24 MOTION day made by Eclipse SUMO's drivers (test data from another "
-        "simulator)",
+        help="write I-24 MOTION days made by Eclipse SUMO's drivers (test data from another "
+        "simulator): a preset's, or a family of held-out days",
         description="Drive a synthesiser preset's road (its lane drop, on-ramp, bottleneck) and "
         "demand with SUMO's own drivers (Krauss, LC2013) and write what the cameras see as an "
-        "I-24 MOTION day file. Needs Eclipse SUMO (pip install eclipse-sumo, in the test extra).",
+        "I-24 MOTION day file (--preset); or draw a family of N days whose SUMO drivers (Krauss, "
+        "IDM or EIDM; LC2013 or SL2015; their parameters), demand and bottleneck vary within "
+        "published ranges, each with its parameters beside it (--family). Needs Eclipse SUMO "
+        "(pip install eclipse-sumo, in the test extra).",
     )
-    p.add_argument(
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument(
         "--preset",
         choices=["D", "E"],
-        required=True,
         help="whose road and demand: D (lanes -3 and -4 ending 300 m past the segment), E "
-        "(the Old Hickory on-ramp and C's bottleneck)",
+        "(the Old Hickory on-ramp and C's bottleneck) (no default: this or --family)",
     )
-    p.add_argument("--out", required=True, type=Path, help="JSON file to write")
+    which.add_argument(
+        "--family", type=at_least_one, metavar="N",
+        help="draw N days, seeds --seed to --seed + N - 1 (development: 0 to 19; test: 1000 "
+        "to 1019), into the folder --out; a rerun keeps the days already made (no default: "
+        "this or --preset)",
+    )  # fmt: skip
+    p.add_argument(
+        "--out", required=True, type=Path,
+        help="JSON file to write (--preset), or the family's folder (--family)",
+    )  # fmt: skip
     p.add_argument(
         "--minutes", type=float, default=None,
-        help="time recorded [min] (default: the preset's, 30)",
+        help="time recorded [min] (default: the preset's, 30; a family's days: 12, 1 to 60)",
     )  # fmt: skip
     add_start(p, "first recorded time, unix or ISO 8601 with offset (default: the preset's)")
-    p.add_argument("--seed", type=int, default=0, help="SUMO's seed, and the tracking noise's")
     p.add_argument(
-        "--lane-change-duration", type=float, default=3.0,
-        help="how long SUMO's lane changes take [s] (default: 3)",
+        "--seed", type=int, default=0,
+        help="SUMO's seed, and the tracking noise's; with --family, the first day's",
+    )  # fmt: skip
+    p.add_argument(
+        "--lane-change-duration", type=float, default=None,
+        help="how long SUMO's lane changes take [s] (default: 3; --preset only)",
     )  # fmt: skip
     p.add_argument(
         "--keep", type=Path, default=None,
-        help="folder to keep SUMO's network, routes and outputs in (default: none kept)",
+        help="folder to keep SUMO's network, routes and outputs in (default: none kept; "
+        "--preset only)",
     )  # fmt: skip
+    add_workers(p, "days made at once, with --family (default: the cores available)")
     add_quiet(p)
     p.set_defaults(handler=_sumo)
 
 
 def _sumo(args) -> int:
+    if args.family is not None:
+        return _sumo_family(args)
     from twin.data.sumo_day import sumo_day
 
+    if args.workers is not None:
+        raise UsageError("--workers is for --family: a preset is one day")
     check_seed(args.seed)
     config = _preset(args, {"seed": args.seed})
-    if not args.lane_change_duration > 0:
-        raise UsageError(f"--lane-change-duration must be > 0 s, got {args.lane_change_duration}")
-    result = sumo_day(config, args.out, lane_change_duration=args.lane_change_duration,
-                      keep=args.keep, progress=not args.quiet)  # fmt: skip
+    duration = 3.0 if args.lane_change_duration is None else args.lane_change_duration
+    if not duration > 0:
+        raise UsageError(f"--lane-change-duration must be > 0 s, got {duration}")
+    result = sumo_day(config, args.out, lane_change_duration=duration, keep=args.keep,
+                      progress=not args.quiet)  # fmt: skip
     path = result.path
     print(
         f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {result.trajectories:,} "
         f"trajectories made by SUMO, {config.road.value}; SUMO: {result.departed:,} vehicles, "
         f"{result.lane_changes:,} lane changes, {result.collisions} collisions, "
         f"{result.waiting} still waiting to enter"
+    )
+    return 0
+
+
+def _sumo_family(args) -> int:
+    """``twin data sumo --family N``: one line per day as it is made, then a summary."""
+    import time
+
+    from twin.data import sumo_family
+
+    for option, given in (("--start", args.start), ("--keep", args.keep),
+                          ("--lane-change-duration", args.lane_change_duration)):  # fmt: skip
+        if given is not None:
+            raise UsageError(f"{option} is for --preset: a family's days set their own")
+    check_seed(args.seed)
+    minutes = sumo_family.MINUTES if args.minutes is None else args.minutes
+    low, high = sumo_family.MINUTES_RANGE
+    if not low <= minutes <= high:
+        raise UsageError(f"--minutes must be {low:g} to {high:g} for a family, got {minutes:g}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if args.out.exists() and not args.out.is_dir():
+        raise UsageError(f"--out {args.out} is a file: a family is written to a folder")
+    days = []
+
+    def show(day) -> None:
+        days.append(day)
+        params, sumo = day.record["params"], day.record["sumo"]
+        drivers = params["drivers"]
+        made = "kept (made before)" if day.seconds is None else f"{day.seconds:.0f} s"
+        print(
+            f"{day.path.name}: {params['geometry']}, {drivers['car_following']} + "
+            f"{drivers['lane_changing']}, tau {drivers['tau']:.2f} s, load {params['load']:.2f}; "
+            f"{sumo['trajectories']:,} trajectories, {sumo['lane_changes']:,} lane changes, "
+            f"{sumo['collisions']} collisions, {sumo['waiting']:,} waiting ({made})",
+            flush=True,
+        )
+
+    start = time.perf_counter()
+    sumo_family.make_family(args.family, args.seed, args.out, minutes=minutes,
+                            workers=args.workers, progress=not args.quiet,
+                            on_day=show)  # fmt: skip
+    kept = sum(day.seconds is None for day in days)
+    print(
+        f"wrote {args.family - kept} of {args.family} days (seeds {args.seed} to "
+        f"{args.seed + args.family - 1}, {minutes:g} min each) to {args.out} in "
+        f"{time.perf_counter() - start:.0f} s, {kept} kept from before: "
+        f"{sumo_family.summary(days)}; {sumo_family.FAMILY_INDEX} indexes them"
     )
     return 0
 

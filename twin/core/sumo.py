@@ -2,6 +2,8 @@
 ``netconvert``), which the twin runs as processes (the SUMO export, SUMO-made test
 data, the benchmark against SUMO)."""
 
+import subprocess
+from functools import cache
 from pathlib import Path
 
 from twin.core.errors import TwinError
@@ -34,3 +36,18 @@ def sumo_tool(name: str) -> Path:
     if not path.is_file():
         raise SumoMissing(f"Eclipse SUMO at {path.parent.parent} has no {name}")
     return path
+
+
+@cache
+def sumo_version() -> str:
+    """The version of SUMO's ``sumo`` (``1.28.0``), as its ``--version`` states it.
+
+    Raises:
+        SumoMissing: SUMO is not installed, or its ``sumo`` does not run.
+    """
+    path = sumo_tool("sumo")
+    done = subprocess.run([str(path), "--version"], capture_output=True, text=True, check=False)
+    words = done.stdout.splitlines()[0].split() if done.stdout else []
+    if done.returncode != 0 or len(words) < 4 or words[:3] != ["Eclipse", "SUMO", "sumo"]:
+        raise SumoMissing(f"{path} --version did not state a version (exit {done.returncode})")
+    return words[3]

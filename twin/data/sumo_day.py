@@ -29,6 +29,11 @@ floating-car data as Parquet (SUMO's own Arrow support: no Python binding to SUM
 loaded, whose Arrow build could clash with pyarrow's), which is resampled at the
 camera rate with a per-vehicle phase and the preset's tracking noise, back centre, as
 the synthesiser records.
+
+:class:`SumoDrivers` gives every vehicle type other drivers than SUMO's defaults: another
+car-following model (IDM, EIDM), another lane-changing model (SL2015, on SUMO's sublane
+model), and the models' parameters (:mod:`twin.data.sumo_family` draws them for a family
+of held-out days).
 """
 
 import itertools
@@ -57,6 +62,19 @@ STEP = 0.1  # [s] SUMO's step
 SUMO_CLASSES = ("passenger", "passenger", "passenger", "delivery", "trailer", "truck",
                 "motorcycle")  # fmt: skip
 RAMP = "ramp"  # the ramp's edges' name prefix
+#: SUMO's car-following models a day may be driven by (its ``carFollowModel`` names)
+CAR_FOLLOWING = ("Krauss", "IDM", "EIDM")
+#: ... and its lane-changing models (``laneChangeModel``); SL2015 runs on the sublane model
+LANE_CHANGING = ("LC2013", "SL2015")
+#: the car-following models that dawdle by ``sigma`` (SUMO's IDM does not; its EIDM has
+#: estimation and driving errors of its own, left at SUMO's defaults)
+DAWDLING = ("Krauss",)
+#: SUMO classes whose acceleration and braking stay SUMO's class defaults under
+#: :class:`SumoDrivers` (a lorry is not a car whatever the day's drivers)
+HEAVY_SUMO_CLASSES = ("trailer", "truck")
+#: how the lanes' vehicles enter the road (SUMO's departSpeed): at the fastest safe speed,
+#: or at the mean speed of the vehicles on their lane
+DEPART_SPEEDS = ("max", "avg")
 
 
 class SumoDayError(TwinError):
@@ -76,6 +94,117 @@ class SumoDayResult:
 
 
 @dataclass(frozen=True)
+class SumoDrivers:
+    """SUMO's drivers for every vehicle type of a day, in place of SUMO's defaults.
+
+    Attributes:
+        car_following: SUMO's ``carFollowModel``: ``"Krauss"``, ``"IDM"`` or ``"EIDM"``.
+        lane_changing: SUMO's ``laneChangeModel``: ``"LC2013"`` or ``"SL2015"`` (on the
+            sublane model, at ``lateral_resolution``; SUMO's lane changes then take as
+            long as its lateral speed needs, not ``lane_change_duration``).
+        tau: [s] desired time headway (``tau``).
+        sigma: [-] dawdling, 0 to 1 (``sigma``), for Krauss; None for IDM and EIDM
+            (EIDM's own estimation and driving errors keep SUMO's defaults).
+        min_gap: [m] standstill gap (``minGap``).
+        accel, decel: [m/s^2] maximum acceleration and comfortable braking of the light
+            vehicles (``accel``, ``decel``); heavy vehicles (SUMO's ``truck`` and
+            ``trailer``) keep SUMO's defaults for their class.
+        speed_dev: [-] standard deviation of the drivers' speed factor (``speedDev``):
+            each class keeps its mean desired speed, the spread is this, clipped at 2 sd.
+        lc_strategic, lc_cooperative, lc_speed_gain, lc_keep_right, lc_assertive: [-]
+            the lane-changing model's eagerness for strategic, cooperative, speed-gain
+            and keep-right changes and its willingness to take smaller gaps
+            (``lcStrategic``, ``lcCooperative`` 0 to 1, ``lcSpeedGain``,
+            ``lcKeepRight``, ``lcAssertive`` > 0).
+        action_step: [s] how often a driver decides (``actionStepLength``), a multiple
+            of SUMO's 0.1 s step: its reaction time, which spares SUMO most of its
+            work (SL2015's above all).
+        lateral_resolution: [m] the sublane model's resolution (SUMO's
+            ``--lateral-resolution``), used with SL2015 only.
+
+    Raises:
+        SumoDayError: a model SUMO does not offer here or a value out of its range.
+    """
+
+    car_following: str
+    lane_changing: str
+    tau: float
+    sigma: float | None
+    min_gap: float
+    accel: float
+    decel: float
+    speed_dev: float
+    lc_strategic: float
+    lc_cooperative: float
+    lc_speed_gain: float
+    lc_keep_right: float
+    lc_assertive: float
+    action_step: float = STEP
+    lateral_resolution: float = 0.8
+
+    def __post_init__(self):
+        if self.car_following not in CAR_FOLLOWING:
+            raise SumoDayError(
+                f"car_following {self.car_following!r}: expected one of {', '.join(CAR_FOLLOWING)}"
+            )
+        if self.lane_changing not in LANE_CHANGING:
+            raise SumoDayError(
+                f"lane_changing {self.lane_changing!r}: expected one of {', '.join(LANE_CHANGING)}"
+            )
+        if (self.sigma is None) == (self.car_following in DAWDLING):
+            raise SumoDayError(
+                f"sigma {self.sigma!r}: {self.car_following} needs one (0 to 1)"
+                if self.sigma is None
+                else f"sigma {self.sigma!r}: {self.car_following} does not dawdle; give None"
+            )
+        checks = {
+            "tau": self.tau > 0,
+            "sigma": self.sigma is None or 0 <= self.sigma <= 1,
+            "min_gap": self.min_gap >= 0,
+            "accel": self.accel > 0,
+            "decel": self.decel > 0,
+            "speed_dev": 0 <= self.speed_dev < 0.5,
+            "lc_strategic": self.lc_strategic >= 0,
+            "lc_cooperative": 0 <= self.lc_cooperative <= 1,
+            "lc_speed_gain": self.lc_speed_gain >= 0,
+            "lc_keep_right": self.lc_keep_right >= 0,
+            "lc_assertive": self.lc_assertive > 0,
+            "action_step": self.action_step >= STEP
+            and abs(self.action_step / STEP - round(self.action_step / STEP)) < 1e-6,
+            "lateral_resolution": 0 < self.lateral_resolution <= i24.LANE_WIDTH,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise SumoDayError(
+                    f"SumoDrivers.{name} is out of its range: {getattr(self, name)!r}"
+                )
+
+    @property
+    def sublane(self) -> bool:
+        """Whether SUMO runs its sublane model (SL2015's lane changes need it)."""
+        return self.lane_changing == "SL2015"
+
+    def attributes(self, sumo_class: str) -> dict[str, str]:
+        """The vType attributes of a type of SUMO class ``sumo_class``."""
+        out = {"carFollowModel": self.car_following, "tau": f"{self.tau:.3f}",
+               "minGap": f"{self.min_gap:.3f}",
+               "actionStepLength": f"{self.action_step:.1f}"}  # fmt: skip
+        if self.sigma is not None:
+            out["sigma"] = f"{self.sigma:.3f}"
+        if sumo_class not in HEAVY_SUMO_CLASSES:
+            out |= {"accel": f"{self.accel:.3f}", "decel": f"{self.decel:.3f}"}
+        out |= {
+            "laneChangeModel": self.lane_changing,
+            "lcStrategic": f"{self.lc_strategic:.3f}",
+            "lcCooperative": f"{self.lc_cooperative:.3f}",
+            "lcSpeedGain": f"{self.lc_speed_gain:.3f}",
+            "lcKeepRight": f"{self.lc_keep_right:.3f}",
+            "lcAssertive": f"{self.lc_assertive:.3f}",
+        }
+        return out
+
+
+@dataclass(frozen=True)
 class _Piece:
     """One edge of SUMO's network: road-frame x from ``x0`` to ``x1`` [m]."""
 
@@ -87,7 +216,8 @@ class _Piece:
 
 
 def sumo_day(config: SynthConfig, out, *, lane_change_duration: float = 3.0,
-             keep: Path | None = None, progress: bool = False) -> SumoDayResult:  # fmt: skip
+             keep: Path | None = None, drivers: SumoDrivers | None = None,
+             depart_speed: str = "max", progress: bool = False) -> SumoDayResult:  # fmt: skip
     """Drive ``config``'s road and demand with SUMO's drivers and write the recording
     as an I-24 MOTION day file ``out`` (module doc). Deterministic by ``config.seed``.
 
@@ -97,29 +227,44 @@ def sumo_day(config: SynthConfig, out, *, lane_change_duration: float = 3.0,
             tracking noise are driven.
         lane_change_duration: [s] SUMO's continuous lane changes take this long.
         keep: a folder to keep SUMO's inputs and outputs in (default: a temporary one).
+        drivers: SUMO's drivers for every vehicle type (default: SUMO's own, Krauss and
+            LC2013 with SUMO's defaults for each class).
+        depart_speed: how the lanes' vehicles enter the road, one of ``DEPART_SPEEDS``:
+            ``"max"``, at the fastest speed that is safe there (an entry that admits no
+            more than free flow does), or ``"avg"``, at the mean speed of the vehicles on
+            their lane (a queue that reaches the road's start keeps being fed at the
+            queue's pace, as the road upstream would feed it).
 
     Raises:
-        SumoDayError: SUMO is missing or failed, or the preset has no flow.
+        SumoDayError: SUMO is missing or failed, the preset has no flow, or
+            ``depart_speed`` is not one of ``DEPART_SPEEDS``.
     """
     if not sum(config.flow) and (config.on_ramp is None or config.on_ramp.flow <= 0):
         raise SumoDayError("the preset has no demand: every lane's flow is 0")
     if not lane_change_duration > 0:
         raise SumoDayError(f"lane_change_duration must be > 0 s, got {lane_change_duration}")
+    if depart_speed not in DEPART_SPEEDS:
+        raise SumoDayError(
+            f"depart_speed {depart_speed!r}: expected one of {', '.join(DEPART_SPEEDS)}"
+        )
     pieces = _pieces(config)
     if keep is not None:
         keep = Path(keep)
         if keep.exists() and not keep.is_dir():
             raise SumoDayError(f"--keep {keep}: a file, not a folder")
         keep.mkdir(parents=True, exist_ok=True)
-        return _drive(config, pieces, Path(keep), Path(out), lane_change_duration, progress)
+        return _drive(config, pieces, Path(keep), Path(out), lane_change_duration, drivers,
+                      depart_speed, progress)  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="i24-sumo-") as folder:
-        return _drive(config, pieces, Path(folder), Path(out), lane_change_duration, progress)
+        return _drive(config, pieces, Path(folder), Path(out), lane_change_duration, drivers,
+                      depart_speed, progress)  # fmt: skip
 
 
-def _drive(config, pieces, folder, out, lane_change_duration, progress) -> SumoDayResult:
+def _drive(config, pieces, folder, out, lane_change_duration, drivers, depart_speed,
+           progress) -> SumoDayResult:  # fmt: skip
     _network(pieces, folder)
-    departures = _routes(config, pieces, folder)
-    stats = _run(config, folder, lane_change_duration)
+    departures = _routes(config, pieces, folder, drivers, depart_speed)
+    stats = _run(config, folder, lane_change_duration, drivers)
     vid, tracks, classes, dims = _record(config, pieces, folder, departures)
     if not tracks:
         raise SumoDayError("SUMO's vehicles never entered the recorded range")
@@ -218,7 +363,8 @@ def _network(pieces: list[_Piece], folder: Path) -> None:
 # -- the demand -------------------------------------------------------------------------------
 
 
-def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataFrame:
+def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path,
+            sumo_drivers: SumoDrivers | None, depart_speed: str) -> pd.DataFrame:  # fmt: skip
     """Vehicle types, one flow per lane and the ramp's (random arrivals: exponential
     headways); returns the types' table. Each I-24 class is a type with its size, and
     with the preset's desired speeds (their spread clipped at 2 sd, as the synthesiser
@@ -226,7 +372,9 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
     class mix is the preset's (heavy vehicles out of the HOV lane, scaled by its
     ``heavy_factor`` elsewhere; the ramp's as lane -4's); how they accelerate, brake,
     dawdle (``sigma``) and change lanes is SUMO's default for their SUMO class, so the
-    road's capacity is SUMO's drivers', not the preset's."""
+    road's capacity is SUMO's drivers', not the preset's. With ``sumo_drivers`` every
+    type takes their models and parameters instead (their time headway, standstill
+    gap and speed spread in place of the preset's)."""
     frame = vehicle_classes().frame
     drivers = config.drivers
     routes = ET.Element("routes")
@@ -240,13 +388,19 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
             factor = row["desired_speed_mps"] * drivers.desired_speed_scale / SPEED_LIMIT
             spread = row["desired_speed_sd_mps"] * drivers.desired_speed_scale / SPEED_LIMIT
             headway = row["time_headway_s"] * drivers.time_headway_scale
+            if sumo_drivers is not None:
+                spread = sumo_drivers.speed_dev
             low, high = factor - 2.0 * spread, factor + 2.0 * spread  # the synthesiser's clip
             draw = f"normc({factor:.4f},{spread:.4f},{low:.4f},{high:.4f})"
-            ET.SubElement(routes, "vType", id=name,
-                          vClass="hov" if hov else SUMO_CLASSES[int(c)],
+            sumo_class = "hov" if hov else SUMO_CLASSES[int(c)]
+            if sumo_drivers is None:
+                behaviour = {"carFollowModel": "Krauss", "tau": f"{headway:.3f}",
+                             "minGap": f"{drivers.min_gap:.3f}"}  # fmt: skip
+            else:
+                behaviour = sumo_drivers.attributes(sumo_class)
+            ET.SubElement(routes, "vType", id=name, vClass=sumo_class,
                           length=f"{row['length_m']:.3f}", width=f"{row['width_m']:.3f}",
-                          height=f"{row['height_m']:.3f}", carFollowModel="Krauss",
-                          tau=f"{headway:.3f}", minGap=f"{drivers.min_gap:.3f}",
+                          height=f"{row['height_m']:.3f}", **behaviour,
                           speedFactor=draw)  # fmt: skip
             rows.append((name, int(c), row["length_m"], row["width_m"], row["height_m"]))
     types = pd.DataFrame(rows, columns=["type", "vehicle_class", "length", "width", "height"])
@@ -270,7 +424,7 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
             continue
         ET.SubElement(routes, "flow", id=f"lane{lane}", type=f"mix{lane}",
                       begin="0", end=f"{end:.1f}", period=f"exp({flow / 3600.0:.6f})",
-                      departLane=str(index), departSpeed="max", departPos="base",
+                      departLane=str(index), departSpeed=depart_speed, departPos="base",
                       **{"from": _edge(0), "to": _edge(last)})  # fmt: skip
     ramp = config.on_ramp
     if ramp is not None and ramp.flow > 0:
@@ -286,9 +440,14 @@ def _routes(config: SynthConfig, pieces: list[_Piece], folder: Path) -> pd.DataF
 # -- the run ----------------------------------------------------------------------------------
 
 
-def _run(config: SynthConfig, folder: Path, lane_change_duration: float) -> dict:
+def _run(config: SynthConfig, folder: Path, lane_change_duration: float,
+         drivers: SumoDrivers | None) -> dict:  # fmt: skip
     """Run SUMO; returns its counts (lane changes, collisions, departed, waiting)."""
     end = config.warmup + 60.0 * config.minutes
+    if drivers is not None and drivers.sublane:
+        lateral = ["--lateral-resolution", f"{drivers.lateral_resolution}"]
+    else:
+        lateral = ["--lanechange.duration", f"{lane_change_duration}"]
     _call(
         [
             str(_tool("sumo")),
@@ -297,7 +456,7 @@ def _run(config: SynthConfig, folder: Path, lane_change_duration: float) -> dict
             "--begin", "0", "--end", f"{end:.1f}",
             "--step-length", f"{STEP}",
             "--seed", str(int(config.seed) % (2**31)),
-            "--lanechange.duration", f"{lane_change_duration}",
+            *lateral,
             "--time-to-teleport", "-1",
             "--collision.action", "warn",
             "--collision.check-junctions", "true",
