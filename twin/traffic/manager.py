@@ -40,7 +40,8 @@ from twin.traffic.drivers import mean_driver_row
 from twin.traffic.kernels import state
 from twin.traffic.kernels.decide import decide_from_python
 from twin.traffic.kernels.decide import settings as kernel_settings
-from twin.traffic.kernels.models import N_PARAMS
+from twin.traffic.kernels.drivers import DriverTable, draw_drivers, driver_table
+from twin.traffic.kernels.models import MODEL_IDS, N_PARAMS
 from twin.traffic.models import AUTO, UNCALIBRATED, car_following_model
 from twin.traffic.scene import NO_OBSTACLES, Commands, Obstacles
 
@@ -62,7 +63,6 @@ class TrafficManager:
             config = replace(config, car_following=UNCALIBRATED)
         self.config = config
         self.model = car_following_model(config.car_following)
-        self.rng = np.random.default_rng(config.seed)
         self.classes = vehicle_classes()
         self.time = 0.0
         self._steps = 0
@@ -149,29 +149,29 @@ class TrafficManager:
         lane = np.broadcast_to(np.asarray(lane, dtype=np.int64), (n,)).copy()
         self._check_new(ids, road, lane, params)
         cfg = self.config
-        traits = cfg.drivers.draw(self.classes, params.vehicle_class, self.rng)
+        keys = ids if keys is None else np.broadcast_to(np.asarray(keys, np.int64), (n,))
+        desired = np.full(n, np.nan)
+        if desired_speed is not None:
+            desired = np.broadcast_to(np.asarray(desired_speed, dtype=np.float64), (n,)).copy()
+            _check_speed(desired)
+        cf, lucky, first = np.zeros((n, N_PARAMS)), np.zeros(n, bool), np.zeros(n)
+        draw_drivers(
+            self._driver_table, MODEL_IDS[cfg.car_following], np.int64(cfg.seed),
+            np.ascontiguousarray(keys, np.int64),
+            np.ascontiguousarray(params.vehicle_class, np.int64), desired, cf, lucky, first,
+        )  # fmt: skip
         allowed = self.classes.column("hov_allowed")[params.vehicle_class] == 1
-        lucky = self.rng.random(n) < cfg.hov_share
         if hov_eligible is None:
             eligible = (lane == HOV_LANE) | (allowed & lucky)
         else:
             eligible = np.broadcast_to(np.asarray(hov_eligible, dtype=bool), (n,)).copy()
             if np.any(~eligible & (lane == HOV_LANE)):
                 raise ValueError("a vehicle added in the HOV lane must be HOV-eligible")
-        if desired_speed is not None:
-            desired = np.broadcast_to(np.asarray(desired_speed, dtype=np.float64), (n,)).copy()
-            _check_speed(desired)
-            traits = replace(traits, desired_speed=desired)
-        model = self.model.from_traits(traits)
-        cf = np.zeros((n, N_PARAMS))
-        for j, name in enumerate(self.model.names):
-            cf[:, j] = np.broadcast_to(getattr(model, name), (n,))
-        keys = ids if keys is None else np.broadcast_to(np.asarray(keys, np.int64), (n,))
         values = {
             "key": keys, "cf": cf, "hov_eligible": eligible,
             "auto": np.full(n, cfg.auto_lane_change), "lane": lane, "lane_from": lane,
             "start_x": np.zeros(n), "start_y": (0.5 - lane) * LANE_WIDTH, "path_length": np.ones(n),
-            "next_decision": self.time + self.rng.uniform(0.0, cfg.decision_interval, n),
+            "next_decision": self.time + first,
             "decisions": np.zeros(n, np.int64), "changes": np.zeros(n, np.int64),
             "requested": np.zeros(n, np.int64), "strategic": np.zeros(n, np.int64),
             "strategic_from": np.full(n, np.nan), "strategic_by": np.full(n, np.nan),
@@ -529,6 +529,12 @@ class TrafficManager:
     def _kernel_settings(self, road: int):
         zones = [(lane, x0, x1) for r, lane, x0, x1 in self._keep_out if r == road]
         return kernel_settings(self.config, self._mean_driver, keep_out=zones)
+
+    @cached_property
+    def _driver_table(self) -> DriverTable:
+        """What the drivers are drawn from (the core's draw); read once: fixed."""
+        cfg = self.config
+        return driver_table(cfg.drivers, self.classes, cfg.hov_share, cfg.decision_interval)
 
     @cached_property
     def _mean_driver(self) -> np.ndarray:

@@ -155,3 +155,40 @@ def test_same_seed_same_drivers_and_decisions(built_map):
     (p1, r1), (p2, r2) = runs
     assert all(np.array_equal(p1[k], p2[k]) for k in p1)
     assert np.array_equal(r1.x, r2.x) and np.array_equal(r1.lane, r2.lane)
+
+
+def test_a_driver_is_its_seeds_keys_and_classes_whatever_is_added_with_it():
+    # the core's draw (twin.traffic.kernels.drivers): keyed, not a stream, so the
+    # vehicles around a driver, and the order they come in, do not change it
+    crowd, params = point_mass_manager(np.full(3, -3), [0, 4, 1], seed=7)
+    crowd.add([0, 1, 2], 1, -3, params, keys=[11, 12, 13])
+    alone, one = point_mass_manager(np.full(1, -3), [4], seed=7)
+    alone.add([5], 1, -3, one, keys=[12])
+    drawn, single = crowd.params([1]), alone.params([5])
+    assert all(np.array_equal(drawn[k], single[k]) for k in drawn)
+    assert crowd._d.next_decision[0, 1] == alone._d.next_decision[0, 0]
+    other, _ = point_mass_manager(np.full(1, -3), [4], seed=8)
+    other.add([5], 1, -3, one, keys=[12])
+    assert other.params([5])["time_headway"][0] != single["time_headway"][0]
+
+
+def test_the_managers_drivers_follow_the_class_tables_law():
+    # the same law as the distribution's numpy draw (DriverDistribution.draw), other
+    # draws: 4,000 sedans' traits agree with 4,000 of the numpy draw's within 4 standard
+    # errors, and every first decision comes within one decision interval
+    n = 4000
+    manager, params = point_mass_manager(np.full(n, -3), 0, seed=3)
+    manager.add(np.arange(n), 1, -3, params)
+    cfg = manager.config
+    ours = manager.params(np.arange(n))
+    theirs = cfg.drivers.draw(manager.classes, np.zeros(n, np.int64), np.random.default_rng(3))
+    for name, log in (("desired_speed", False), ("time_headway", True), ("min_gap", False),
+                      ("max_accel", True)):  # fmt: skip
+        a, b = ours[name], getattr(theirs, name)
+        a, b = (np.log(a), np.log(b)) if log else (a, b)
+        standard_error = np.sqrt((a.var() + b.var()) / n)
+        assert abs(a.mean() - b.mean()) < 4 * standard_error, name
+        assert a.std() == pytest.approx(b.std(), rel=0.1), name
+    first = manager._d.next_decision[0]
+    assert np.all((first >= 0) & (first < cfg.decision_interval))
+    assert first.std() == pytest.approx(cfg.decision_interval / np.sqrt(12), rel=0.1)

@@ -27,7 +27,13 @@ from twin.core.i24 import HOV_LANE, LANE_WIDTH, N_LANES
 from twin.core.jit import kernel, uniform
 from twin.core.ramps import RAMP_LANE, SPAN_MARGIN
 from twin.traffic.drivers import CLIP_SD
-from twin.traffic.kernels.drivers import clipped_normal, draw_driver, first_decision, hov_lucky
+from twin.traffic.kernels.drivers import (
+    clipped_normal,
+    draw_driver,
+    driver_table,
+    first_decision,
+    hov_lucky,
+)
 from twin.traffic.kernels.lane_change import (
     DURATION_STREAM,
     clear_target,
@@ -533,21 +539,13 @@ def behaviour_arrays(behaviour, traffic_config, recording, plan=None) -> Behavio
     flows = behaviour.strategic_flows
     edges, left, right, lanes, states = flow_arrays(flows)
     plan = plan if plan is not None else empty_plan(recording.tid.size)
+    # the draw's fields, as the traffic manager's (one builder)
+    table = driver_table(dist, classes, traffic_config.hov_share, traffic_config.decision_interval)
     return BehaviourArrays(
         mode=mode,
-        class_v0=classes.column("desired_speed_mps").astype(float),
-        class_v0_sd=classes.column("desired_speed_sd_mps").astype(float),
-        class_time_headway=classes.column("time_headway_s").astype(float),
-        class_max_accel=classes.column("max_accel_mps2").astype(float),
+        **table._asdict(),
         class_hov=classes.column("hov_allowed").astype(np.int64) == 1,
         class_group=group_of_class,
-        time_headway_sd_log=float(dist.time_headway_sd_log), min_gap=float(dist.min_gap),
-        min_gap_sd=float(dist.min_gap_sd), max_accel_sd_log=float(dist.max_accel_sd_log),
-        decel=float(dist.comfortable_decel), decel_sd=float(dist.comfortable_decel_sd),
-        delta=float(dist.delta), v0_scale=float(dist.desired_speed_scale),
-        time_headway_scale=float(dist.time_headway_scale),
-        max_accel_scale=float(dist.max_accel_scale), hov_share=float(traffic_config.hov_share),
-        decision_interval=float(traffic_config.decision_interval),
         auto=bool(traffic_config.auto_lane_change and behaviour.auto_lane_change),
         politeness=float(
             mobil.politeness if behaviour.politeness is None else behaviour.politeness
