@@ -7,9 +7,11 @@ A lane change is counted as the calibration counts the recording's
 ``LANE_HOLD``), at the place its vehicle first is in the new lane. The recorded changes
 counted are those inside the visible window at their time, the simulated ones are the
 simulated vehicles' (always inside it). The net flow out of a lane in a bin is the
-changes out of it minus the changes into it there; bins are :data:`BIN` metres, on a
-grid fixed to the road frame (edges at multiples of :data:`BIN`) so that episodes add
-up.
+changes out of it minus the changes into it there; ``changes`` holds where every change
+was made (``simulated_x``, ``recorded_x``), for the rates by zone
+(:mod:`twin.metrics.lane_change_zones`).
+Bins are :data:`BIN` metres, on a grid fixed to the road frame (edges at multiples of
+:data:`BIN`) so that episodes add up.
 """
 
 import numpy as np
@@ -84,7 +86,18 @@ def episode_section(simulated: pd.DataFrame, recorded: pd.DataFrame, windows) ->
         }
         for lane in LANES
     }
-    return {"bin_m": BIN, "x_edges": edges.tolist(), "pairs": pairs, "net_out": net}
+    changes = {"simulated_x": _places(simulated), "recorded_x": _places(recorded)}
+    return {
+        "bin_m": BIN, "x_edges": edges.tolist(), "pairs": pairs, "net_out": net,
+        "changes": changes,
+    }  # fmt: skip
+
+
+def _places(changes: pd.DataFrame) -> list[float]:
+    """Where [m, road frame, to 0.1 m] each change was made, in increasing order."""
+    if changes.empty:
+        return []
+    return np.round(np.sort(changes["x"].to_numpy(dtype=np.float64)), 1).tolist()
 
 
 def _count(changes: pd.DataFrame, lane_from: int, lane_to: int) -> int:
@@ -122,8 +135,11 @@ def sum_episodes(sections) -> dict | None:
     index = {x: k for k, x in enumerate(starts)}
     net = {str(lane): np.zeros((2, len(starts)), dtype=np.int64) for lane in LANES}
     pairs = {pair_key(a, b): np.zeros(2, dtype=np.int64) for a, b in PAIRS}
+    places = {"simulated_x": [], "recorded_x": []}
     for s in sections:
         columns = [index[round(x, 6)] for x in s["x_edges"][:-1]]
+        for name, xs in s.get("changes", {}).items():  # none in sections from before
+            places[name].extend(xs)
         for lane, both in s["net_out"].items():
             net[lane][0, columns] += np.asarray(both["simulated"], dtype=np.int64)
             net[lane][1, columns] += np.asarray(both["recorded"], dtype=np.int64)
@@ -143,6 +159,7 @@ def sum_episodes(sections) -> dict | None:
         "net_out": {
             lane: {"simulated": v[0].tolist(), "recorded": v[1].tolist()} for lane, v in net.items()
         },
+        "changes": {name: sorted(xs) for name, xs in places.items()},
         "episodes_summed": len(sections),
         "changes_simulated": changes_sim,
         "changes_recorded": changes_rec,
