@@ -81,6 +81,10 @@ def test_bench_fidelity_tables_each_day_and_records_a_day_it_cannot_calibrate(
     assert (wave["speed_field_rmse_worst_lane_mps"] == lanes.max(axis=1)).all()
     for column in ("lane_changes_out_of_lane_-2_recorded", "collisions_rear_end", "stalled"):
         assert column in days
+    zones = ("before_drop", "weave", "elsewhere")
+    for who in ("simulated", "recorded"):
+        in_zones = sum(wave[f"lane_changes_{z}_{who}"] for z in zones)
+        assert (in_zones == wave[f"lane_changes_{who}"]).all(), who
     assert (wave["collisions"] == 0).all() and wave["physics_collisions"].isna().all()
     assert (wave["param_seed"] == 0).all() and (wave["param_demand_scale"] == 1.1).all()
     assert (wave["param_lanes"] == "[-1, -2]").all() and light["param_seed"].isna().all()

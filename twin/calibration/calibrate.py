@@ -445,6 +445,28 @@ def _road_section(store, road, data, settings, model, car, distributions) -> dic
     return section
 
 
+def describe_check(check: dict | None) -> list[str]:
+    """The report's lines of a road's ``lane_change_check``
+    (:func:`twin.runners.lane_change_fit.check_in_twin`): the calibrated twin's lane
+    changes against the recording's on the window, out of each lane and by zone."""
+    if not check:
+        return []
+    if "note" in check:
+        return [f"      checked in the twin: {check['note']}"]
+
+    def counts(by: dict, sep: str) -> str:
+        return sep.join(
+            f"{key.replace('_', ' ')} {c['simulated']} / {c['recorded']}" for key, c in by.items()
+        )
+
+    return [
+        f"      checked in the twin ({check['episodes']} kinematic episodes of the window): "
+        f"{check['simulated']} lane changes simulated / {check['recorded']} recorded",
+        f"        out of lanes: {counts(check['by_lane'], ', ')}",
+        f"        by zone: {counts(check['by_zone'], '; ')}",
+    ]
+
+
 def _lane_change_flows(grid, changes, incentives, settings) -> tuple[dict, dict]:
     """The MOBIL threshold and the lane-change flows (:mod:`lane_flows`). The threshold
     is fitted to every recorded change, then, where the flows show strategic changes,
@@ -704,6 +726,7 @@ def describe_calibration(doc: dict | None) -> str:
                 f"scenes' threshold {mobil['scenes_threshold']:.2f} m/s^2 made "
                 f"{fit['trials'][0][1]})"
             )
+        lines += describe_check(section.get("lane_change_check"))
         lines += describe_flows(section.get("lane_flows", {}))
         lines += describe_merges(section.get("merges", []))
         lines += describe_ramp_speeds(section.get("ramp_speeds"))

@@ -77,6 +77,16 @@ def register(commands) -> None:
         "window, to start as many lane changes as the recording makes in them (20 "
         "episodes, about 10 s a road; default scenes)",
     )
+    p.add_argument(
+        "--check-episodes",
+        type=int,
+        default=20,
+        metavar="N",
+        help="once calibrated, run N kinematic episodes of each road's window in the twin "
+        "and report its lane changes against the recording's, out of each lane and by "
+        "zone (before a drop, the weave, elsewhere), written as lane_change_check "
+        "(0: no check; default 20, a few seconds a road)",
+    )
     add_quiet(p)
     p.set_defaults(handler=_calibrate)
 
@@ -89,6 +99,8 @@ def _calibrate(args) -> int:
         write_calibration,
     )
 
+    if args.check_episodes < 0:
+        raise UsageError(f"--check-episodes must be >= 0, got {args.check_episodes}")
     roads = [checked_road(road) for road in args.road] if args.road is not None else None
     store = open_store(args.store)
     t_from, t_until = unix_time(args.t_from, "--from"), unix_time(args.t_until, "--until")
@@ -122,6 +134,12 @@ def _calibrate(args) -> int:
         from twin.runners.lane_change_fit import refit_store
 
         doc = refit_store(open_store(args.store), default_map(), progress=not args.quiet)
+    if args.check_episodes:
+        from mapgen.build import default_map
+        from twin.runners.lane_change_fit import check_store
+
+        doc = check_store(open_store(args.store), default_map(), episodes=args.check_episodes,
+                          progress=not args.quiet)  # fmt: skip
     pictures = draw_lane_flows(store, doc)
     print(describe_calibration(doc))
     print(f"written: {', '.join(map(str, [path, *pictures]))}")

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.metrics.collisions import COLUMNS as COLLISION_CAUSES
+from twin.metrics.lane_change_zones import ZONES
 from twin.metrics.lane_flow_fidelity import LANES, pair_key
 
 #: The lane-change ratio the issue asks of most days, and the one it asks of every day.
@@ -127,6 +128,7 @@ def day_figures(entry: dict) -> dict:
     row["lane_changes_recorded"] = int(recorded)
     row["lane_change_ratio"] = _ratio(simulated, recorded)
     row.update(lane_changes_by_lane(entry.get("lane_flows")))
+    row.update(lane_changes_by_zone(entry.get("lane_changes_by_zone")))
     row.update(safety_figures(entry))
     return row
 
@@ -146,6 +148,21 @@ def lane_changes_by_lane(flows: dict | None) -> dict:
         row[f"lane_changes_out_of_lane_{lane}_simulated"] = simulated
         row[f"lane_changes_out_of_lane_{lane}_recorded"] = recorded
         row[f"lane_change_ratio_lane_{lane}"] = _ratio(simulated, recorded)
+    return row
+
+
+def lane_changes_by_zone(counts: dict | None) -> dict:
+    """The changes in each zone (:mod:`twin.metrics.lane_change_zones`), simulated and
+    recorded, and their ratio (NaN where not counted or none recorded)."""
+    row = {}
+    for zone in ZONES:
+        c = (counts or {}).get(zone) or {}
+        simulated, recorded = c.get("simulated"), c.get("recorded")
+        simulated = math.nan if simulated is None else simulated
+        recorded = math.nan if recorded is None else recorded
+        row[f"lane_changes_{zone}_simulated"] = simulated
+        row[f"lane_changes_{zone}_recorded"] = recorded
+        row[f"lane_change_ratio_{zone}"] = _ratio(simulated, recorded)
     return row
 
 

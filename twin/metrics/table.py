@@ -280,10 +280,11 @@ def document() -> str:
         '`info["metrics"]`. The path in brackets is where the run\'s `metrics.json` holds it.\n'
         "Generated from `twin/metrics/table.py` by `python -m twin.metrics.table`; do not edit.\n\n"
         "Beside these, `metrics.json` holds a nested `lane_flows` section: the lane changes\n"
-        "by lane pair and the net flow out of each lane by 200 m bin, simulated and\n"
-        "recorded in the same moving window (`twin/metrics/lane_flow_fidelity.py`);\n"
-        "`twin eval` sums it over the episodes into `summary.json`, `summary.md` and\n"
-        "`fidelity.png`.\n\n" + markdown_table()
+        "by lane pair, the net flow out of each lane by 200 m bin and where each change\n"
+        "was made, simulated and recorded in the same moving window\n"
+        "(`twin/metrics/lane_flow_fidelity.py`); `twin eval` sums it over the episodes\n"
+        "into `summary.json`, `summary.md` and `fidelity.png`, and counts the changes by\n"
+        "zone of the road (`twin/metrics/lane_change_zones.py`).\n\n" + markdown_table()
     )
 
 

@@ -52,6 +52,7 @@ BEHAVIOURS = ("calibrated", "paper")
 DAY_SUFFIXES = (".json", ".json.gz")
 PARAMS_SUFFIX = ".params.json"
 FAMILY_FILE = "family.json"
+DROP_X = "param_params_drop_x"  # a family day's lane drop [m], from its parameters file
 
 
 class FidelityBenchError(TwinError):
@@ -286,7 +287,8 @@ def run_day(
         rows = [{**common, "behaviour": b, "status": NOT_CALIBRATED} for b in BEHAVIOURS]
         _say(progress, f"{day.name}: not calibrated ({calibration['reason']})")
     else:
-        rows = _evaluated(store, folder, common, settings, (split, last), workers, progress)
+        rows = _evaluated(store, folder, common, settings, (split, last), workers, progress,
+                          day.params.get(DROP_X))  # fmt: skip
     rows = [{**_finite_or_none(row), **day.params} for row in rows]
     with atomic_file(done) as tmp:
         tmp.write_text(json.dumps(rows, indent=1, allow_nan=False) + "\n")
@@ -356,11 +358,13 @@ def _evaluated(
     window: tuple[float, float],
     workers: int,
     progress: bool,
+    drop_x: float | None = None,
 ) -> list[dict]:
     """The day's rows from its evaluations in both worlds (the physics one skipped
-    with ``physics_episodes`` 0)."""
+    with ``physics_episodes`` 0); ``drop_x`` [m]: where its lanes end, if known."""
     from twin.cosim.config import SCENARIO_B, switch_world
     from twin.metrics.day_fidelity import day_figures, safety_figures
+    from twin.metrics.lane_change_zones import store_zones
     from twin.runners.episodes import SamplingError
     from twin.runners.evaluation import EvalConfig, evaluate
 
@@ -373,6 +377,9 @@ def _evaluated(
         t_until=window[1],
         seed=settings.seed,
     )
+    # lane changes by zone: where the day's own parameters say its lanes end, else
+    # where its recording shows them ending
+    zones = store_zones(store, settings.road, drop_x=drop_x)
     summaries, seconds = {}, {}
     worlds = {"kinematic": settings.episodes, "physics": settings.physics_episodes}
     for world, episodes in worlds.items():
@@ -382,8 +389,9 @@ def _evaluated(
         start = time.perf_counter()
         try:
             result = evaluate(
-                store, folder / world, world_config, workers=workers, progress=progress
-            )
+                store, folder / world, world_config, workers=workers, progress=progress,
+                zones=zones,
+            )  # fmt: skip
         except SamplingError as error:
             reason = f"no episode to evaluate in the second half: {error}"
             _say(progress, f"{common['day']}: not evaluated ({reason})")

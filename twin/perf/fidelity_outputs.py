@@ -21,6 +21,7 @@ from twin.metrics.day_fidelity import (
     judge,
     over_days,
 )
+from twin.metrics.lane_change_zones import ZONES
 from twin.metrics.lane_flow_fidelity import LANES
 from twin.metrics.table import section_head
 
@@ -198,6 +199,7 @@ def markdown(frame, summary: dict) -> str:
             "end error median / p90 [m]",
             "speed field RMSE worst lane; lanes " + " / ".join(map(str, LANES)) + " [m/s]",
             "lane changes sim / rec (ratio); out of lanes " + " / ".join(map(str, LANES)),
+            "lane changes sim / rec by zone: " + " / ".join(z.replace("_", " ") for z in ZONES),
             "collisions kinematic; physics",
             "stalled kinematic; physics",
             "calibrate [s]",
@@ -214,6 +216,10 @@ def markdown(frame, summary: dict) -> str:
             f"{_f(r['speed_field_rmse_worst_lane_mps'])}; {lanes}",
             f"{_n(r['lane_changes_simulated'])} / {_n(r['lane_changes_recorded'])} "
             f"({_f(r['lane_change_ratio'])}); {by_lane}",
+            " / ".join(
+                f"{_n(r.get(f'lane_changes_{z}_simulated'))}:{_n(r.get(f'lane_changes_{z}_recorded'))}"
+                for z in ZONES
+            ),
             f"{_collisions(r, '')}; {_collisions(r, 'physics_')}",
             f"{_n(r['stalled'])}; {_n(r.get('physics_stalled'))}",
             _f(r["calibrate_s"], 1),

@@ -39,7 +39,7 @@ from twin.core.locks import output_lock
 from twin.cosim.behaviour import BEHAVIOURS, Behaviour, car_following_of
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.data.store import TrajectoryStore
-from twin.metrics import lane_flow_fidelity
+from twin.metrics import lane_change_zones, lane_flow_fidelity
 from twin.metrics.table import SUMMARISED, flatten
 from twin.runners.engines import run_jobs, where, worker_data
 from twin.runners.episodes import (
@@ -198,10 +198,13 @@ def evaluate(
     bundle=None,
     progress: bool = True,
     extension: "Extension | None" = None,
+    zones: "lane_change_zones.Zones | None" = None,
 ) -> EvalResult:
     """Run (or resume) the evaluation ``config`` into the folder ``out``; ``extension``
     adds to its outputs once the rows are in (the paired benchmark's,
-    :mod:`twin.control.benchmark`).
+    :mod:`twin.control.benchmark`). ``zones``: where the lane changes are counted by
+    zone (default: the road's on-ramps and the lanes the recording shows ending,
+    :func:`twin.metrics.lane_change_zones.store_zones`).
 
     Raises:
         EvaluationError: bad arguments, ``out`` holds something else or another
@@ -263,7 +266,8 @@ def evaluate(
                 ),
                 error_type=EvaluationError,
             )
-        summary = assemble(out, config, specs, extension)
+        zones = zones or lane_change_zones.store_zones(store, road)
+        summary = assemble(out, config, specs, extension, zones)
         return EvalResult(out, summary, todo, time.perf_counter() - start)
 
 
@@ -526,10 +530,13 @@ def _claim(out: Path, config: EvalConfig, store: TrajectoryStore, bundle) -> Non
 
 
 def assemble(
-    out: Path, config: EvalConfig, specs: list[EpisodeSpec], extension: "Extension | None" = None
-) -> dict:
+    out: Path, config: EvalConfig, specs: list[EpisodeSpec], extension: "Extension | None" = None,
+    zones: "lane_change_zones.Zones | None" = None,
+) -> dict:  # fmt: skip
     """Write episodes.parquet, summary.json, summary.md and fidelity.png from the
-    results of ``specs`` (and what ``extension`` adds); returns the summary."""
+    results of ``specs`` (and what ``extension`` adds); returns the summary. ``zones``:
+    the road's (:mod:`twin.metrics.lane_change_zones`) the lane changes are counted by
+    (default: its on-ramps' weaves, no drop)."""
     import pandas as pd
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -549,13 +556,21 @@ def assemble(
         pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
     summary = summarise(frame, config)
     lane_flows = {label: lane_flow_fidelity.sum_episodes(f) for label, f in flows.items()}
+    zones = zones or lane_change_zones.road_zones(config.road)
+    summary["lane_change_zones"] = zones.to_dict()
+    by_zone = {}
     for label, summed in lane_flows.items():
         summary[config.arms_key][label]["lane_flows"] = summed
+        by_zone[label] = lane_change_zones.by_zone(summed and summed.get("changes"), zones)
+        summary[config.arms_key][label]["lane_changes_by_zone"] = by_zone[label]
     more = extension(out, frame, config, summary) if extension is not None else ""
     with atomic_file(out / "summary.json") as tmp:
         tmp.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     with atomic_file(out / "summary.md") as tmp:
-        tmp.write_text(markdown(summary) + lane_flow_fidelity.markdown(lane_flows) + more)
+        tmp.write_text(
+            markdown(summary) + lane_flow_fidelity.markdown(lane_flows)
+            + lane_change_zones.markdown(by_zone, zones) + more
+        )  # fmt: skip
     with atomic_file(out / "fidelity.png") as tmp:
         _plot(frame, config, tmp, lane_flows)
     return summary
@@ -736,6 +751,7 @@ def summary_lines(result: EvalResult) -> str:
             f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
             + _merge_words(m)
             + _flow_words(entry.get("lane_flows"))
+            + _zone_words(entry.get("lane_changes_by_zone"))
             + _seam_words(m)
         )
     return "\n".join(lines)
@@ -787,6 +803,11 @@ def _flow_words(flows: dict | None) -> str:
         f"({flows['bins_within']} of {flows['bins_judged']} bins within "
         f"{lane_flow_fidelity.WITHIN:.0%})"
     )
+
+
+def _zone_words(counts: dict | None) -> str:
+    words = lane_change_zones.describe(counts or {})
+    return f"; lane changes by zone {words}" if words else ""
 
 
 def _stat(metrics: dict, name: str) -> str:

@@ -40,6 +40,14 @@ def test_calibrate_writes_beside_the_data_and_never_changes_them(
     assert set(after) - set(before) == {CALIBRATION, FITS, "lane_flows_westbound.png"}
 
     doc = read_calibration(store)
+    # the calibrated twin checked on its own window: lane changes out of each lane and
+    # by zone, simulated against recorded
+    assert "checked in the twin (20 kinematic episodes" in out and "by zone:" in out
+    check = doc["roads"]["westbound"].pop("lane_change_check")
+    assert sum(c["recorded"] for c in check["by_lane"].values()) == check["recorded"]
+    assert sum(c["simulated"] for c in check["by_lane"].values()) == check["simulated"]
+    placed = sum(z["recorded"] for z in check["by_zone"].values())
+    assert placed >= check["recorded"] > 0  # a two-lane jump is placed, not paired
     # deterministic: the session's calibration, made apart of another copy of the same
     # data (twin.calibration.calibrate), is this one but for the time it was made
     session = read_calibration(calibrated_wave_store)

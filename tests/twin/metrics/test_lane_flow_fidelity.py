@@ -68,6 +68,7 @@ def test_episode_section_counts_pairs_and_the_net_flow_by_bin_on_the_road_grid()
     assert section["net_out"]["-3"]["simulated"] == [0, -2, 1]
     assert section["net_out"]["-4"]["recorded"] == [0, 1, 0]
     assert section["net_out"]["-1"]["recorded"] == [0, 0, 0]
+    assert section["changes"] == {"simulated_x": [210.0, 220.0, 450.0], "recorded_x": [390.0]}
 
 
 def _section(edges, net_sim, net_rec, pair=(0, 0)):
@@ -92,6 +93,12 @@ def test_episodes_add_up_bin_by_bin_and_the_errors_follow():
     # judged: bins with |recorded| >= 10 (12 and 10); within 30 %: 10 of 12, not 20 of 10
     assert (total["bins_judged"], total["bins_within"]) == (2, 1)
     assert total["episodes_summed"] == 2
+    assert total["changes"] == {"simulated_x": [], "recorded_x": []}  # none kept then
+    a["changes"] = {"simulated_x": [30.0, 310.0], "recorded_x": [5.0]}
+    b["changes"] = {"simulated_x": [250.0], "recorded_x": []}
+    assert lff.sum_episodes([a, b])["changes"] == {
+        "simulated_x": [30.0, 250.0, 310.0], "recorded_x": [5.0]
+    }  # fmt: skip
     assert lff.sum_episodes([None, {}]) is None
 
 

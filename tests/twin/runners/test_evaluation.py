@@ -42,6 +42,14 @@ def test_eval_runs_every_behaviour_on_the_same_episodes_and_resumes(
     assert set(summary["behaviours"]) == {"paper", "calibrated"}
     assert summary["behaviours"]["paper"]["metrics"]["ego_speed_rmse_mps"]["median"] is not None
     assert "| ego_speed_rmse_mps (median / p90) |" in (out / "summary.md").read_text()
+    # the lane changes by zone: every change placed, once
+    for entry in summary["behaviours"].values():
+        places = entry["lane_flows"]["changes"]
+        by_zone = entry["lane_changes_by_zone"]
+        for who in ("simulated", "recorded"):
+            assert sum(z[who] for z in by_zone.values()) == len(places[f"{who}_x"])
+    assert summary["lane_change_zones"]["weaves"]  # the road's on-ramp
+    assert "## Lane changes by zone" in (out / "summary.md").read_text()
     assert (out / "fidelity.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
     # resumed: nothing runs again; two workers give the same rows

@@ -9,7 +9,7 @@ import pytest
 from twin.calibration.calibrate import read_calibration
 from twin.core.errors import TwinError
 from twin.data.store import TrajectoryStore
-from twin.runners.lane_change_fit import fit_in_twin, refit_store
+from twin.runners.lane_change_fit import check_in_twin, check_store, fit_in_twin, refit_store
 
 
 @pytest.fixture
@@ -50,3 +50,28 @@ def test_the_threshold_is_fitted_to_the_recorded_count_through_the_twin(
 def test_a_store_without_a_calibration_is_named(private_wave_store, built_map):
     with pytest.raises(TwinError, match="no calibration to refit"):
         refit_store(private_wave_store, built_map)
+    with pytest.raises(TwinError, match="no calibration to check"):
+        check_store(private_wave_store, built_map)
+
+
+def test_the_calibrated_twin_is_checked_on_its_window_by_lane_and_zone(
+    private_calibrated, built_map
+):
+    store = private_calibrated
+    section = read_calibration(store)["roads"]["westbound"]
+    window = (section["window"]["from"], section["window"]["until"])
+    check = check_in_twin(store, built_map, "westbound", window, episodes=6, duration=40.0)
+    assert check["episodes"] >= 3 and check["recorded"] > 0
+    assert set(check["by_lane"]) == {"-1", "-2", "-3", "-4"}
+    assert set(check["by_zone"]) == {"before_drop", "weave", "elsewhere"}
+    assert sum(c["simulated"] for c in check["by_lane"].values()) == check["simulated"]
+    assert check["zones"]["weaves"] and check["zones"]["drops"] == []  # no lane ends here
+    again = check_in_twin(store, built_map, "westbound", window, episodes=6, duration=40.0)
+    assert again == check  # deterministic
+    doc = check_store(store, built_map, episodes=6, duration=40.0)
+    assert doc["roads"]["westbound"]["lane_change_check"] == check
+    written = json.loads((store.path / "calibration.json").read_text())
+    assert written["roads"]["westbound"]["lane_change_check"] == check
+    # a window holding no episode is said, not a failure
+    late = (window[1] + 3600.0, window[1] + 7200.0)
+    assert "note" in check_in_twin(store, built_map, "westbound", late, episodes=2)
