@@ -72,7 +72,20 @@ def test_calibrate_writes_beside_the_data_and_never_changes_them(
 def test_a_window_is_given_in_unix_or_iso_time_and_must_hold_data(store, capsys):
     t0, t1 = store.time_range("westbound")
     mid = 0.5 * (t0 + t1)
-    assert main(["calibrate", str(store.path), "--until", f"{mid:.0f}", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                str(store.path),
+                "--until",
+                f"{mid:.0f}",
+                "--quiet",
+                "--check-episodes",
+                "0",
+            ]
+        )
+        == 0
+    )
     window = read_calibration(store)["roads"]["westbound"]["window"]
     assert window["until"] <= mid + 0.1
     capsys.readouterr()
@@ -107,7 +120,12 @@ def test_a_window_without_waves_takes_its_car_following_from_another_calibration
     path = tmp_path / "other.json"
     path.write_text(json.dumps(other))
     light = str(tmp_path / "light")
-    assert main(["calibrate", light, "--quiet", "--following-from", str(path)]) == 0
+    assert (
+        main(
+            ["calibrate", light, "--quiet", "--check-episodes", "0", "--following-from", str(path)]
+        )
+        == 0
+    )
     assert "car following: taken from another calibration" in capsys.readouterr().out
     section = read_calibration(TrajectoryStore(tmp_path / "light"))["roads"]["eastbound"]
     car, theirs = section["car_following"], other["roads"]["eastbound"]

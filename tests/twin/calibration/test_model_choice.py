@@ -106,7 +106,12 @@ def test_a_morning_without_waves_chooses_among_the_drivers_another_calibration_k
     path = tmp_path / "other.json"
     path.write_text(json.dumps(other))
     light = str(tmp_path / "light")
-    assert main(["calibrate", light, "--quiet", "--following-from", str(path)]) == 0
+    assert (
+        main(
+            ["calibrate", light, "--quiet", "--check-episodes", "0", "--following-from", str(path)]
+        )
+        == 0
+    )
     doc = read_calibration(TrajectoryStore(tmp_path / "light"))
     candidates = doc["model_choice"]["candidates"]
     assert all(c["run_rmse_m"]["median"] > 0 for c in candidates.values()), candidates
@@ -122,7 +127,17 @@ def test_a_morning_without_waves_chooses_among_the_drivers_another_calibration_k
     )
     assert car["distributions"] == theirs["distributions"]
     # one model named: taken where that calibration kept it
-    one = ["calibrate", light, "--quiet", "--following-from", str(path), "--model", "idm"]
+    one = [
+        "calibrate",
+        light,
+        "--quiet",
+        "--check-episodes",
+        "0",
+        "--following-from",
+        str(path),
+        "--model",
+        "idm",
+    ]
     assert main(one) == 0
     assert read_calibration(TrajectoryStore(tmp_path / "light"))["car_following_model"] == "idm"
     # a calibration of one model offers no other
