@@ -3,6 +3,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from twin.traffic.kernels.models import MAX_ACCEL_COLUMN, MODEL_IDS, N_PARAMS, follow_accel
 from twin.traffic.models import MODELS
@@ -63,3 +65,29 @@ def test_kernel_parameters_from_traits_are_the_models(name):
                     traits.min_gap[i], traits.max_accel[i], traits.comfortable_decel[i],
                     traits.delta[i])  # fmt: skip
     np.testing.assert_array_equal(got, expected)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    name=st.sampled_from(sorted(MODELS)),
+    draws=st.lists(st.floats(0.0, 1.0), min_size=N_PARAMS, max_size=N_PARAMS),
+    v=st.floats(0.0, 40.0),
+    v_lead=st.floats(0.0, 40.0),
+    gap=st.one_of(st.floats(0.01, 300.0), st.just(np.inf)),
+)
+def test_kernel_acceleration_is_the_models_for_any_state(name, draws, v, v_lead, gap):
+    # the numpy models are the calibration's reference (their fits evaluate them on the
+    # recorded followers), the kernels what the traffic drives: one law, found so by
+    # hypothesis over the parameters' bounds and any speeds and gaps
+    model = MODELS[name]
+    values = {
+        p.name: np.array([p.bounds[0] + u * (p.bounds[1] - p.bounds[0])])
+        for p, u in zip(model.parameters, draws, strict=False)
+    }
+    expected = model.accel(np.array([v]), np.array([v_lead]), np.array([gap]),
+                           model.make(**values))  # fmt: skip
+    row = np.zeros(N_PARAMS)
+    for column, p in enumerate(model.names):
+        row[column] = values[p][0]
+    got = follow_accel(MODEL_IDS[name], v, v_lead, gap, *row)
+    np.testing.assert_allclose(got, expected[0], rtol=1e-12, atol=1e-9)
