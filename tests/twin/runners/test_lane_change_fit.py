@@ -19,12 +19,17 @@ def private_calibrated(calibrated_wave_store, tmp_path) -> TrajectoryStore:
     return TrajectoryStore(tmp_path / "store")
 
 
+def _westbound(store) -> tuple[dict, tuple[float, float]]:
+    """The store's westbound calibration section and its window (unix [s])."""
+    section = read_calibration(store)["roads"]["westbound"]
+    return section, (section["window"]["from"], section["window"]["until"])
+
+
 def test_the_threshold_is_fitted_to_the_recorded_count_through_the_twin(
     private_calibrated, built_map
 ):
     store = private_calibrated
-    scenes = read_calibration(store)["roads"]["westbound"]
-    window = (scenes["window"]["from"], scenes["window"]["until"])
+    scenes, window = _westbound(store)
     fit = fit_in_twin(store, built_map, "westbound", window, episodes=6, duration=40.0)
     if "note" in fit:  # too few recorded changes: the scenes' threshold is kept
         assert fit["threshold"] == scenes["mobil"]["threshold"]
@@ -58,8 +63,7 @@ def test_the_calibrated_twin_is_checked_on_its_window_by_lane_and_zone(
     private_calibrated, built_map
 ):
     store = private_calibrated
-    section = read_calibration(store)["roads"]["westbound"]
-    window = (section["window"]["from"], section["window"]["until"])
+    _, window = _westbound(store)
     check = check_in_twin(store, built_map, "westbound", window, episodes=6, duration=40.0)
     assert check["episodes"] >= 3 and check["recorded"] > 0
     assert set(check["by_lane"]) == {"-1", "-2", "-3", "-4"}
