@@ -13,7 +13,7 @@ its lane-changing models: Krauss with LC2013 or with SL2015 (on the sublane mode
 or EIDM with LC2013 (:data:`MODELS`; :data:`STEPPED` says why SL2015 only with Krauss);
 their time headway, dawdling, standstill gap, acceleration, braking, speed spread,
 reaction time and lane-changing eagerness are drawn for the day
-(:class:`~twin.data.sumo_day.SumoDrivers`). The pair of models and the road are the
+(:class:`~twin.data.sumo_drivers.SumoDrivers`). The pair of models and the road are the
 seed's (every 16 consecutive seeds hold each pair on each road once, :data:`CELLS`), the
 numbers drawn. Each road has one bottleneck, so that its followers cross stop-and-go
 waves, which the calibration fits drivers on (``twin calibrate`` needs followers that
@@ -29,6 +29,14 @@ The general lanes' demand is drawn as a *load*: the most the bottleneck could ca
 the day's drivers (:func:`lane_capacity`), times 1 to 1.3. SUMO's drivers carry less,
 so the demand exceeds what the bottleneck discharges and a queue grows upstream of it
 through the recorded range, whatever the drivers' headway.
+
+Why one module of about 600 lines: a fifth of it is the table of ranges with their
+sources (:data:`SOURCES`, :data:`RANGES`), which the draw reads and the docs are tested
+against, and the rest is one job, a family from its seed: the draw of a day
+(:func:`draw_day`), the day made and its parameters written beside it
+(:func:`make_day`), and the family made, resumed and summed up (:func:`make_family`).
+SUMO's drivers themselves are :mod:`twin.data.sumo_drivers`, the run
+:mod:`twin.data.sumo_day`.
 """
 
 import json
@@ -49,7 +57,8 @@ from twin.core.errors import TwinError
 from twin.core.progress import progress_bar
 from twin.core.sumo import sumo_version
 from twin.core.vehicle_classes import vehicle_classes
-from twin.data.sumo_day import DAWDLING, STEP, SumoDrivers, sumo_day
+from twin.data.sumo_day import sumo_day
+from twin.data.sumo_drivers import DAWDLING, STEP, SumoDrivers
 from twin.data.synth.config import Bottleneck, LaneDrop, SynthConfig
 from twin.data.synth.presets import PRESET_C, PRESET_E
 from twin.data.synth.simulation import class_weights
