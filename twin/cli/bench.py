@@ -273,7 +273,7 @@ def _register_fidelity(benchmarks) -> None:
         help="the twin's fidelity over many days: each calibrated on its first half and "
         "evaluated on its second, against the fidelity targets",
         description="For each day file (or folder of day files, such as a family of SUMO "
-        "days whose drivers and demand vary): ingest it, calibrate its road on the "
+        "days made by twin data sumo --family): ingest it, calibrate its road on the "
         "recording's first half (a day "
         "that cannot be calibrated is recorded as 'not calibrated' with the reason) and "
         "evaluate the second half with the calibrated and the paper's behaviours, in the "

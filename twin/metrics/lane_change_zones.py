@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.core.i24 import N_LANES, Road
-from twin.core.ramps import segment_ramps
+from twin.core.ramps import SEGMENT_LENGTH, segment_ramps
+from twin.metrics.table import section_head
 
 ZONES = ("before_drop", "weave", "elsewhere")
 BEFORE_DROP = 500.0  # [m] upstream of a lane's end: where its drivers must leave it
@@ -153,8 +154,6 @@ def store_zones(store, road, drop_x=None) -> Zones:
     """The zones of ``road`` in ``store``'s recording: :func:`road_zones` with the
     lanes' ends ``drop_x`` where given, else where the recording shows them
     (:func:`recorded_lane_ends` over the whole recording of the road)."""
-    from twin.core.ramps import SEGMENT_LENGTH
-
     road = Road.parse(road) if isinstance(road, str) else road
     if drop_x is None:
         first, last = store.time_range(road)
@@ -165,8 +164,6 @@ def store_zones(store, road, drop_x=None) -> Zones:
 
 def markdown(by_arm: dict, zones: Zones) -> str:
     """The counts by zone of each arm (``{arm: by_zone(...)}``) as a Markdown table."""
-    from twin.metrics.table import section_head
-
     arms = [a for a, c in by_arm.items() if c]
     if not arms:
         return ""

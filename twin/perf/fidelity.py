@@ -2,7 +2,7 @@
 first half and evaluated on its second.
 
 For every day file given (or every day file of a folder given, such as a family of
-SUMO days whose drivers and demand vary), in that order:
+SUMO days made by ``twin data sumo --family``), in that order:
 
 1. the day is ingested into a store (:func:`twin.data.ingest.ingest`);
 2. its road is calibrated on the recording's first half (:func:`twin.calibration.
@@ -30,8 +30,8 @@ done is not done again; a rerun with other settings is refused)::
       fidelity.png          the figures' distributions over the days, with the targets
 
 A day's name is its file's name less ``.json`` (or ``.json.gz``); where
-``NAME.params.json`` lies beside it (the parameters a family's generator drew
-for it), each of its values is a ``param_...`` column of the day's rows.
+``NAME.params.json`` lies beside it (the parameters ``twin data sumo --family``
+drew for it), each of its values is a ``param_...`` column of the day's rows.
 """
 
 import json
