@@ -4,16 +4,19 @@ its limits; without relaxation the paper's hand-over jumps. Scenario B's wave on
 session's preset-B recording, kinematic world, 120 s, and a hand-built scene
 (``tests/twin/cosim/scenes.py``)."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from tests.twin.cosim.scenes import EGO_X, T0, tid_of, vehicle
+from tests.twin.cosim.sections import with_section
 from twin.core import i24
 from twin.core.errors import TwinError
 from twin.cosim.config import SCENARIO_B, CosimConfig
 from twin.cosim.core import relax
+from twin.cosim.core.batch import Batch, Shared
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
 from twin.metrics.handover import handover_section
@@ -179,3 +182,40 @@ def test_a_vehicle_a_little_ahead_of_its_recording_behind_recorded_traffic_is_ha
     ahead = rows["x"] - (EGO_X + 120.0 + 8.0 * rows["time"] - 8.0)
     assert ahead[(rows["time"] - 16.0).abs() < 1e-6].iloc[0] > 5.0  # a few metres, relaxing
     assert (ghosts["tid"] == tid_of(sim, 2)).any()  # handed back: a ghost again
+
+
+def test_a_relaxing_driver_back_in_the_visible_window_draws_strategic_targets(
+    calibrated_wave_store, built_map, tmp_path
+):
+    # SUMO development day 3 (twin data sumo --family): in stop-and-go most recorded
+    # vehicles reach the visible window's rear as relaxing bodies (made bodies behind a
+    # body they crowd in the ghost cell), and came in without strategic targets, which
+    # relaxing clears: the recording's lane-change flows went undriven (178 lane changes
+    # against the recording's 297 on 12 episodes; 201 drawing them). Every driver that
+    # comes back into the window draws them, as a vehicle spawned there does.
+    doc = json.loads((calibrated_wave_store.path / "calibration.json").read_text())
+    flows = doc["roads"]["westbound"]["lane_flows"]
+    bins = len(flows["x_edges"]) - 1
+    flows["strategic"] = {"-2>-3": {"probability": [0.02] * bins},
+                          "-3>-2": {"probability": [0.02] * bins}}  # fmt: skip
+    store = with_section(calibrated_wave_store, tmp_path / "store", "lane_flows",
+                         {**flows, "identified": True})  # fmt: skip
+    config = CosimConfig(world="kinematic", t_max=60.0, behaviour="calibrated")
+    shared = Shared.make(store, built_map, config)
+    assert shared.settings.targets
+    t_first, _ = store.time_range(config.road)
+    run = Batch(shared, episodes=4)
+    for b in range(4):
+        run.reset(b, lane=-2, x=700.0, time=t_first + 60.0 + 60.0 * b, seed=b)
+    state = run.state
+    was_relaxing = state.slots.relaxing & state.bodies.valid
+    entered, without = 0, 0
+    while not run.done.all():
+        run.step()
+        bo, sl, ep = state.bodies, state.slots, state.episodes
+        for b, i in zip(*np.nonzero(bo.valid & was_relaxing & ~sl.relaxing), strict=True):
+            if i != ep.ego[b] and ep.windows[b, 1] <= bo.x[b, i] <= ep.windows[b, 2]:
+                entered += 1
+                without += state.drivers.ctrl[b, i] == 0 and not sl.tgt_on[b, i]
+        was_relaxing = sl.relaxing & bo.valid
+    assert entered > 0 and without == 0, (entered, without)

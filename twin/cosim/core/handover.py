@@ -114,7 +114,8 @@ def despawn_outside(b, core):
     its recording is in a ghost cell or behind it as far as the recording is read (it
     would appear there, away from the vehicle), and so is one whose recording is
     absent or off the lanes, or one off the road; back inside the visible window it is
-    visible again. Returns how many were removed."""
+    visible again, with strategic targets drawn as a spawn's (:func:`_targets_again`).
+    Returns how many were removed."""
     valid, x, ep, sl, cs = (
         core.bodies.valid,
         core.bodies.x,
@@ -133,6 +134,7 @@ def despawn_outside(b, core):
         if v0 <= x[b, i] <= v1:
             if sl.relaxing[b, i]:
                 relax.end(b, core, i, ep.step[b] * cs.dt)
+                _targets_again(b, core, i)
             continue
         t = ep.t0[b] + ep.step[b] * cs.dt
         if cs.relax:
@@ -152,6 +154,23 @@ def despawn_outside(b, core):
         gone += 1
     ep.despawned[b] += gone
     return gone
+
+
+@kernel(inline=True)
+def _targets_again(b, core, i):
+    """Slot ``i``, a relaxing vehicle back inside the visible window, draws its
+    strategic targets from where it is, as a spawn there does
+    (:func:`twin.cosim.core.drivers.first_target`; its draws start again, so a driver
+    that was visible before reads the same draws for the bins ahead of it).
+
+    Relaxing cleared them (:func:`twin.cosim.core.relax.begin`). A recorded vehicle made
+    a body in a ghost cell (:func:`_yields`) enters the visible window relaxing, where
+    before it spawned from its ghost: in stop-and-go most vehicles entering at the rear
+    do so, and without targets they left the recording's lane-change flows undriven
+    (SUMO development day 1, 12 x 120 s calibrated: 201 lane changes against the
+    recording's 400; twin data sumo --family)."""
+    if core.traffic.drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
+        behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 
 
 @kernel(inline=True)

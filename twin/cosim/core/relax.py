@@ -35,7 +35,9 @@ closes the distance to its recorded trajectory within physical limits:
   leaves the lanes, and when it leaves the road; a vehicle whose recording is absent
   when it leaves the visible window is removed then, as in the paper;
 * back inside the visible window it is a visible vehicle again: its driver decides
-  (its next lane-change decision at once; a strategic target it had is not restored).
+  (its next lane-change decision at once) and draws its strategic targets from where
+  it is, as a vehicle spawned there does
+  (:func:`twin.cosim.core.handover.despawn_outside`).
 
 A recorded vehicle in a ghost cell, or behind the rear one (as far as 50 m behind the
 rearmost relaxing vehicle), that crowds a body ahead of it becomes a relaxing vehicle
