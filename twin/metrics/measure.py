@@ -6,7 +6,8 @@ Sections: ``ego`` (the simulated ego against its recording), ``traffic`` (speeds
 the speed field against the recording), ``energy`` (:mod:`twin.metrics.economy`),
 ``control`` (:mod:`twin.metrics.wave_dampening`), ``counts``, ``lane_flows``
 (:mod:`twin.metrics.lane_flow_fidelity`), ``handover`` (the ghost-cell boundary's
-jumps, :mod:`twin.metrics.handover`), ``physics`` and ``timing``.
+jumps, :mod:`twin.metrics.handover`), ``continuity`` (every record's track, whatever
+it is drawn as: :mod:`twin.metrics.continuity`), ``physics`` and ``timing``.
 """
 
 import math
@@ -18,6 +19,7 @@ from twin.cosim.cosimulator import Cosimulator
 from twin.data.store import TrajectoryStore
 from twin.metrics import economy, fidelity, lane_flow_fidelity, wave_dampening
 from twin.metrics.collisions import collision_section
+from twin.metrics.continuity import continuity_section
 from twin.metrics.handover import handover_section
 from twin.metrics.merges import merge_section
 from twin.metrics.recorded_changes import recorded_lane_changes
@@ -78,6 +80,18 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
         ),
         "handover": handover_section(
             vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt, sim.limits
+        ),
+        "continuity": continuity_section(
+            vehicles,
+            ghosts,
+            windows,
+            sim.traffic,
+            cfg.road,
+            sim.t0,
+            cfg.dt,
+            1.0 / cfg.ghost_log_rate,
+            sim.limits,
+            store.trajectory_arrays["id"],
         ),
         "physics": _physics(sim, vehicles),
         "timing": {

@@ -26,6 +26,7 @@ WITH_GHOST_SPAWN = "runs with a spawn from the ghost cells"
 WITH_SPAWN = "runs with a spawn"
 WITH_RELAXING = "runs with a vehicle relaxing in the ghost cells"
 WITH_RAMP = "runs on a road with an on-ramp"
+WITH_PAIRS = "runs that log a recorded vehicle at two times in a row"
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,27 @@ METRICS: tuple[Metric, ...] = (
            "spawn from the ghost cells (the spawn against its ghost carried on at its speed)",
            ("handover", "ghost_to_visible", "position_jump_m", "max"),
            produced_by=WITH_GHOST_SPAWN),
+    Metric("continuity_jump_p90_m", "m", "p90 over every pair of consecutive logged states "
+           "of one recorded vehicle, whatever it is drawn as (ego, body, ghost), of the "
+           "second's distance from the first carried on at their mean speed "
+           "(twin/metrics/continuity.py)", ("continuity", "position_jump_m", "p90"),
+           produced_by=WITH_PAIRS),
+    Metric("continuity_jump_max_m", "m", "the largest of those position jumps",
+           ("continuity", "position_jump_m", "max"), produced_by=WITH_PAIRS),
+    Metric("continuity_speed_jump_max_mps", "m/s", "the largest change of speed between two "
+           "consecutive logged states of one recorded vehicle beyond what 1 g allows in "
+           "their time", ("continuity", "speed_jump_mps", "max"), produced_by=WITH_PAIRS),
+    Metric("continuity_discontinuous", "count", "pairs of consecutive states of one recorded "
+           "vehicle more than 0.5 m or 0.5 m/s apart beyond their motion",
+           ("continuity", "discontinuous"), summary="sum"),
+    Metric("tracks_ending_inside", "count", "tracks of a recorded vehicle that end inside the "
+           "drawn region (not at its edge, the road's end, the episode's end or the "
+           "recording's)", ("continuity", "tracks", "end", "inside"), summary="sum"),
+    Metric("tracks_beginning_inside", "count", "tracks of a recorded vehicle that begin inside "
+           "the drawn region", ("continuity", "tracks", "begin", "inside"), summary="sum"),
+    Metric("bodies_beyond_region", "count", "simulated vehicles ever more than 50 m beyond the "
+           "ghost windows' outer ends", ("continuity", "beyond_region", "vehicles"),
+           summary="sum"),
     Metric("collisions", "count", "pairs of vehicles that touched (however often): two "
            "bodies, or a body on a ghost's recorded box",
            ("physics", "collisions"), summary="sum"),
@@ -284,7 +306,16 @@ def document() -> str:
         "was made, simulated and recorded in the same moving window\n"
         "(`twin/metrics/lane_flow_fidelity.py`); `twin eval` sums it over the episodes\n"
         "into `summary.json`, `summary.md` and `fidelity.png`, and counts the changes by\n"
-        "zone of the road (`twin/metrics/lane_change_zones.py`).\n\n" + markdown_table()
+        "zone of the road (`twin/metrics/lane_change_zones.py`).\n\n"
+        "It also holds a `continuity` section (`twin/metrics/continuity.py`): every\n"
+        "recorded vehicle's rows in the log, whatever it is drawn as (the ego, a body\n"
+        "inside or outside the visible window, a ghost), judged pair by pair: how far each\n"
+        "state lies from the one before carried on at their mean speed, how much the speed\n"
+        "changed beyond 1 g, by kind of pair (`visible>ghost`, `relaxing>ghost`, ...), the\n"
+        "worst pair with its `record_id`, where each track begins and ends (the episode's\n"
+        "start or end, the drawn region's edge, the road's end, the recording's own start\n"
+        "or end, or `inside`: a seam), records drawn twice at once, and the bodies that\n"
+        "were ever more than 50 m beyond the ghost windows.\n\n" + markdown_table()
     )
 
 

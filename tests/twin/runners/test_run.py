@@ -114,6 +114,16 @@ def test_metrics_json_and_config_toml(run_folder):
     assert config.time == pytest.approx(T0) and config.traffic.hov_share == 0.2
 
 
+def test_metrics_json_follows_every_record_through_the_boundary(run_folder):
+    # the ghost entering from behind is spawned where it is drawn, at its speed; every
+    # body's own motion is continuous and no track begins or ends inside the region
+    c = json.loads((run_folder / "metrics.json").read_text())["continuity"]
+    assert c["by_roles"]["ghost>visible"]["pairs"] == 1
+    assert c["discontinuous"] == 0 and c["position_jump_m"]["max"] <= 0.5
+    assert c["tracks"]["begin"]["inside"] == 0 and c["tracks"]["end"]["inside"] == 0
+    assert c["doubled"] == 0 and c["beyond_region"]["vehicles"] == 0
+
+
 def test_energy_in_the_log_and_in_metrics_json(run_folder):
     frame = pd.read_parquet(run_folder / "trajectories.parquet")
     m = json.loads((run_folder / "metrics.json").read_text())["energy"]
