@@ -19,9 +19,10 @@ Definitions (one place; :func:`continuity_section` applies them):
   a pair is **continuous** within :data:`JUMP_M` and :data:`SPEED_JUMP_MPS`;
 * a track **begins** and **ends** somewhere: at the episode's first or last logged
   time (``episode``); at or beyond the drawn region's edge, the rear and front ghost
-  windows' outer ends, within how far it moves in one log period
-  (``edge``); at the road's end (``road``); where its recording begins or ends
-  (``recording``: the data's own); anywhere else is a seam (``inside``);
+  windows' outer ends, within how far it and the edge (which moves with the ego) move
+  in one log period, and :data:`EDGE_SLACK_M` (``edge``); at the road's end
+  (``road``); where its recording begins or ends (``recording``: the data's own);
+  anywhere else is a seam (``inside``);
 * a record drawn twice at one time (a body and its ghost) is counted (``doubled``).
 
 Bodies beyond the drawn region are counted too (``beyond_region``): how many bodies
@@ -87,8 +88,12 @@ def continuity_section(vehicles: pd.DataFrame, ghosts: pd.DataFrame, windows: pd
         "worst": _worst(frame, k, position, speed_jump, record_ids),
         "tracks": {
             "count": int(begins.size),
-            "begin": _places(frame, begins, -1, edges, t_first, period, traffic, road, t0, limits),
-            "end": _places(frame, ends, 1, edges, t_last, period, traffic, road, t0, limits),
+            "begin": _places(
+                frame, begins, -1, edges, windows, dt, t_first, period, traffic, road, t0, limits
+            ),
+            "end": _places(
+                frame, ends, 1, edges, windows, dt, t_last, period, traffic, road, t0, limits
+            ),
         },
         "doubled": int(np.count_nonzero(doubled)),
         "beyond_region": _beyond(frame, edges),
@@ -170,7 +175,8 @@ def _worst(frame, k, position, speed_jump, record_ids) -> dict | None:
     }
 
 
-def _places(frame, rows, side, edges, t_bound, period, traffic, road, t0, limits) -> dict:
+def _places(frame, rows, side, edges, windows, dt, t_bound, period, traffic, road, t0,
+            limits) -> dict:  # fmt: skip
     """Where the tracks of ``rows`` (their first rows, ``side`` -1, or last, +1)
     begin or end: counts per place of :data:`PLACES` (module doc)."""
     counts = dict.fromkeys(PLACES, 0)
@@ -179,9 +185,13 @@ def _places(frame, rows, side, edges, t_bound, period, traffic, road, t0, limits
     time, x = frame["time"].to_numpy()[rows], frame["x"].to_numpy()[rows]
     speed = frame["speed"].to_numpy()[rows]
     e = edges[rows]
+    # the edges move with the ego: where they were a log period before (after) too
+    other = _edges_at(windows, time + side * period, dt)
     episode = np.abs(time - t_bound) <= period + 1e-9
     slack = np.abs(speed) * period + EDGE_SLACK_M
-    edge = (x <= e[:, 0] + slack) | (x >= e[:, 3] - slack)
+    near_rear = x <= np.maximum(e[:, 0], other[:, 0]) + slack
+    near_front = x >= np.minimum(e[:, 3], other[:, 3]) - slack
+    edge = near_rear | near_front
     road_end = (x <= limits[0] + slack) | (x >= limits[1] - slack)
     present, _, _, _ = traffic.recorded_states(road, frame["tid"].to_numpy()[rows],
                                                t0 + time + side * period)  # fmt: skip
