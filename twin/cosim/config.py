@@ -62,6 +62,14 @@ class CosimConfig:
             ghost cell and closes in on its recording within physical limits before it
             becomes a ghost (no jump; :mod:`twin.cosim.core.relax`); false: the paper's
             hand-over, onto the recording at once.
+        anchor: (with ``relax``) the simulated region ends ``REAR_MARGIN`` (50 m) behind
+            the rear ghost window and at the front one's end, and a body that ends off
+            its recording (there, or handed back within 0.3 m) is drawn on as its
+            recording anchored where it was, the offset decaying
+            (:mod:`twin.cosim.core.anchor`): every record's track continuous, nothing
+            simulated beyond the region. Off by default: on development days it left
+            more collisions with ghosts (``docs/cosim.md``, "The boundary without
+            seams").
         spawn_clearance: [m] bumper-to-bumper room a spawned vehicle needs to any body
             it shares its lane's width with, plus the difference of their braking
             distances at ``spawn_decel`` when the one behind is faster.
@@ -105,6 +113,7 @@ class CosimConfig:
     w_ghost: float = 50.0
     ghost_smoothing: float = 0.0
     relax: bool = True
+    anchor: bool = False
     spawn_clearance: float = 2.0
     spawn_clearance_at_rest: float = 0.3
     spawn_decel: float = 4.0
@@ -155,6 +164,10 @@ class CosimConfig:
                 raise ConfigError(f"{name} must be > 0, got {numbers[name]!r}")
         if not isinstance(self.relax, bool):
             raise ConfigError(f"relax must be true or false, got {self.relax!r}")
+        if not isinstance(self.anchor, bool):
+            raise ConfigError(f"anchor must be true or false, got {self.anchor!r}")
+        if self.anchor and not self.relax:
+            raise ConfigError("anchor needs relax: a body is anchored where it ends relaxing")
         if self.ghost_smoothing < 0 or self.spawn_clearance < 0:
             raise ConfigError("ghost_smoothing and spawn_clearance must be >= 0")
         if not 0 <= self.spawn_clearance_at_rest <= self.spawn_clearance:

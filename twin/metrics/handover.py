@@ -9,9 +9,17 @@ on, was removed at step k + 1. Where it went (``visible_to_ghost``):
 * ``left_road``: it drove off the road (its position carried on one step lies beyond
   the road's limits, where the windows end at the end of the map): nothing is handed
   over;
-* ``count``: its recording at step k + 1 lies in a ghost cell: it became that ghost.
-  The jump is the recording's position at step k + 1 against the simulated vehicle's
-  at step k carried on at its speed for one step, and the difference of the speeds;
+* ``count``: its recording at step k + 1 lies in a ghost cell, on it: it was handed
+  back and became that ghost. The jump is the recording's position at step k + 1
+  against the simulated vehicle's at step k carried on at its speed for one step, and
+  the difference of the speeds;
+* ``anchored``: its recording lies in a ghost cell, or behind the windows as far as
+  the simulated region reaches, more than :data:`ON_RECORDING_M` from it, in a run whose
+  vehicles relax: the body ended at the simulated region's edge and its ghost is drawn
+  where it was, the offset to its recording decaying (:mod:`twin.cosim.core.anchor`);
+  ``anchor_offset_m`` summarises those offsets (what the paper's hand-over would have
+  jumped; what is drawn is judged in the ``continuity`` section,
+  :mod:`twin.metrics.continuity`);
 * ``into_visible_window``: it was inside the windows and its recording lies in the
   visible window, where a recording is neither drawn nor simulated while its vehicle
   was: it vanished;
@@ -41,11 +49,18 @@ import pandas as pd
 from twin.core.i24 import Road
 
 BACKWARDS_M = 0.5  # [m] a jump against travel larger than this is counted as backwards
+#: [m] a vehicle this close to its recording one step on was handed back on it (the
+#: hand-back's 0.3 m, twin.cosim.core.relax.HAND_BACK_X, and a step's braking)
+ON_RECORDING_M = 0.35
+#: [m] the simulated region reaches this far behind the rear ghost window
+#: (twin.cosim.core.handover.REAR_MARGIN)
+REGION_REAR_M = 50.0
 EDGE_M = 0.05  # [m] a vehicle carried on this close to the windows' end may have left them
 
 
 def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, road: Road,
-                     t0: float, dt: float, limits=(-np.inf, np.inf)) -> dict:  # fmt: skip
+                     t0: float, dt: float, limits=(-np.inf, np.inf),
+                     anchors: bool = False) -> dict:  # fmt: skip
     """The ``handover`` section of an episode's metrics (module doc).
 
     Args:
@@ -55,6 +70,8 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
         traffic: the recorded traffic (``EmpiricalTraffic``).
         road: the episode's carriageway. t0: [s unix] its start. dt: [s] its step.
         limits: [m] the road's x range the windows are clipped to.
+        anchors: the run's vehicles relax, and a body ending off its recording is
+            anchored to it (``anchored``; else every such end is a jump, the paper's).
     """
     if windows.empty:  # nothing was stepped: nobody was handed over
         return _empty()
@@ -80,28 +97,34 @@ def handover_section(vehicles: pd.DataFrame, windows: pd.DataFrame, traffic, roa
     began[1:] = relaxing[:-1] & (ids[1:] == ids[:-1])
     accel = frame["accel"].to_numpy(float)[began]
     return {
-        "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt, limits),
+        "visible_to_ghost": _to_recording(removed, edges, traffic, road, t0, dt, limits, anchors),
         "ghost_to_visible": _from_recording(spawned, edges, traffic, road, t0, dt),
         "relaxing": _relaxing(frame[relaxing], accel, traffic, road, t0, dt),
     }
 
 
-def _to_recording(rows, edges, traffic, road, t0, dt, limits) -> dict:
+def _to_recording(rows, edges, traffic, road, t0, dt, limits, anchors) -> dict:
     """The simulated vehicles removed: where their recordings put them one step later."""
     after = rows["step"].to_numpy() + 1
     present, x, speed = _recorded(traffic, road, rows["tid"].to_numpy(), t0 + after * dt)
     place = _place(x, edges[after])
     carried = rows["x"].to_numpy() + rows["speed"].to_numpy() * dt
     off_road = (carried < limits[0]) | (carried > limits[1])
-    ghost = present & (place == 1) & ~off_road
+    jump = x - carried
+    in_cell = present & (place == 1) & ~off_road
+    behind = present & (x >= edges[after, 0] - REGION_REAR_M) & (x < edges[after, 0]) & ~off_road
+    anchored = (in_cell | behind) & (np.abs(jump) > ON_RECORDING_M) & anchors
+    ghost = in_cell & ~anchored
     g0, g1 = edges[after, 0], edges[after, 3]  # it was still inside them (one step's
     inside = (carried >= g0 + EDGE_M) & (carried <= g1 - EDGE_M)  # braking aside)
     vanished = present & (place == 0) & ~off_road & inside
     return {
         "count": int(ghost.sum()),
-        **_jumps(x[ghost] - carried[ghost], speed[ghost] - rows["speed"].to_numpy()[ghost]),
+        **_jumps(jump[ghost], speed[ghost] - rows["speed"].to_numpy()[ghost]),
+        "anchored": int(anchored.sum()),
+        "anchor_offset_m": _summary(np.abs(jump[anchored])),
         "into_visible_window": int(vanished.sum()),
-        "left_windows": int((~(ghost | vanished) & ~off_road).sum()),
+        "left_windows": int((~(ghost | vanished | anchored) & ~off_road).sum()),
         "left_road": int(off_road.sum()),
     }
 
@@ -143,6 +166,8 @@ def _empty() -> dict:
         "visible_to_ghost": {
             "count": 0,
             **none,
+            "anchored": 0,
+            "anchor_offset_m": _summary(np.zeros(0)),
             "into_visible_window": 0,
             "left_windows": 0,
             "left_road": 0,

@@ -79,7 +79,14 @@ def measure(sim: Cosimulator, store: TrajectoryStore, loop_s: float, reset_s: fl
             visible, lengths, [r.x_end for r in sim.world.road.ramps if r.road == cfg.road]
         ),
         "handover": handover_section(
-            vehicles, windows, sim.traffic, cfg.road, sim.t0, cfg.dt, sim.limits
+            vehicles,
+            windows,
+            sim.traffic,
+            cfg.road,
+            sim.t0,
+            cfg.dt,
+            sim.limits,
+            cfg.relax and cfg.anchor,
         ),
         "continuity": continuity_section(
             vehicles,

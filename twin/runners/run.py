@@ -349,9 +349,10 @@ def _bev_scene(vehicles, ghosts, windows, arrays, at: float) -> plots.BevScene:
     return plots.BevScene(sim, ghost, window, at)
 
 
-def _seam_line(handover: dict) -> str:
+def _seam_line(handover: dict, continuity: dict | None = None) -> str:
     """The ghost-cell boundary in one line: hand-overs each way with their largest jump,
-    the relaxing vehicles."""
+    the bodies anchored, the relaxing vehicles, and every record's largest jump in the
+    log (``continuity``)."""
     out, back, relaxing = (handover["visible_to_ghost"], handover["ghost_to_visible"],
                            handover["relaxing"])  # fmt: skip
 
@@ -362,12 +363,17 @@ def _seam_line(handover: dict) -> str:
     line = (f"boundary: {out['count']} handed to their recordings (largest jump "
             f"{largest(out)} m), {out['into_visible_window']} vanished, {back['count']} "
             f"spawned from ghosts (largest jump {largest(back)} m)")  # fmt: skip
+    if out.get("anchored"):
+        line += f", {out['anchored']} anchored where their bodies ended"
     if relaxing["vehicles"]:
         low, high = relaxing["accel_min_mps2"], relaxing["accel_max_mps2"]
         far = relaxing["distance_m"]["max"]
         line += (f"; {relaxing['vehicles']} relaxed (acceleration "
                  f"{_figure(low)} to {_figure(high)} m/s^2, up to {_figure(far)} m from the "
                  "recording)")  # fmt: skip
+    if continuity and continuity["pairs"]:
+        line += (f"; every record's largest jump in the log "
+                 f"{_figure(continuity['position_jump_m']['max'])} m")  # fmt: skip
     return line
 
 
@@ -394,7 +400,7 @@ def summary(result: RunResult) -> str:
         f"{counts['despawned']} despawned, {counts['spawns_skipped_overlap']} refused for lack "
         "of room; "
         f"{physics['collisions']} collisions, {physics['vehicles_off_road']} off the road",
-        _seam_line(m["handover"]),
+        _seam_line(m["handover"], m.get("continuity")),
         f"simulated {m['simulated_s']:.1f} s in {m['timing']['loop_s']:.1f} s: "
         f"{m['timing']['real_time_factor']:.1f} x real time",
     ]

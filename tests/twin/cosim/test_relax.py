@@ -5,6 +5,7 @@ session's preset-B recording, kinematic world, 120 s, and a hand-built scene
 (``tests/twin/cosim/scenes.py``)."""
 
 import json
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -15,26 +16,39 @@ from tests.twin.cosim.sections import with_section
 from twin.core import i24
 from twin.core.errors import TwinError
 from twin.cosim.config import SCENARIO_B, CosimConfig
-from twin.cosim.core import relax
+from twin.cosim.core import anchor, relax
 from twin.cosim.core.batch import Batch, Shared
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
+from twin.metrics.continuity import continuity_section
 from twin.metrics.handover import handover_section
 
 
-def _boundary(store, built_map, relaxes: bool) -> dict:
-    config = replace(SCENARIO_B, world="kinematic", dt=0.1, t_max=120.0, relax=relaxes)
+def _boundary(store, built_map, relaxes: bool, anchors: bool = False) -> dict:
+    config = replace(SCENARIO_B, world="kinematic", dt=0.1, t_max=120.0, relax=relaxes,
+                     anchor=anchors)  # fmt: skip
     traffic = EmpiricalTraffic(store)
     with Cosimulator(config, traffic, built_map) as sim:
         sim.reset()
         sim.run()
-        return handover_section(sim.log.vehicles(), sim.log.windows(), traffic, config.road,
-                                sim.t0, config.dt, sim.limits)  # fmt: skip
+        vehicles, windows = sim.log.vehicles(), sim.log.windows()
+        section = handover_section(vehicles, windows, traffic, config.road, sim.t0, config.dt,
+                                   sim.limits, relaxes and anchors)  # fmt: skip
+        section["continuity"] = continuity_section(
+            vehicles, sim.log.ghosts(), windows, traffic, config.road, sim.t0, config.dt,
+            1.0 / config.ghost_log_rate, sim.limits,
+        )  # fmt: skip
+        return section
 
 
 @pytest.fixture(scope="module")
 def relaxed(wave_store, built_map):
     return _boundary(wave_store, built_map, True)
+
+
+@pytest.fixture(scope="module")
+def anchored(wave_store, built_map):
+    return _boundary(wave_store, built_map, True, anchors=True)
 
 
 def test_vehicles_rejoin_their_recordings_without_a_jump(relaxed):
@@ -44,6 +58,23 @@ def test_vehicles_rejoin_their_recordings_without_a_jump(relaxed):
     # its speed the step before, the last drawn, is within HAND_BACK_SPEED of its recording now
     assert out["speed_jump_mps"]["max"] <= relax.HAND_BACK_SPEED + 1e-9
     assert out["backwards"] == 0 and out["into_visible_window"] == 0
+
+
+def test_with_anchors_every_record_goes_on_through_the_boundary_without_a_jump(anchored, relaxed):
+    # issue 76 (anchor = true): bodies that end off their recordings (at the simulated
+    # region's edge) are drawn as their recordings anchored where they were; nothing is
+    # simulated beyond the region, no track ends or begins inside it. Relaxation alone
+    # jumps where a relaxing body is removed off its recording, and keeps bodies far
+    # beyond the windows
+    assert relaxed["continuity"]["discontinuous"] > 0
+    assert relaxed["continuity"]["beyond_region"]["vehicles"] > 0
+    out, continuity = anchored["visible_to_ghost"], anchored["continuity"]
+    assert out["anchored"] >= 1 and out["anchor_offset_m"]["max"] > 1.0  # they were off
+    assert continuity["discontinuous"] == 0 and continuity["position_jump_m"]["max"] <= 0.5
+    assert continuity["speed_jump_mps"]["max"] <= 0.5
+    assert continuity["tracks"]["begin"]["inside"] == 0
+    assert continuity["tracks"]["end"]["inside"] == 0
+    assert continuity["beyond_region"]["vehicles"] == 0 and continuity["doubled"] == 0
 
 
 def test_relaxing_vehicles_stay_within_their_limits_and_never_reverse(relaxed):
@@ -58,12 +89,44 @@ def test_without_relaxation_the_papers_hand_over_jumps(wave_store, built_map, re
     out = _boundary(wave_store, built_map, False)
     assert out["relaxing"]["vehicles"] == 0
     assert out["visible_to_ghost"]["count"] > relaxed["visible_to_ghost"]["count"]
+    assert out["visible_to_ghost"]["anchored"] == 0
+    assert out["continuity"]["discontinuous"] > 0
     assert out["visible_to_ghost"]["position_jump_m"]["max"] > 5.0  # the seam relaxation removes
+
+
+@pytest.mark.parametrize("offset", [-40.0, -3.0, 0.25, 12.0])
+def test_an_anchors_offset_closes_at_a_physical_rate_without_overshoot(offset):
+    # the offset of a vehicle drawn where its body ended decays as a critically damped
+    # spring: its acceleration within ACCEL, never past its recording, under 1 mm in
+    # finite time
+    x, v, dt, steps = offset, 0.0, 0.1, 0
+    while max(abs(x), abs(v)) >= anchor.SETTLED:
+        x_next, v_next = anchor._step(x, v, anchor.ACCEL, dt, -math.inf)
+        assert abs(v_next - v) <= anchor.ACCEL * dt + 1e-12
+        assert x_next * offset >= -1e-9  # it does not overshoot its recording
+        x, v, steps = x_next, v_next, steps + 1
+        assert steps < 2000
+    assert steps * dt > abs(offset) / 20.0  # not at once
+
+
+def test_an_anchored_vehicle_ahead_of_a_standing_recording_waits_for_it():
+    # ahead of its recording by 30 m, the recording standing: the offset's rate never
+    # drops below minus the recorded speed (0), so the vehicle drawn stands and waits
+    x, v = 30.0, 0.0
+    for _ in range(100):
+        x, v = anchor._step(x, v, anchor.ACCEL, 0.1, -0.0)
+        assert v >= 0.0 and x == 30.0
+    x, v = anchor._step(x, v, anchor.ACCEL, 0.1, -5.0)  # the recording moves off at 5 m/s
+    assert -5.0 <= v < 0.0 and x < 30.0
 
 
 def test_relax_must_be_true_or_false():
     with pytest.raises(TwinError, match="relax must be true or false"):
         CosimConfig(relax="yes")
+    with pytest.raises(TwinError, match="anchor must be true or false"):
+        CosimConfig(anchor=1)
+    with pytest.raises(TwinError, match="anchor needs relax"):
+        CosimConfig(relax=False, anchor=True)
 
 
 def test_a_vehicle_far_ahead_of_its_recording_eases_off_without_stopping_in_its_lane(cosim):

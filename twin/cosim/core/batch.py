@@ -133,7 +133,7 @@ class Shared:
             targets=name == "recorded" or beh.strategic_flows is not None,
             kinematic=config.world == "kinematic",
             profile=physics.profile(bundle.road, road.direction),
-            fuel=physics.fuel_coefficients(), relax=bool(config.relax),
+            fuel=physics.fuel_coefficients(), relax=bool(config.relax), anchor=bool(config.anchor),
             merges=merges(bundle.road, road),
         )  # fmt: skip
         zones = [(z["lane"], z["x0"], z["x1"]) for z in beh.keep_out]

@@ -16,8 +16,8 @@ from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import RAMP_LANE
 from twin.core.ramps import lane_of_y as lane_of
+from twin.cosim.core import anchor, relax
 from twin.cosim.core import drivers as behaviour
-from twin.cosim.core import relax
 from twin.cosim.core.layout import (
     GHOST,
     GHOSTS_FULL,
@@ -27,6 +27,7 @@ from twin.cosim.core.layout import (
     SNAPSHOT_FULL,
     TABLE_FULL,
     WAITING,
+    entry,
 )
 from twin.cosim.core.room import CROWD_AHEAD, CROWD_DECEL, spawn_room
 from twin.data.recording import mean_accel, replay, window
@@ -41,7 +42,9 @@ MAX_SPEED = 60.0  # [m/s] spawn speeds above this are refused
 #: [m] behind the rear ghost window, and behind the rearmost relaxing body, the recording
 #: is read too (``Episodes.lookback``): a recorded vehicle there that crowds a body
 #: becomes a relaxing body before it would run into it; a relaxing body stays while its
-#: recording is there, and any body this far behind the rear ghost window
+#: recording is there, and any body this far behind the rear ghost window. With
+#: ``anchor``, the simulated region ends this far behind the rear ghost window: a body
+#: further behind ends there (its recording anchored to it, :mod:`twin.cosim.core.anchor`)
 REAR_MARGIN = 50.0
 #: [m/s^2] it becomes a body behind the one it crowds only where it can stop behind it
 #: braking this hard, ``spawn_clearance_at_rest`` apart (else it stays a ghost: a contact
@@ -60,27 +63,6 @@ APPEAR_DECEL = 8.0
 
 
 # -- the tid table ---------------------------------------------------------------------------
-
-
-@kernel(inline=True)
-def entry(keys, flags, slots, b, r, insert):
-    """The table's index of recording index ``r`` in episode ``b`` (inserted where
-    ``insert``), or -1 (absent, or the table is full)."""
-    size = keys.shape[1]
-    h = (r * 2654435761) & (size - 1)
-    for _ in range(size):
-        k = keys[b, h]
-        if k == r:
-            return h
-        if k < 0:
-            if not insert:
-                return -1
-            keys[b, h] = r
-            flags[b, h] = 0
-            slots[b, h] = -1
-            return h
-        h = (h + 1) & (size - 1)
-    return -1
 
 
 @kernel(inline=True)
@@ -112,8 +94,11 @@ def despawn_outside(b, core):
     from the ghost cells on until they are back on their recordings; a relaxing vehicle
     more than :data:`REAR_MARGIN` behind the windows or ahead of them is removed unless
     its recording is in a ghost cell or behind it as far as the recording is read (it
-    would appear there, away from the vehicle), and so is one whose recording is
-    absent or off the lanes, or one off the road; back inside the visible window it is
+    would appear there, away from the vehicle); with ``anchor`` it ends there wherever
+    its recording is, its recording anchored to where it was
+    (:mod:`twin.cosim.core.anchor`: drawn on from there, no jump); one whose recording is
+    absent or off the lanes, or one off the road, is removed; back inside the visible
+    window it is
     visible again, with strategic targets drawn as a spawn's (:func:`_targets_again`).
     Returns how many were removed."""
     valid, x, ep, sl, cs = (
@@ -141,15 +126,22 @@ def despawn_outside(b, core):
             relax.target(b, core, i, t)  # its recording now
         xr = sl.rec_x[b, i]
         recorded_in_cell = sl.rec_on[b, i] and lookback <= xr <= g1 and not v0 <= xr <= v1
-        stays = sl.rec_on[b, i] and (
-            (rear <= x[b, i] <= g1) or (sl.relaxing[b, i] and recorded_in_cell)
-        )
+        # without anchors, a relaxing body stays while its recording is in a ghost cell
+        # (it would appear there, away from the vehicle), however far that is
+        held = not cs.anchor and sl.relaxing[b, i] and recorded_in_cell
+        stays = sl.rec_on[b, i] and ((rear <= x[b, i] <= g1) or held)
         if cs.relax and stays and cs.limit_lo <= x[b, i] <= cs.limit_hi:
             if not sl.relaxing[b, i]:
                 relax.begin(b, core, i)
             continue
         if not cs.relax:  # the paper's hand-over: its ghost appears at once, where it is
             _drawn_now(b, core, core.slots.r[b, i])
+        elif (
+            cs.anchor
+            and sl.rec_on[b, i]
+            and anchor.anchor(b, core, i, sl.rec_x[b, i], sl.rec_y[b, i], sl.rec_speed[b, i])
+        ):
+            _drawn_now(b, core, core.slots.r[b, i])  # its ghost goes on where it is
         remove(b, core, i)
         gone += 1
     ep.despawned[b] += gone
@@ -197,6 +189,8 @@ def hand_back(b, core):
             continue
         if not _crowds_as_ghost(b, core, i, t):
             _drawn_now(b, core, core.slots.r[b, i])
+            if core.settings.anchor:
+                anchor.anchor(b, core, i, sl.rec_x[b, i], sl.rec_y[b, i], sl.rec_speed[b, i])
             remove(b, core, i)
             back += 1
     ep.handed_back[b] += back
@@ -546,6 +540,9 @@ def snapshot(b, core, t):
             if bo.valid[b, i] and core.slots.relaxing[b, i]:
                 rear = min(rear, bo.x[b, i] - REAR_MARGIN)
                 front = max(front, bo.x[b, i] + bo.length[b, i] + REAR_MARGIN)
+        # and as far as anchored ghosts are from their recordings (module anchor)
+        rear -= max(ep.anchor_hi[b], 0.0)
+        front += max(-ep.anchor_lo[b], 0.0)
     rear = max(rear, core.settings.limit_lo)  # no body is spawned beyond the map's end
     front = max(min(front, core.settings.limit_hi), ep.windows[b, 3])
     ep.lookback[b] = rear
@@ -593,6 +590,11 @@ def enter_and_reload(b, core):
     sr, sx, sy, sspeed = sn.r, sn.x, sn.y, sn.speed
     n = sn.count[b]
     a = _bound(sx[b], n, ep.windows[b, 0], np.bool_(False))  # before a: the rear margin
+    # with anchors, bodies are simulated as far as REAR_MARGIN behind the rear ghost
+    # window: no yield behind that (a body there ends, its recording anchored to it)
+    m0 = 0
+    if core.settings.anchor:
+        m0 = _bound(sx[b], n, ep.windows[b, 0] - REAR_MARGIN, np.bool_(False))
     v0 = _bound(sx[b], n, ep.windows[b, 1], np.bool_(False))
     v1 = _bound(sx[b], n, ep.windows[b, 2], np.bool_(True))
     g1 = _bound(sx[b], n, ep.windows[b, 3], np.bool_(True))  # up to the windows' end
@@ -642,7 +644,7 @@ def enter_and_reload(b, core):
         if lane == 0 or f & SIMULATED:
             continue
         drawn = h >= 0 and core.table.drawn[b, h] >= step - 1
-        if relaxing and k < g1 and _yields(b, core, k, t, m, drawn):
+        if relaxing and m0 <= k < g1 and _yields(b, core, k, t, m, drawn):
             # simulated now, relaxing behind the body it would run into
             m = _sort_bodies(b, core)
             continue

@@ -16,7 +16,9 @@ validity mask), made once and reused.
   :mod:`twin.metrics.collisions`);
 * ``table`` (:data:`TidTable`, B x H): per episode, every recorded vehicle it has met,
   in an open-addressing hash by recording index: simulated now, a ghost after the
-  last reload, seen in the windows before, waiting for room to spawn;
+  last reload, seen in the windows before, waiting for room to spawn, anchored (drawn
+  off its recording where its body was, the offset decaying:
+  :mod:`twin.cosim.core.anchor`, whose entries ``Episodes.anchors`` lists);
 * ``ghosts`` (:data:`Ghosts`, B x G): the ghost set, the traffic's obstacles;
 * ``snap`` (:data:`Snapshot`, B x S): the recorded vehicles in the windows now;
 * ``log`` (:data:`Log`): every slot every step, the windows, the ghosts at the log
@@ -52,9 +54,9 @@ Episodes = namedtuple(
     "skipped_invalid skipped_full collisions collision_log off_road spawn_errors "
     "spawn_error_count touching touching_count ghost_touching ghost_touching_count pair_count "
     "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
-    "follower_count overflow",
+    "follower_count overflow anchors anchor_count anchor_lo anchor_hi anchors_full",
 )
-TidTable = namedtuple("TidTable", "key flags slot drawn")
+TidTable = namedtuple("TidTable", "key flags slot drawn off_x off_v off_y off_vy rec_x rec_y rec_v")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel")
 Snapshot = namedtuple("Snapshot", "count r x y speed")
 Log = namedtuple(
@@ -76,9 +78,11 @@ Core = namedtuple(
 
 #: flags of the tid table: simulated, a ghost, read before, waiting for room, held back
 #: from appearing as a ghost on a body until it appears
-#: (:func:`twin.cosim.core.handover.enter_and_reload`); the table's ``drawn`` keeps the
+#: (:func:`twin.cosim.core.handover.enter_and_reload`), anchored (drawn at an offset
+#: from its recording, :mod:`twin.cosim.core.anchor`); the table's ``drawn`` keeps the
 #: last step a vehicle was drawn (a ghost, or a body until its removal)
-SIMULATED, GHOST, SEEN, WAITING, HELD = 1, 2, 4, 8, 16
+SIMULATED, GHOST, SEEN, WAITING, HELD, ANCHORED = 1, 2, 4, 8, 16, 32
+ANCHORS_KEPT = 256  # anchored recorded vehicles per episode (more are not anchored: counted)
 #: ``Episodes.ended``
 RUNNING, EGO_LEFT = 0, 1
 #: ``Episodes.overflow``: what ran out (the batch's facade names it)
@@ -95,6 +99,27 @@ GHOST_ID_BASE = -1  # a ghost's id in a contact: GHOST_ID_BASE - tid (below ever
 SPAWN_ERRORS_KEPT = 4096  # spawn speed errors kept per episode
 TOUCHING_KEPT = 256  # vehicle pairs in contact at once, per episode
 FOLLOWERS = 5  # the AV's followers whose fuel counts with its own
+
+
+@kernel(inline=True)
+def entry(keys, flags, slots, b, r, insert):  # the tid table's probe
+    """The table's index of recording index ``r`` in episode ``b`` (inserted where
+    ``insert``), or -1 (absent, or the table is full)."""
+    size = keys.shape[1]
+    h = (r * 2654435761) & (size - 1)
+    for _ in range(size):
+        k = keys[b, h]
+        if k == r:
+            return h
+        if k < 0:
+            if not insert:
+                return -1
+            keys[b, h] = r
+            flags[b, h] = 0
+            slots[b, h] = -1
+            return h
+        h = (h + 1) & (size - 1)
+    return -1
 
 
 def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_every: int) -> State:
@@ -137,11 +162,16 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         group_distance=np.zeros(b), speed_prev=np.zeros((b, n)), speed_prev_control=np.zeros(b),
         collisions_before=zeros.copy(),
         followers=np.full((b, FOLLOWERS), -1, np.int64), follower_count=zeros.copy(),
-        overflow=zeros.copy(),
+        overflow=zeros.copy(), anchors=np.full((b, ANCHORS_KEPT), -1, np.int64),
+        anchor_count=zeros.copy(), anchor_lo=np.zeros(b), anchor_hi=np.zeros(b),
+        anchors_full=zeros.copy(),
     )  # fmt: skip
     table = TidTable(
         key=np.full((b, h), -1, np.int64), flags=np.zeros((b, h), np.int64),
         slot=np.full((b, h), -1, np.int64), drawn=np.full((b, h), NEVER, np.int64),
+        off_x=np.zeros((b, h)), off_v=np.zeros((b, h)), off_y=np.zeros((b, h)),
+        off_vy=np.zeros((b, h)), rec_x=np.zeros((b, h)), rec_y=np.zeros((b, h)),
+        rec_v=np.zeros((b, h)),
     )  # fmt: skip
     ghosts = Ghosts(
         count=zeros.copy(), r=np.zeros((b, g), np.int64), lane=np.zeros((b, g), np.int64),

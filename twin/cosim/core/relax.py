@@ -31,19 +31,24 @@ closes the distance to its recorded trajectory within physical limits:
   only where its recording, the ghost it becomes, would not crowd a body ahead
   (:func:`twin.cosim.core.handover.hand_back`);
 * it is removed once it is outside the windows, unless its recording is in a ghost
-  cell (it would appear there, away from the vehicle), once its recording ends or
-  leaves the lanes, and when it leaves the road; a vehicle whose recording is absent
-  when it leaves the visible window is removed then, as in the paper;
+  cell (it would appear there, away from the vehicle); with ``anchor`` (off by
+  default) it ends where it leaves the simulated region (the windows and
+  :data:`twin.cosim.core.handover.REAR_MARGIN` behind them) wherever its recording is,
+  its recording drawn from then on where it was and closing in on the recording
+  (:mod:`twin.cosim.core.anchor`); it is removed once its recording ends or leaves the
+  lanes, and when it leaves the road; a vehicle whose recording is absent when it
+  leaves the visible window is removed then, as in the paper;
 * back inside the visible window it is a visible vehicle again: its driver decides
   (its next lane-change decision at once) and draws its strategic targets from where
   it is, as a vehicle spawned there does
   (:func:`twin.cosim.core.handover.despawn_outside`).
 
 A recorded vehicle in a ghost cell, or behind the rear one (as far as 50 m behind the
-rearmost relaxing vehicle), that crowds a body ahead of it becomes a relaxing vehicle
-too, spawned at its recorded state (:func:`twin.cosim.core.handover.enter_and_reload`):
-the lag of a relaxing vehicle travels upstream, as a queue does, instead of the
-recording driving through it.
+rearmost relaxing vehicle; with ``anchor``, as far as the simulated region reaches),
+that crowds a body ahead of it becomes a relaxing vehicle too, spawned
+at its recorded state (:func:`twin.cosim.core.handover.enter_and_reload`): the lag of a
+relaxing vehicle travels upstream, as a queue does, instead of the recording driving
+through it.
 
 How far a relaxing vehicle strays from its recorded track, its acceleration and its
 slowest speed are measured in every run (``twin.metrics.handover``).

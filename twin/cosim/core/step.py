@@ -31,7 +31,7 @@ from collections import namedtuple
 
 from twin.core.jit import kernel
 from twin.core.ramps import RAMP_LANE, on_ramp
-from twin.cosim.core import relax, settle
+from twin.cosim.core import anchor, relax, settle
 from twin.cosim.core.drivers import update_targets
 from twin.cosim.core.handover import (
     despawn_outside,
@@ -63,7 +63,7 @@ CoreSettings = namedtuple(
     "CoreSettings",
     "dt limit_lo limit_hi w_visible w_ghost vel_default ghost_smoothing clearance "
     "clearance_at_rest spawn_decel av_share av_controller ego_controller lead_chases_ghost "
-    "targets kinematic profile fuel relax merges",
+    "targets kinematic profile fuel relax anchor merges",
 )
 
 
@@ -102,6 +102,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.collisions[b], ep.off_road[b], ep.spawn_error_count[b] = 0, 0, 0
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
     ep.ghost_touching_count[b] = 0
+    ep.anchor_count[b], ep.anchor_lo[b], ep.anchor_hi[b], ep.anchors_full[b] = 0, 0.0, 0.0, 0
     ep.fuel_sum[b], ep.group_distance[b], ep.collisions_before[b] = 0.0, 0.0, 0
     for k in range(4):
         ep.lead_speed[b, k] = math.nan
@@ -248,6 +249,7 @@ def read_windows(b, core):
     ep = core.episodes
     snapshot(b, core, ep.t0[b] + ep.step[b] * core.settings.dt)
     hand_back(b, core)
+    anchor.apply(b, core)
 
 
 @kernel
@@ -267,6 +269,7 @@ def close_step(b, core):
     ep.fuel_sum[b] += fuel
     ep.group_distance[b] += distance
     record(b, core, ep.step[b])
+    anchor.decay(b, core)
     ep.done[b] = ep.step[b] >= ep.steps[b] or ep.ended[b] != 0
 
 

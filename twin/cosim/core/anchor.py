@@ -1,0 +1,246 @@
+"""Anchored ghosts: a recorded vehicle whose simulated body ends is drawn where the body
+was, not where its recording is, and closes the distance at a physical rate (issue 76,
+``docs/cosim.md``, "The boundary without seams"). On with the run setting ``anchor``
+(off by default: on development days it left more collisions with ghosts); without
+it nothing is anchored and every function here leaves the state as it is.
+
+A body ends at the boundary in two ways: handed back once it is within 0.3 m of its
+recording (:func:`twin.cosim.core.handover.hand_back`), or removed where it leaves the
+simulated region (the ghost windows and :data:`twin.cosim.core.handover.REAR_MARGIN`
+behind them) still metres from its recording (:func:`twin.cosim.core.handover.
+despawn_outside`). Drawn at its recording at once, the vehicle jumped by that distance
+(scenario B: a median 9 m, up to 34 m), in the log and in the cameras.
+
+Here the body's recording becomes its ghost **anchored**: the tid table keeps its
+offset from the recording (along and across the road, and their rates of change:
+``TidTable.off_x``, ``off_v``, ``off_y``, ``off_vy``; ``rec_v``, the recorded speed
+it was last drawn at), set to the body's state minus the recording's at the step it
+ends, so the ghost's first state is the body's. Every
+snapshot of the recording draws it at its recorded state plus the offset
+(:func:`apply`): it keeps its recording's speed profile, shifted, so the traffic behind
+it still sees the recorded wave, and everything that reads the snapshot (the ghost
+set, the log, the cameras, a spawn into the visible window, a yield behind a body)
+sees it where it is drawn. After each step the offset decays as a critically damped
+spring of natural frequency :data:`OMEGA` (relaxation's), its acceleration within
+:data:`ACCEL` along and :data:`ACCEL_Y` across, never so fast that the vehicle drawn
+would back up (ahead of a standing recording it stands and waits), nor so fast that
+it could not stop behind the body or ghost ahead of it (:func:`decay`);
+once all four are below :data:`SETTLED` the anchor is dropped and the ghost is its
+recording again. A
+recorded vehicle simulated again (spawned into the visible window, or made a body
+behind one it crowds) drops its anchor: the body starts where it was drawn.
+
+``Episodes.anchors`` lists the anchored entries of the table (at most
+:data:`~twin.cosim.core.layout.ANCHORS_KEPT`; one more is not anchored and is counted
+in ``anchors_full``); ``anchor_lo`` and ``anchor_hi`` [m] are the smallest and largest
+offsets along the road, by which the snapshot reads the recording further
+(:func:`twin.cosim.core.handover.snapshot`), so an anchored vehicle whose recording is
+outside the windows is still drawn where it is.
+"""
+
+import math
+
+import numpy as np
+
+from twin.core.jit import kernel
+from twin.core.ramps import lane_of_y as lane_of
+from twin.cosim.core.layout import ANCHORED, SIMULATED, entry
+from twin.cosim.core.relax import OMEGA
+
+ACCEL = 2.0  # [m/s^2] the largest acceleration of the offset along the road
+ACCEL_Y = 1.0  # [m/s^2] across it
+SETTLED = 1e-3  # [m], [m/s] an offset this small in all four is dropped
+FOLLOW_GAP = 2.0  # [m] an anchored vehicle keeps this far behind what is ahead of it
+FOLLOW_DECEL = 4.0  # [m/s^2] and could stop there braking this hard
+BRAKE = 8.0  # [m/s^2] the hardest its drawn speed falls for what is ahead
+HEADWAY = 1.0  # [s] what is behind it closer than FOLLOW_GAP and this at its speed
+BESIDE_GAP = 0.3  # [m] it moves across no closer than this to a body alongside
+
+
+@kernel
+def anchor(b, core, i, rec_x, rec_y, rec_speed):
+    """Body slot ``i``, ending now, is drawn from now on as its recording (at back x,
+    y [m] and ``rec_speed`` [m/s] now) offset to where the body is. Returns whether it
+    was anchored (not where the list is full)."""
+    bo, table, ep = core.bodies, core.table, core.episodes
+    h = entry(table.key, table.flags, table.slot, b, core.slots.r[b, i], np.bool_(True))
+    if h < 0:
+        return False
+    if table.flags[b, h] & ANCHORED == 0:
+        n = ep.anchor_count[b]
+        if n == ep.anchors.shape[1]:
+            ep.anchors_full[b] += 1
+            return False
+        ep.anchors[b, n] = h
+        ep.anchor_count[b] = n + 1
+        table.flags[b, h] |= ANCHORED
+    table.off_x[b, h] = bo.x[b, i] - rec_x
+    table.off_v[b, h] = bo.speed[b, i] - rec_speed
+    table.off_y[b, h] = bo.y[b, i] - rec_y
+    table.off_vy[b, h] = bo.speed[b, i] * math.sin(bo.yaw[b, i])
+    table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = rec_x, rec_y, rec_speed
+    _extent(b, core)
+    return True
+
+
+@kernel
+def apply(b, core):
+    """The snapshot's anchored vehicles drawn at their recorded states plus their
+    offsets (a speed never below 0; one drawn beyond the road's ends has left the map
+    and is dropped), and the rows sorted by x again."""
+    sn, table, cs = core.snap, core.table, core.settings
+    flags = table.flags
+    if core.episodes.anchor_count[b] == 0:
+        return
+    moved, kept = False, 0
+    for k in range(sn.count[b]):
+        r, x, y, speed = sn.r[b, k], sn.x[b, k], sn.y[b, k], sn.speed[b, k]
+        h = entry(table.key, flags, table.slot, b, np.int64(r), np.bool_(False))
+        if h >= 0 and flags[b, h] & ANCHORED and not flags[b, h] & SIMULATED:
+            # the recorded state it is drawn from: its offset's rate never drives it
+            # backwards, nor into what is ahead of where it is drawn (decay)
+            table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = x, y, speed
+            x += table.off_x[b, h]
+            y += table.off_y[b, h]
+            speed = max(speed + table.off_v[b, h], 0.0)
+            moved = True
+            if not cs.limit_lo <= x <= cs.limit_hi:
+                continue  # drawn beyond the road's end: it has left the map
+        sn.r[b, kept], sn.x[b, kept], sn.y[b, kept], sn.speed[b, kept] = r, x, y, speed
+        kept += 1
+    sn.count[b] = kept
+    if moved:
+        _sort(b, sn)
+
+
+@kernel(inline=True)
+def _sort(b, sn):
+    """Insertion sort of the snapshot's rows by x (they come nearly sorted)."""
+    r, x, y, speed = sn.r, sn.x, sn.y, sn.speed
+    for k in range(1, sn.count[b]):
+        rk, xk, yk, vk = r[b, k], x[b, k], y[b, k], speed[b, k]
+        j = k
+        while j > 0 and x[b, j - 1] > xk:
+            r[b, j], x[b, j] = r[b, j - 1], x[b, j - 1]
+            y[b, j], speed[b, j] = y[b, j - 1], speed[b, j - 1]
+            j -= 1
+        r[b, j], x[b, j], y[b, j], speed[b, j] = rk, xk, yk, vk
+
+
+@kernel
+def decay(b, core):
+    """One step of every anchor's offset toward zero (module doc); the settled and the
+    simulated again dropped from the list."""
+    table, ep, dt = core.table, core.episodes, core.settings.dt
+    flags = table.flags
+    kept = 0
+    for a in range(ep.anchor_count[b]):
+        h = ep.anchors[b, a]
+        if flags[b, h] & ANCHORED == 0 or flags[b, h] & SIMULATED:
+            flags[b, h] &= ~ANCHORED
+            continue
+        x, v = _step(table.off_x[b, h], table.off_v[b, h], ACCEL, dt, -table.rec_v[b, h])
+        v = _behind(b, core, h, v, dt)
+        x = table.off_x[b, h] + v * dt
+        y, vy = _step(table.off_y[b, h], table.off_vy[b, h], ACCEL_Y, dt, -math.inf)
+        if _body_beside(b, core, h, table.rec_y[b, h] + y):
+            # a body beside where it would move across: it holds its line
+            vy = 0.0
+            y = table.off_y[b, h]
+        table.off_x[b, h], table.off_v[b, h] = x, v
+        table.off_y[b, h], table.off_vy[b, h] = y, vy
+        if max(abs(x), abs(v), abs(y), abs(vy)) < SETTLED:
+            flags[b, h] &= ~ANCHORED
+            continue
+        ep.anchors[b, kept] = h
+        kept += 1
+    ep.anchor_count[b] = kept
+    _extent(b, core)
+
+
+@kernel(inline=True)
+def _step(x, v, limit, dt, floor):
+    """(offset, rate) one step of ``dt`` [s] later: a critically damped spring toward 0
+    of natural frequency OMEGA, its acceleration within ``limit`` (semi-implicit), its
+    rate no lower than ``floor`` (along the road: minus the recorded speed, so that the
+    vehicle drawn ahead of a slower recording waits for it rather than backs up)."""
+    a = min(max(-2.0 * OMEGA * v - OMEGA * OMEGA * x, -limit), limit)
+    v = max(v + a * dt, floor)
+    return x + v * dt, v
+
+
+@kernel(inline=True)
+def _behind(b, core, h, v, dt):
+    """Table entry ``h``'s offset rate [m/s] ``v`` for the next step: no slower than the
+    nearest body or ghost behind it in its lane where that is within :data:`FOLLOW_GAP`
+    and :data:`HEADWAY` of it (raised no faster than :data:`ACCEL` allows: a recording
+    behind does not know of the offset and would run into it); no faster than lets the
+    vehicle drawn stop behind the nearest body or ghost ahead of it (braking at
+    :data:`FOLLOW_DECEL` to :data:`FOLLOW_GAP` behind it), lowered no faster than
+    :data:`BRAKE` allows (a vehicle drawn does not stop at once). What is ahead wins:
+    an anchored vehicle closes in on its recording only as the traffic allows."""
+    table, bo, gh = core.table, core.bodies, core.ghosts
+    r = table.key[b, h]
+    length = core.rec.length[r]
+    x = table.rec_x[b, h] + table.off_x[b, h]
+    lane = lane_of(table.rec_y[b, h] + table.off_y[b, h])
+    if lane == 0:
+        return v
+    ahead, ahead_v = math.inf, 0.0
+    for i in range(bo.top[b]):
+        if bo.valid[b, i] and bo.lane[b, i] == lane and x < bo.x[b, i] < ahead:
+            ahead, ahead_v = bo.x[b, i], bo.speed[b, i]
+    for g in range(gh.count[b]):
+        if gh.r[b, g] != r and gh.lane[b, g] == lane and x < gh.x[b, g] < ahead:
+            ahead, ahead_v = gh.x[b, g], gh.speed[b, g]
+    behind, behind_v, behind_end = -math.inf, 0.0, -math.inf
+    for i in range(bo.top[b]):
+        end = bo.x[b, i] + bo.length[b, i]
+        if bo.valid[b, i] and bo.lane[b, i] == lane and behind < bo.x[b, i] < x:
+            behind, behind_v, behind_end = bo.x[b, i], bo.speed[b, i], end
+    for g in range(gh.count[b]):
+        if gh.r[b, g] != r and gh.lane[b, g] == lane and behind < gh.x[b, g] < x:
+            behind, behind_v, behind_end = gh.x[b, g], gh.speed[b, g], gh.x[b, g] + gh.length[b, g]
+    if math.isfinite(behind) and x - behind_end < FOLLOW_GAP + behind_v * HEADWAY:
+        # what is behind it closes in: it goes no slower than that, as it speeds up
+        v = max(v, min(behind_v - table.rec_v[b, h], table.off_v[b, h] + ACCEL * dt))
+    if not math.isfinite(ahead):
+        return v
+    room = max(ahead - x - length - FOLLOW_GAP, 0.0)
+    allowed = math.sqrt(ahead_v * ahead_v + 2.0 * FOLLOW_DECEL * room) - table.rec_v[b, h]
+    if v <= allowed:
+        return v
+    return max(allowed, table.off_v[b, h] - BRAKE * dt, -table.rec_v[b, h])
+
+
+@kernel(inline=True)
+def _body_beside(b, core, h, y):
+    """Whether table entry ``h``'s vehicle drawn at road-frame ``y`` [m] (its x where it
+    is drawn now) would come within :data:`BESIDE_GAP` across of a body alongside it
+    (their boxes overlapping along the road, :data:`FOLLOW_GAP` apart): an anchored
+    vehicle moving across toward its recording's lane does so only where the lane is
+    clear, as a lane change would."""
+    table, bo, rec = core.table, core.bodies, core.rec
+    r = table.key[b, h]
+    x = table.rec_x[b, h] + table.off_x[b, h]
+    length, width = rec.length[r], rec.width[r]
+    for i in range(bo.top[b]):
+        if not bo.valid[b, i]:
+            continue
+        bx = bo.x[b, i]
+        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
+        if along and abs(bo.y[b, i] - y) < 0.5 * (width + bo.width[b, i]) + BESIDE_GAP:
+            return True
+    return False
+
+
+@kernel(inline=True)
+def _extent(b, core):
+    """``anchor_lo``, ``anchor_hi`` [m]: the smallest and largest offsets along the
+    road (0 without anchors)."""
+    table, ep = core.table, core.episodes
+    lo, hi = 0.0, 0.0
+    for a in range(ep.anchor_count[b]):
+        off = table.off_x[b, ep.anchors[b, a]]
+        lo, hi = min(lo, off), max(hi, off)
+    ep.anchor_lo[b], ep.anchor_hi[b] = lo, hi
