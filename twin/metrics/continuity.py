@@ -33,6 +33,8 @@ the front one, and the farthest any was [m].
 import numpy as np
 import pandas as pd
 
+from twin.metrics.handover import spread
+
 TRACK_GAP_S = 0.25  # [s] rows of one record further apart than this are two tracks
 JUMP_M = 0.5  # [m] the largest position jump of a continuous pair
 SPEED_JUMP_MPS = 0.5  # [m/s] the largest speed jump of a continuous pair
@@ -81,8 +83,8 @@ def continuity_section(vehicles: pd.DataFrame, ghosts: pd.DataFrame, windows: pd
     t_first = float(windows["time"].iloc[0]) if not windows.empty else 0.0
     return {
         "pairs": int(k.size),
-        "position_jump_m": _summary(position),
-        "speed_jump_mps": _summary(speed_jump),
+        "position_jump_m": spread(position),
+        "speed_jump_mps": spread(speed_jump),
         "discontinuous": int(np.count_nonzero((position > JUMP_M) | (speed_jump > SPEED_JUMP_MPS))),
         "by_roles": _by_roles(role[k - 1], role[k], position, speed_jump),
         "worst": _worst(frame, k, position, speed_jump, record_ids),
@@ -127,16 +129,6 @@ def _edges_at(windows: pd.DataFrame, time: np.ndarray, dt: float) -> np.ndarray:
     at = windows["time"].to_numpy()
     k = np.clip(np.searchsorted(at, np.asarray(time) + 1e-9 * dt, side="right") - 1, 0, len(at) - 1)
     return windows[["g0", "x0", "x1", "g1"]].to_numpy()[k]
-
-
-def _summary(values: np.ndarray) -> dict:
-    if values.size == 0:
-        return {"median": None, "p90": None, "max": None}
-    return {
-        "median": round(float(np.median(values)), 4),
-        "p90": round(float(np.percentile(values, 90)), 4),
-        "max": round(float(values.max()), 4),
-    }
 
 
 def _by_roles(before, after, position, speed_jump) -> dict:
@@ -222,8 +214,8 @@ def _empty() -> dict:
     places = dict.fromkeys(PLACES, 0)
     return {
         "pairs": 0,
-        "position_jump_m": _summary(np.zeros(0)),
-        "speed_jump_mps": _summary(np.zeros(0)),
+        "position_jump_m": spread(np.zeros(0)),
+        "speed_jump_mps": spread(np.zeros(0)),
         "discontinuous": 0,
         "by_roles": {},
         "worst": None,

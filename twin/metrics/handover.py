@@ -122,7 +122,7 @@ def _to_recording(rows, edges, traffic, road, t0, dt, limits, anchors) -> dict:
         "count": int(ghost.sum()),
         **_jumps(jump[ghost], speed[ghost] - rows["speed"].to_numpy()[ghost]),
         "anchored": int(anchored.sum()),
-        "anchor_offset_m": _summary(np.abs(jump[anchored])),
+        "anchor_offset_m": spread(np.abs(jump[anchored])),
         "into_visible_window": int(vanished.sum()),
         "left_windows": int((~(ghost | vanished | anchored) & ~off_road).sum()),
         "left_road": int(off_road.sum()),
@@ -141,7 +141,7 @@ def _relaxing(rows, accel, traffic, road, t0, dt) -> dict:
         "accel_min_mps2": round(float(measured.min()), 4) if measured.size else None,
         "accel_max_mps2": round(float(measured.max()), 4) if measured.size else None,
         "speed_min_mps": round(float(rows["speed"].min()), 4) if len(rows) else None,
-        "distance_m": _summary(distance),
+        "distance_m": spread(distance),
     }
 
 
@@ -167,7 +167,7 @@ def _empty() -> dict:
             "count": 0,
             **none,
             "anchored": 0,
-            "anchor_offset_m": _summary(np.zeros(0)),
+            "anchor_offset_m": spread(np.zeros(0)),
             "into_visible_window": 0,
             "left_windows": 0,
             "left_road": 0,
@@ -178,7 +178,7 @@ def _empty() -> dict:
             "accel_min_mps2": None,
             "accel_max_mps2": None,
             "speed_min_mps": None,
-            "distance_m": _summary(np.zeros(0)),
+            "distance_m": spread(np.zeros(0)),
         },
     }
 
@@ -201,13 +201,16 @@ def _place(x, edges) -> np.ndarray:
 def _jumps(position: np.ndarray, speed: np.ndarray) -> dict:
     """Median, p90 and max of the jumps' sizes, and the backward ones."""
     return {
-        "position_jump_m": _summary(np.abs(position)),
-        "speed_jump_mps": _summary(np.abs(speed)),
+        "position_jump_m": spread(np.abs(position)),
+        "speed_jump_mps": spread(np.abs(speed)),
         "backwards": int((position < -BACKWARDS_M).sum()),
     }
 
 
-def _summary(values: np.ndarray) -> dict:
+def spread(values: np.ndarray) -> dict:
+    """Median, p90 and max of ``values`` rounded to 0.1 mm (None where there are none):
+    how the boundary's jumps and distances are summarised (here and in
+    :mod:`twin.metrics.continuity`)."""
     if values.size == 0:
         return {"median": None, "p90": None, "max": None}
     return {
