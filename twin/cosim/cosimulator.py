@@ -64,6 +64,8 @@ class Counters:
     skipped_full: int = 0  # spawns refused: every vehicle slot of the episode was taken
     yielded: int = 0  # recorded vehicles made relaxing bodies behind one they crowded
     held: int = 0  # recorded vehicles held back from appearing as ghosts on bodies
+    anchored: int = 0  # bodies ended and drawn on as their recordings anchored (anchor)
+    anchors_full: int = 0  # bodies ended unanchored: the episode's anchor list was full
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
     collisions: list = field(default_factory=list)  # the new contacts (layout.CONTACT_COLUMNS)
     # kept (a collision is a pair: twin.metrics.collisions counts them)
@@ -599,6 +601,7 @@ def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
     c.skipped_overlap, c.skipped_invalid = int(ep.skipped_overlap[b]), int(ep.skipped_invalid[b])
     c.skipped_full, c.off_road = int(ep.skipped_full[b]), int(ep.off_road[b])
     c.yielded, c.held = int(ep.yielded[b]), int(ep.held[b])
+    c.anchored, c.anchors_full = int(ep.anchored[b]), int(ep.anchors_full[b])
     n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
     c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
     c.contacts = int(ep.collisions[b])

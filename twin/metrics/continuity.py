@@ -9,8 +9,10 @@ logged states must follow from the one before.
 
 Definitions (one place; :func:`continuity_section` applies them):
 
-* the rows of one record (ego, bodies and ghosts together, by time) form **tracks**:
-  a row more than :data:`TRACK_GAP_S` after the one before begins a new track;
+* the rows of one record (ego, bodies and ghosts together, by time; a body and its
+  ghost at one time, ``doubled``, by the body's) form **tracks**: a row more than
+  :data:`TRACK_GAP_S`, or one and a half log periods of the ghosts, after the one
+  before begins a new track;
 * each consecutive pair of rows of a track is judged: its **position jump** is how far
   the second row lies from the first carried on at their mean speed,
   ``|x1 - x0 - (v0 + v1) / 2 * dt|`` along travel (exact under any constant
@@ -21,7 +23,8 @@ Definitions (one place; :func:`continuity_section` applies them):
   time (``episode``); at or beyond the drawn region's edge, the rear and front ghost
   windows' outer ends, within how far it and the edge (which moves with the ego) move
   in one log period, and :data:`EDGE_SLACK_M` (``edge``); at the road's end
-  (``road``); where its recording begins or ends (``recording``: the data's own);
+  (``road``); where its recording begins or ends or leaves the lanes (``recording``:
+  the data's own);
   anywhere else is a seam (``inside``);
 * a record drawn twice at one time (a body and its ghost) is counted (``doubled``).
 
@@ -33,6 +36,8 @@ the front one, and the farthest any was [m].
 import numpy as np
 import pandas as pd
 
+from twin.core.i24 import LANE_WIDTH
+from twin.core.ramps import RAMP_LANE
 from twin.metrics.handover import spread
 
 TRACK_GAP_S = 0.25  # [s] rows of one record further apart than this are two tracks
@@ -64,20 +69,23 @@ def continuity_section(vehicles: pd.DataFrame, ghosts: pd.DataFrame, windows: pd
     frame = _rows(vehicles, ghosts, windows, dt)
     if frame.empty:
         return _empty()
+    # a record drawn twice at one time (a body and its ghost) is judged by its body
+    # (the rows sort the body first); the rows dropped are counted
+    tid, time = frame["tid"].to_numpy(), frame["time"].to_numpy()
+    doubled = np.r_[False, (tid[1:] == tid[:-1]) & (np.diff(time) <= 1e-9)]
+    frame = frame[~doubled].reset_index(drop=True)
     tid, time = frame["tid"].to_numpy(), frame["time"].to_numpy()
     x, speed, role = frame["x"].to_numpy(), frame["speed"].to_numpy(), frame["role"].to_numpy()
+    period = max(dt, ghost_period)
     same = np.r_[False, tid[1:] == tid[:-1]]
     gap = np.r_[np.inf, np.diff(time)]
-    doubled = same & (gap <= 1e-9)
-    pair = same & (gap > 1e-9) & (gap <= TRACK_GAP_S)
+    pair = same & (gap <= max(TRACK_GAP_S, 1.5 * period))
     k = np.flatnonzero(pair)
     step = gap[k]
     position = np.abs(x[k] - x[k - 1] - 0.5 * (speed[k] + speed[k - 1]) * step)
     speed_jump = np.maximum(np.abs(speed[k] - speed[k - 1]) - ACCEL_LIMIT * step, 0.0)
-    begins = np.flatnonzero(~pair & ~doubled)
+    begins = np.flatnonzero(~pair)
     ends = np.r_[begins[1:] - 1, len(frame) - 1]
-    ends = ends[~doubled[ends]] if ends.size else ends
-    period = max(dt, ghost_period)
     edges = _edges_at(windows, time, dt)
     t_last = float(windows["time"].iloc[-1]) if not windows.empty else 0.0
     t_first = float(windows["time"].iloc[0]) if not windows.empty else 0.0
@@ -117,6 +125,8 @@ def _rows(vehicles, ghosts, windows, dt) -> pd.DataFrame:
         "role": np.full(len(ghosts), 3, np.int8),
     }) if len(ghosts) else bodies.iloc[:0]  # fmt: skip
     frame = pd.concat([bodies, drawn], ignore_index=True)
+    frame = frame.astype({"tid": np.int64, "time": float, "x": float, "speed": float,
+                          "role": np.int8})  # fmt: skip
     frame = frame[frame["tid"] >= 0]
     return frame.sort_values(["tid", "time", "role"], kind="stable").reset_index(drop=True)
 
@@ -185,13 +195,21 @@ def _places(frame, rows, side, edges, windows, dt, t_bound, period, traffic, roa
     near_front = x >= np.minimum(e[:, 3], other[:, 3]) - slack
     edge = near_rear | near_front
     road_end = (x <= limits[0] + slack) | (x >= limits[1] - slack)
-    present, _, _, _ = traffic.recorded_states(road, frame["tid"].to_numpy()[rows],
+    present, _, y, _ = traffic.recorded_states(road, frame["tid"].to_numpy()[rows],
                                                t0 + time + side * period)  # fmt: skip
-    recording = ~np.asarray(present, bool)
+    # the recording is absent, or off the lanes (a body is removed then too)
+    recording = ~np.asarray(present, bool) | _off_lanes(np.asarray(y, float))
     place = np.select([episode, edge, road_end, recording], [0, 1, 2, 3], default=4)
     for p, name in enumerate(PLACES):
         counts[name] = int(np.count_nonzero(place == p))
     return counts
+
+
+def _off_lanes(y: np.ndarray) -> np.ndarray:
+    """Where road-frame ``y`` [m] lies outside the five lane bands (lanes -1 to -5, as
+    :func:`twin.core.ramps.lane_of_y` reads them), or is NaN."""
+    band = y / LANE_WIDTH + 1e-9
+    return ~((band >= 1.0) & (band < -RAMP_LANE + 1.0))
 
 
 def _beyond(frame, edges) -> dict:

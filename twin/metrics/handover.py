@@ -13,10 +13,10 @@ on, was removed at step k + 1. Where it went (``visible_to_ghost``):
   back and became that ghost. The jump is the recording's position at step k + 1
   against the simulated vehicle's at step k carried on at its speed for one step, and
   the difference of the speeds;
-* ``anchored``: its recording lies in a ghost cell, or behind the windows as far as
-  the simulated region reaches, more than :data:`ON_RECORDING_M` from it, in a run whose
-  vehicles relax: the body ended at the simulated region's edge and its ghost is drawn
-  where it was, the offset to its recording decaying (:mod:`twin.cosim.core.anchor`);
+* ``anchored``: in a run with anchors, its recording lies anywhere on the road more
+  than :data:`ON_RECORDING_M` from it: the body ended at the simulated region's edge
+  and its recording is drawn where it was, the offset decaying
+  (:mod:`twin.cosim.core.anchor`);
   ``anchor_offset_m`` summarises those offsets (what the paper's hand-over would have
   jumped; what is drawn is judged in the ``continuity`` section,
   :mod:`twin.metrics.continuity`);
@@ -52,9 +52,6 @@ BACKWARDS_M = 0.5  # [m] a jump against travel larger than this is counted as ba
 #: [m] a vehicle this close to its recording one step on was handed back on it (the
 #: hand-back's 0.3 m, twin.cosim.core.relax.HAND_BACK_X, and a step's braking)
 ON_RECORDING_M = 0.35
-#: [m] the simulated region reaches this far behind the rear ghost window
-#: (twin.cosim.core.handover.REAR_MARGIN)
-REGION_REAR_M = 50.0
 EDGE_M = 0.05  # [m] a vehicle carried on this close to the windows' end may have left them
 
 
@@ -112,8 +109,10 @@ def _to_recording(rows, edges, traffic, road, t0, dt, limits, anchors) -> dict:
     off_road = (carried < limits[0]) | (carried > limits[1])
     jump = x - carried
     in_cell = present & (place == 1) & ~off_road
-    behind = present & (x >= edges[after, 0] - REGION_REAR_M) & (x < edges[after, 0]) & ~off_road
-    anchored = (in_cell | behind) & (np.abs(jump) > ON_RECORDING_M) & anchors
+    # the core anchors every body that ends off its recording, wherever the recording
+    # is (counts.anchored is the core's own count; counts.anchors_full, those it could
+    # not anchor)
+    anchored = present & ~off_road & (np.abs(jump) > ON_RECORDING_M) & anchors
     ghost = in_cell & ~anchored
     g0, g1 = edges[after, 0], edges[after, 3]  # it was still inside them (one step's
     inside = (carried >= g0 + EDGE_M) & (carried <= g1 - EDGE_M)  # braking aside)

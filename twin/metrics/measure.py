@@ -175,6 +175,8 @@ def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> d
         "spawns_skipped_invalid": counters.skipped_invalid,
         "ghosts_yielded": counters.yielded,
         "ghosts_held": counters.held,
+        "anchored": counters.anchored,
+        "anchors_full": counters.anchors_full,
         "visible_max": int(vehicles.groupby("time").size().max()) - 1,
         "lane_changes": sim.manager.lane_changes,
         "lane_changes_recorded_in_window": fidelity.recorded_lane_changes_in_window(

@@ -6,13 +6,33 @@ import pandas as pd
 import pytest
 
 from tests.twin.metrics.test_handover import DT, T0, Recording
+from twin.core.i24 import LANE_WIDTH
 from twin.metrics.continuity import continuity_section
 
 STEPS = 20
+ON_LANE_Y = 1.5 * LANE_WIDTH  # [m] lane -2's centre
+
+
+class OnLanes(Recording):
+    """The hand-made recording, on lane -2 where present (``off`` (tid, step) keys off
+    the lanes)."""
+
+    def __init__(self, states, off=()):
+        super().__init__(states)
+        self.off = set(off)
+
+    def recorded_states(self, road, tids, times):
+        present, x, _, speed = super().recorded_states(road, tids, times)
+        steps = np.round((np.asarray(times) - T0) / DT).astype(int)
+        y = np.array([0.0 if (int(t), int(k)) in self.off else ON_LANE_Y
+                      for t, k in zip(tids, steps, strict=True)])  # fmt: skip
+        return present, x, y, speed
+
+
 EDGES = {"g0": 0.0, "x0": 100.0, "x1": 300.0, "g1": 400.0}
 
 
-def _section(bodies, ghosts, recording=None, ghost_period=DT, record_ids=None):
+def _section(bodies, ghosts, recording=None, ghost_period=DT, record_ids=None, off=()):
     """The section of a log of ``bodies`` (step, tid, role, x, speed) and ``ghosts``
     (step, tid, x, speed) over STEPS steps of windows EDGES; recordings present
     wherever ``recording`` (tid -> steps) says, everywhere by default."""
@@ -24,7 +44,7 @@ def _section(bodies, ghosts, recording=None, ghost_period=DT, record_ids=None):
     tids = set(vehicles["tid"]) | set(drawn["tid"])
     steps = recording or {tid: range(-5, STEPS + 5) for tid in tids}
     states = {(tid, k): (0.0, 0.0) for tid, ks in steps.items() for k in ks}
-    return continuity_section(vehicles, drawn, windows, Recording(states), "westbound", T0, DT,
+    return continuity_section(vehicles, drawn, windows, OnLanes(states, off), "westbound", T0, DT,
                               ghost_period, (-1000.0, 3000.0), record_ids)  # fmt: skip
 
 
@@ -84,10 +104,26 @@ def test_tracks_begin_and_end_at_the_region_edge_or_are_seams():
 
 def test_a_gap_in_a_record_splits_its_track_and_a_record_drawn_twice_is_counted():
     bodies = _moving(10, 1, 150.0, 10.0, range(0, 4)) + _moving(10, 1, 150.0, 10.0, range(8, 12))
-    ghosts = [(11, 10, 150.0 + 10.0 * DT * 11, 10.0)]  # its ghost drawn at its body's time
+    # its ghost drawn at its body's time, 100 m off: judged by the body, counted once
+    ghosts = [(11, 10, 250.0 + 10.0 * DT * 11, 10.0)]
     s = _section(bodies, ghosts)
     assert s["tracks"]["count"] == 2 and s["doubled"] == 1
-    assert s["discontinuous"] == 0
+    assert s["discontinuous"] == 0 and s["position_jump_m"]["max"] < 1e-9
+    assert sum(s["tracks"]["end"].values()) == sum(s["tracks"]["begin"].values()) == 2
+
+
+def test_ghosts_logged_at_a_low_rate_are_one_track():
+    # ghosts logged at 2 Hz: rows 0.5 s apart are one track, judged pair by pair
+    ghosts = [(k, 14, 150.0 + 10.0 * DT * k, 10.0) for k in range(0, STEPS, 5)]
+    s = _section([], ghosts, ghost_period=0.5)
+    assert s["tracks"]["count"] == 1 and s["pairs"] == 3 and s["discontinuous"] == 0
+    assert s["tracks"]["begin"]["inside"] == 0 and s["tracks"]["end"]["inside"] == 0
+
+
+def test_a_body_removed_where_its_recording_leaves_the_lanes_ends_at_the_recording():
+    bodies = _moving(15, 1, 150.0, 10.0, range(0, 6))
+    s = _section(bodies, [], off=[(15, k) for k in range(6, STEPS + 5)])
+    assert s["tracks"]["end"]["recording"] == 1 and s["tracks"]["end"]["inside"] == 0
 
 
 def test_bodies_far_beyond_the_ghost_windows_are_counted():

@@ -32,7 +32,8 @@ behind one it crowds) drops its anchor: the body starts where it was drawn.
 
 ``Episodes.anchors`` lists the anchored entries of the table (at most
 :data:`~twin.cosim.core.layout.ANCHORS_KEPT`; one more is not anchored and is counted
-in ``anchors_full``); ``anchor_lo`` and ``anchor_hi`` [m] are the smallest and largest
+in ``anchors_full``; ``anchored`` counts the bodies anchored, ``metrics.json``'s
+``counts``); ``anchor_lo`` and ``anchor_hi`` [m] are the smallest and largest
 offsets along the road, by which the snapshot reads the recording further
 (:func:`twin.cosim.core.handover.snapshot`), so an anchored vehicle whose recording is
 outside the windows is still drawn where it is.
@@ -79,6 +80,7 @@ def anchor(b, core, i, rec_x, rec_y, rec_speed):
     table.off_y[b, h] = bo.y[b, i] - rec_y
     table.off_vy[b, h] = bo.speed[b, i] * math.sin(bo.yaw[b, i])
     table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = rec_x, rec_y, rec_speed
+    ep.anchored[b] += 1
     _extent(b, core)
     return True
 

@@ -159,8 +159,8 @@ def _targets_again(b, core, i):
     a body in a ghost cell (:func:`_yields`) enters the visible window relaxing, where
     before it spawned from its ghost: in stop-and-go most vehicles entering at the rear
     do so, and without targets they left the recording's lane-change flows undriven
-    (SUMO development day 1, 12 x 120 s calibrated: 201 lane changes against the
-    recording's 400; twin data sumo --family)."""
+    (SUMO development day 3, 12 x 120 s calibrated: 178 lane changes against the
+    recording's 297, 201 with the targets; twin data sumo --family)."""
     if core.traffic.drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
         behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 

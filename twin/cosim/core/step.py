@@ -103,6 +103,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
     ep.ghost_touching_count[b] = 0
     ep.anchor_count[b], ep.anchor_lo[b], ep.anchor_hi[b], ep.anchors_full[b] = 0, 0.0, 0.0, 0
+    ep.anchored[b] = 0
     ep.fuel_sum[b], ep.group_distance[b], ep.collisions_before[b] = 0.0, 0.0, 0
     for k in range(4):
         ep.lead_speed[b, k] = math.nan
