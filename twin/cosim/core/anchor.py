@@ -188,21 +188,25 @@ def _behind(b, core, h, v, dt):
     lane = lane_of(table.rec_y[b, h] + table.off_y[b, h])
     if lane == 0:
         return v
+    # the nearest body or ghost ahead of it and behind it in its lane (bodies first)
     ahead, ahead_v = math.inf, 0.0
-    for i in range(bo.top[b]):
-        if bo.valid[b, i] and bo.lane[b, i] == lane and x < bo.x[b, i] < ahead:
-            ahead, ahead_v = bo.x[b, i], bo.speed[b, i]
-    for g in range(gh.count[b]):
-        if gh.r[b, g] != r and gh.lane[b, g] == lane and x < gh.x[b, g] < ahead:
-            ahead, ahead_v = gh.x[b, g], gh.speed[b, g]
     behind, behind_v, behind_end = -math.inf, 0.0, -math.inf
     for i in range(bo.top[b]):
-        end = bo.x[b, i] + bo.length[b, i]
-        if bo.valid[b, i] and bo.lane[b, i] == lane and behind < bo.x[b, i] < x:
-            behind, behind_v, behind_end = bo.x[b, i], bo.speed[b, i], end
+        if not (bo.valid[b, i] and bo.lane[b, i] == lane):
+            continue
+        xi = bo.x[b, i]
+        if x < xi < ahead:
+            ahead, ahead_v = xi, bo.speed[b, i]
+        if behind < xi < x:
+            behind, behind_v, behind_end = xi, bo.speed[b, i], xi + bo.length[b, i]
     for g in range(gh.count[b]):
-        if gh.r[b, g] != r and gh.lane[b, g] == lane and behind < gh.x[b, g] < x:
-            behind, behind_v, behind_end = gh.x[b, g], gh.speed[b, g], gh.x[b, g] + gh.length[b, g]
+        if not (gh.r[b, g] != r and gh.lane[b, g] == lane):
+            continue
+        xg = gh.x[b, g]
+        if x < xg < ahead:
+            ahead, ahead_v = xg, gh.speed[b, g]
+        if behind < xg < x:
+            behind, behind_v, behind_end = xg, gh.speed[b, g], xg + gh.length[b, g]
     if math.isfinite(behind) and x - behind_end < FOLLOW_GAP + behind_v * HEADWAY:
         # what is behind it closes in: it goes no slower than that, as it speeds up
         v = max(v, min(behind_v - table.rec_v[b, h], table.off_v[b, h] + ACCEL * dt))

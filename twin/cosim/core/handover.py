@@ -99,7 +99,7 @@ def despawn_outside(b, core):
     (:mod:`twin.cosim.core.anchor`: drawn on from there, no jump); one whose recording is
     absent or off the lanes, or one off the road, is removed; back inside the visible
     window it is
-    visible again, with strategic targets drawn as a spawn's (:func:`_targets_again`).
+    visible again, with strategic targets drawn as a spawn's (:func:`relax.end`).
     Returns how many were removed."""
     valid, x, ep, sl, cs = (
         core.bodies.valid,
@@ -119,7 +119,6 @@ def despawn_outside(b, core):
         if v0 <= x[b, i] <= v1:
             if sl.relaxing[b, i]:
                 relax.end(b, core, i, ep.step[b] * cs.dt)
-                _targets_again(b, core, i)
             continue
         t = ep.t0[b] + ep.step[b] * cs.dt
         if cs.relax:
@@ -146,23 +145,6 @@ def despawn_outside(b, core):
         gone += 1
     ep.despawned[b] += gone
     return gone
-
-
-@kernel(inline=True)
-def _targets_again(b, core, i):
-    """Slot ``i``, a relaxing vehicle back inside the visible window, draws its
-    strategic targets from where it is, as a spawn there does
-    (:func:`twin.cosim.core.drivers.first_target`; its draws start again, so a driver
-    that was visible before reads the same draws for the bins ahead of it).
-
-    Relaxing cleared them (:func:`twin.cosim.core.relax.begin`). A recorded vehicle made
-    a body in a ghost cell (:func:`_yields`) enters the visible window relaxing, where
-    before it spawned from its ghost: in stop-and-go most vehicles entering at the rear
-    do so, and without targets they left the recording's lane-change flows undriven
-    (SUMO development day 3, 12 x 120 s calibrated: 178 lane changes against the
-    recording's 297, 201 with the targets; twin data sumo --family)."""
-    if core.traffic.drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
-        behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 
 
 @kernel(inline=True)

@@ -41,7 +41,7 @@ closes the distance to its recorded trajectory within physical limits:
 * back inside the visible window it is a visible vehicle again: its driver decides
   (its next lane-change decision at once) and draws its strategic targets from where
   it is, as a vehicle spawned there does
-  (:func:`twin.cosim.core.handover.despawn_outside`).
+  (:func:`end`).
 
 A recorded vehicle in a ghost cell, or behind the rear one (as far as 50 m behind the
 rearmost relaxing vehicle; with ``anchor``, as far as the simulated region reaches),
@@ -59,6 +59,7 @@ import math
 from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
+from twin.cosim.core import drivers as behaviour
 from twin.cosim.core.room import (
     CROWD_AHEAD,
     CROWD_DECEL,
@@ -67,6 +68,7 @@ from twin.cosim.core.room import (
     stopping_decel,
 )
 from twin.data.recording import replay
+from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
 
@@ -99,10 +101,23 @@ def begin(b, core, i):
 @kernel
 def end(b, core, i, time):
     """Slot ``i`` is back inside the visible window at clock ``time`` [s]: its driver
-    decides again (its next lane-change decision at once)."""
+    decides again (its next lane-change decision at once) and draws its strategic
+    targets from where it is, as a spawn there does
+    (:func:`twin.cosim.core.drivers.first_target`; its draws start again, so a driver
+    that was visible before reads the same draws for the bins ahead of it).
+
+    :func:`begin` cleared them. A recorded vehicle made a body in a ghost cell (a yield,
+    :func:`twin.cosim.core.handover._yields`) enters the visible window relaxing where
+    before it spawned from its ghost: in stop-and-go most vehicles entering at the rear
+    do so, and without targets they left the recording's lane-change flows undriven
+    (SUMO development day 3, 12 x 120 s calibrated: 178 lane changes against the
+    recording's 297, 201 with the targets; twin data sumo --family)."""
     core.slots.relaxing[b, i] = False
-    core.traffic.drivers.next_decision[b, i] = time
-    core.traffic.drivers.requested[b, i] = 0
+    drivers = core.traffic.drivers
+    drivers.next_decision[b, i] = time
+    drivers.requested[b, i] = 0
+    if drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
+        behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 
 
 @kernel
