@@ -20,6 +20,9 @@ else in it (the recorded data are never touched)::
 
 Each is written to a temporary file and renamed; the JSON last, so a reader never
 sees a calibration whose fits are missing.
+
+Over 500 lines: the fits' orchestration and the file format in one module; issue 78
+separates the format, so that reading a calibration no longer imports the fitting.
 """
 
 import json

@@ -25,6 +25,9 @@ kernels decide (:class:`twin.physics.world.PhysicsWorld`, reached through
 :class:`twin.physics.worlds.World`): every step the bodies' commands go to pybullet,
 its states come back into the core, and the core's spawns and removals become bodies.
 A user's Python controller is called between the decision and the world's step.
+
+Over 500 lines: the loop, the pybullet bridge, the log's conversion and the views the
+runners read; issue 78 splits it along those lines.
 """
 
 import math

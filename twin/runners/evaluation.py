@@ -17,6 +17,9 @@ The output folder::
       fidelity.png         each metric's distribution per behaviour, side by side
 
 A run that is interrupted keeps its finished results; the same command resumes it.
+
+Over 500 lines: the configuration, the jobs, the summary and the report of one command;
+issue 78 splits them into modules of their own.
 """
 
 import json

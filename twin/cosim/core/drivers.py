@@ -13,6 +13,9 @@ gives desired speeds), depends on the spawn.
 
 :data:`BehaviourArrays` holds the behaviour as arrays (:func:`behaviour_arrays` makes
 them from a :class:`~twin.cosim.behaviour.Behaviour`).
+
+Over 500 lines: the spawn draws, the strategic targets and their packing as arrays;
+issue 78 splits them.
 """
 
 import math

@@ -6,6 +6,10 @@ spawned where they fit (step 6), and the ghost set reloaded from the recording (
 Every recorded vehicle an episode meets has an entry in its tid table (an
 open-addressing hash by recording index ``r``): simulated now, a ghost after the last
 reload, seen in the windows before, waiting for room to spawn.
+
+Over 500 lines: steps 5 to 7 and the room, crowding and spawn tests they share. Issue
+78 splits it (the windows and despawn, the spawn checks, entering and cut-ins, the lead
+speeds of step 3); until that lands it stays one module rather than be split twice.
 """
 
 import math

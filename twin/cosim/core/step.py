@@ -24,6 +24,9 @@ of any size.
 
 :data:`CoreSettings` holds what every episode of a batch shares (the windows, the
 spawn clearances, the road, the controllers).
+
+Over 500 lines: besides the phases it holds the contacts, fuel and log kernels the
+step calls; issue 78 moves those out so that the step reads top to bottom.
 """
 
 import math
