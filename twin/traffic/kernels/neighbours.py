@@ -60,10 +60,18 @@ def lanes_occupied(vehicles, drivers, b, o):
     yaw = vehicles.yaw[b, o]
     half = 0.5 * (vehicles.length[b, o] * abs(math.sin(yaw))
                   + vehicles.width[b, o] * abs(math.cos(yaw)))  # fmt: skip
+    return bits | footprint_lanes(vehicles.y[b, o], half)
+
+
+@kernel(inline=True)
+def footprint_lanes(y, half):
+    """The lanes (bits as :func:`lanes_occupied`) a footprint centred at ``y`` [m] and
+    ``half`` [m] wide each side reaches more than :data:`FOOTPRINT_REACH` into."""
+    bits = 0
     # lane -k lies between y = k and k + 1 lane widths: the footprint, less the reach
     # at each side, must cross into it
-    low = (vehicles.y[b, o] - half + FOOTPRINT_REACH) / LANE_WIDTH
-    high = (vehicles.y[b, o] + half - FOOTPRINT_REACH) / LANE_WIDTH
+    low = (y - half + FOOTPRINT_REACH) / LANE_WIDTH
+    high = (y + half - FOOTPRINT_REACH) / LANE_WIDTH
     if not (math.isfinite(low) and math.isfinite(high)):
         return bits
     for k in range(max(math.floor(low), 1), min(math.ceil(high) - 1, N_GROUPS) + 1):
