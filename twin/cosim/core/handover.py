@@ -253,34 +253,40 @@ def fits(b, core, x, y, speed, length, width):
 
 
 @kernel
-def lane_room(b, core, r, x, y, speed, length, width, bodies, decel):
+def lane_room(b, core, r, x, y, speed, length, width, c, rest, decel, waits):
     """Whether a recorded vehicle ``r`` at back x, y [m] and ``speed`` [m/s] has a spawn's
-    room (:func:`spawn_room` at ``decel`` [m/s^2]) in the lanes the traffic core will
-    see it in once simulated (its lane and those its footprint reaches into,
-    :func:`twin.traffic.kernels.neighbours.lanes_occupied`): to the nearest ghost ahead
-    in each (a ghost by its recording's lane, carried on a step from the last reload)
-    and, where ``bodies``, to the nearest body ahead and from the nearest body behind
-    in each (a body in the lanes it occupies). :func:`fits` asks the same of the
-    footprints; but a lane holds vehicles side by side in a recording made with a
-    sub-lane model (a motorcycle beside a car, a car beside a truck's tail, SUMO's
-    SL2015 days), and a vehicle spawned half a metre behind one beside it in its lane
-    got the traffic manager's emergency braking, harder than its tyres hold: its speed a
-    step on was off its spawn's by up to 2.4 % (11 such spawns in the test family's 304
-    kinematic episodes, every one so)."""
+    room (:func:`spawn_room` at clearances ``c``, ``rest`` [m] and ``decel`` [m/s^2])
+    in the lanes the traffic core will see it in once simulated (its lane and those its
+    footprint reaches into, :func:`twin.traffic.kernels.neighbours.lanes_occupied`): to
+    the nearest body ahead or beside it along the road in each (a body in the lanes it
+    occupies) and the nearest ghost ahead (in its recording's lane, carried on a step
+    from the last reload), and, for a spawn that ``waits`` for room where there is none,
+    from the nearest body behind and to any ghost beside it. A yield
+    (:func:`_yields`, which cannot wait: the recording would run into the body it
+    crowds) looks at the ghosts ahead of its back only: two recorded at one place, both
+    crowding a body that lags, were both refused and ran into it as ghosts (12
+    collisions in one test-family episode, against 1).
+    :func:`fits` asks the same of the footprints; but a lane holds vehicles side by side
+    in a recording made with a sub-lane model (a motorcycle beside a car, a car beside a
+    truck's tail, SUMO's SL2015 days; two recorded at one place), and a vehicle spawned
+    half a metre behind one beside it in its lane got the traffic manager's emergency
+    braking, harder than its tyres hold: its speed a step on was off its spawn's by up
+    to 2.4 % (11 such spawns in the test family's 304 kinematic episodes, every one so)."""
     cs, bo, gh = core.settings, core.bodies, core.ghosts
     lane = lane_of(y)
     mine = footprint_lanes(y, 0.5 * width)
     if -N_GROUPS <= lane <= -1:
         mine |= 1 << (-lane - 1)
-    c, rest = cs.clearance, cs.clearance_at_rest
-    for j in range(bo.top[b] if bodies else 0):
+    for j in range(bo.top[b]):
         if not bo.valid[b, j] or not lanes_occupied(bo, core.traffic.drivers, b, j) & mine:
             continue
-        bx, bv = bo.x[b, j], max(bo.speed[b, j], 0.0)
-        if bx >= x:
+        bx, bv, blength = bo.x[b, j], max(bo.speed[b, j], 0.0), bo.length[b, j]
+        if bx + blength > x:  # ahead, or beside it along the road
             gap, rear, closing = bx - (x + length), speed, speed * speed - bv * bv
+        elif waits:
+            gap, rear, closing = x - (bx + blength), bv, bv * bv - speed * speed
         else:
-            gap, rear, closing = x - (bx + bo.length[b, j]), bv, bv * bv - speed * speed
+            continue
         if gap < spawn_room(c, rest, decel, rear, closing):
             return False
     for g in range(gh.count[b]):
@@ -289,7 +295,7 @@ def lane_room(b, core, r, x, y, speed, length, width, bodies, decel):
             continue
         gv = max(gh.speed[b, g], 0.0)
         gx = gh.x[b, g] + gv * cs.dt
-        if gx < x:
+        if gx < x and not (waits and gx + gh.length[b, g] > x):
             continue  # behind: a ghost that crowds a body is made one behind it (_yields)
         if gx - (x + length) < spawn_room(c, rest, decel, speed, speed * speed - gv * gv):
             return False
@@ -539,8 +545,8 @@ def spawn_recorded(b, core, k, retry):
         return False
     slot = -1
     if fits(b, core, x, y, speed, rec.length[r], rec.width[r]) and lane_room(
-        b, core, np.int64(r), x, y, speed, rec.length[r], rec.width[r], np.bool_(True),
-        cs.spawn_decel,
+        b, core, np.int64(r), x, y, speed, rec.length[r], rec.width[r], cs.clearance,
+        cs.clearance_at_rest, cs.spawn_decel, np.bool_(True),
     ):  # fmt: skip
         slot = spawn(b, core, np.int64(r), x, y, speed, 0.0, np.int64(-1))
         if slot < 0:
@@ -770,10 +776,12 @@ def _yields(b, core, k, t, m, drawn):
         math.inf, 0.0, np.int64(-1), np.bool_(False),
     ):  # fmt: skip
         return False
-    # nor where, in its lane as the traffic core sees it, it could not stop behind a
-    # ghost ahead so (a recording beside another in one lane, :func:`lane_room`): its
-    # first command would be an emergency stop, its spawn inexact
-    if not lane_room(b, core, r, x, y, speed, length, width, np.bool_(False), YIELD_DECEL):
+    # nor where, in its lanes as the traffic core sees them, it could not stop so behind
+    # a body or ghost ahead (a recording beside another in one lane, :func:`lane_room`):
+    # its first command would be an emergency stop, its spawn inexact
+    rest = cs.clearance_at_rest
+    if not lane_room(b, core, r, x, y, speed, length, width, rest, rest, YIELD_DECEL,
+                     np.bool_(False)):  # fmt: skip
         return False
     if not drawn and (
         _cannot_stop_for(b, core, x, y, speed, length, width)
