@@ -206,7 +206,8 @@ class Frame:
         index: frame number of this camera's stream (0, 1, ...).
         time: [s] unix time; sim_time: [s] since the episode began.
         rgb: (h, w, 3) uint8. depth: (h, w) float32 [m] planar, +inf: nothing.
-        semantic: (h, w) uint8 class ids. instance: (h, w) int64 twin ids, -1: none.
+        semantic: (h, w) uint8 class ids. instance: (h, w) int64 instance ids (twin
+            ids; with recorded traffic, each recorded vehicle's own), -1: none.
         world_from_camera, ego_from_camera: (4, 4) poses (OpenCV camera axes).
         ego_id: the twin id of the vehicle carrying the camera.
         vehicles: the other vehicles as drawn (3D boxes in the world).
@@ -326,6 +327,21 @@ class CameraRig:
             road=np.asarray(replayed.road, np.int64),
         )
 
+    def _by_record(self, drawn: DrawnVehicles, traffic) -> tuple[DrawnVehicles, np.ndarray]:
+        """The simulated vehicles of ``drawn`` relabelled with their records' instance
+        ids (those their recordings have when replayed): one id per recorded vehicle all
+        episode long, whether it is simulated or replayed at the frame, so that a
+        dataset's track of it goes on through the ghost-cell boundary. Returns the
+        relabelled vehicles and the lookup from the rendered ids to the labelled ones."""
+        simulated = np.flatnonzero(~drawn.replayed)
+        tids = np.asarray(traffic.tids_of(drawn.id[simulated]), np.int64)
+        simulated = simulated[tids >= 0]  # a vehicle with no recording keeps its twin id
+        ids = drawn.id.copy()
+        ids[simulated] = [self._replay_id(int(t)) for t in tids[tids >= 0].tolist()]
+        relabel = np.arange(MAX_INSTANCE_ID + 1, dtype=np.int64)
+        relabel[drawn.id[simulated]] = ids[simulated]
+        return replace(drawn, id=ids), relabel
+
     def _replay_id(self, tid: int) -> int:
         """The instance id of recorded trajectory ``tid`` in this episode."""
         known = self._replay_ids.get(tid)
@@ -366,10 +382,11 @@ class CameraRig:
         Args:
             traffic: the recording around a cosimulation
                 (:class:`sensors.replay.FrameTraffic`): its recorded vehicles are drawn
-                beside the simulated ones, each with an id of its own from
-                ``REPLAY_BASE`` up (the same for a record all episode long), and the
-                simulated ones are labelled with their records. ``None``: only the
-                physics world's vehicles.
+                beside the simulated ones, and every vehicle of a recording,
+                simulated or replayed, has its record's instance id from
+                ``REPLAY_BASE`` up (the same all episode long: a track of it goes on
+                through the ghost-cell boundary) and its record. ``None``: only the
+                physics world's vehicles, with their twin ids.
 
         Raises:
             KeyError: ``ego_id`` is not an active vehicle.
@@ -378,7 +395,7 @@ class CameraRig:
         cameras = self.cameras if cameras is None else cameras
         eye, margin = self._eye(ego_id, cameras)
         everyone = self.view.vehicles(hide=[ego_id], eye=eye, margin=margin)
-        replayed = None
+        replayed, relabel = None, None
         if traffic is not None:
             records, roads = traffic.record_of(everyone.id)
             everyone = replace(everyone, record_id=np.asarray(records, object), road=roads)
@@ -386,6 +403,8 @@ class CameraRig:
         drawn = DrawnVehicles.join(
             everyone.take(everyone.shown), self._pose_replayed(replayed, eye, margin)
         )
+        if traffic is not None:
+            drawn, relabel = self._by_record(drawn, traffic)
         ego = np.flatnonzero(everyone.id == ego_id)
         if ego.size == 0:
             raise KeyError(f"vehicle {ego_id} is not active in the physics world")
@@ -408,6 +427,9 @@ class CameraRig:
             ego_from_camera = camera.vehicle_from_camera(length)
             world_from_camera = world_from_ego @ ego_from_camera
             picture, rgb = self._render(camera, world_from_camera, light, casters)
+            instance = picture.instance
+            if relabel is not None:
+                instance = np.where(instance >= 0, relabel[np.maximum(instance, 0)], -1)
             frames.append(
                 Frame(
                     camera=camera,
@@ -417,7 +439,7 @@ class CameraRig:
                     rgb=rgb,
                     depth=camera.depth_from_buffer(picture.depth_buffer),
                     semantic=picture.semantic,
-                    instance=picture.instance,
+                    instance=instance,
                     world_from_camera=world_from_camera,
                     ego_from_camera=ego_from_camera,
                     ego_id=int(ego_id),

@@ -57,7 +57,8 @@ class VehicleLabels:
     """The labels of one frame's visible vehicles, struct-of-arrays (see the module doc).
 
     Attributes:
-        id: (n,) int64 twin ids (the instance ids of the frame's mask).
+        id: (n,) int64 instance ids (those of the frame's mask: a recorded vehicle's
+            own, :meth:`sensors.camera.CameraRig.capture`).
         vehicle_class: (n,) int64 I-24 class ids.
         pixels: (n,) int64 visible pixels.
         visible_box: (n, 4) int64 [left, top, right, bottom], inclusive pixel indices.

@@ -5,7 +5,7 @@ body) at its recorded position, with its heading from its recorded path (so lane
 changes show) and its recorded size and class.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,10 +68,15 @@ class RecordedView:
     def _roads(self) -> list:
         return list(self.traffic.store.metadata.get("roads", {}) or ["eastbound", "westbound"])
 
-    def around(self, t: float, station: float, simulated: np.ndarray) -> Replayed:
+    def around(
+        self, t: float, station: float, simulated: np.ndarray, drawn=None, drawn_road=None
+    ) -> Replayed:
         """The recorded vehicles at unix time ``t`` within ``radius`` of ``station``
         [m, along the map's reference direction] on both roads, but those simulated
-        (``simulated``: (trajectories,) bool by store index)."""
+        (``simulated``: (trajectories,) bool by store index). ``drawn``
+        (:class:`twin.cosim.core.drawn.Drawn`), on road ``drawn_road``: the
+        cosimulation's own drawing of its road's recording, which the replay follows
+        (anchored vehicles where they are drawn, those held undrawn left out)."""
         parts = []
         for road in (Road.EASTBOUND, Road.WESTBOUND):
             if road.value not in self._roads():
@@ -80,16 +85,21 @@ class RecordedView:
             snap = self.traffic.snapshot(road, t, lo, hi)
             if len(snap.tid) == 0:
                 continue
+            shift = drawn if drawn is not None and road == drawn_road else None
+            if shift is not None:
+                snap = _shifted(snap, shift)
             centre = snap.x + 0.5 * snap.length
             near = np.abs(self.road_model.station(road, centre) - station) <= self.radius
             keep = near & ~simulated[snap.tid]
+            if shift is not None:
+                keep &= ~shift.hidden[snap.tid]
             if keep.any():
-                parts.append(self._posed(road, t, snap, np.flatnonzero(keep)))
+                parts.append(self._posed(road, t, snap, np.flatnonzero(keep), shift))
         if not parts:
             return _empty()
         return Replayed(*(np.concatenate([getattr(p, f) for p in parts]) for f in _FIELDS))
 
-    def _posed(self, road: Road, t: float, snap, rows: np.ndarray) -> Replayed:
+    def _posed(self, road: Road, t: float, snap, rows: np.ndarray, shift=None) -> Replayed:
         tid = snap.tid[rows]
         length, width = snap.length[rows], snap.width[rows]
         height = snap.height[rows]
@@ -98,6 +108,8 @@ class RecordedView:
         position, heading, pitch = self.road_model.to_world(road, np.clip(x, lo, hi), y)
         # the heading from the recorded path a moment later (lane changes show)
         later = self.traffic.snapshot(road, t + HEADING_LEAD, lo, hi)
+        if shift is not None and later.tid.size:
+            later = _shifted(later, shift)
         forward = np.column_stack([np.cos(heading), np.sin(heading), np.tan(pitch)])
         found = np.zeros(tid.size, bool)
         if later.tid.size:
@@ -127,6 +139,17 @@ class RecordedView:
         )
 
 
+def _shifted(snap, drawn):
+    """A snapshot with its anchored vehicles where the cosimulation draws them."""
+    tid = snap.tid
+    return replace(
+        snap,
+        x=snap.x + drawn.off_x[tid],
+        y=snap.y + drawn.off_y[tid],
+        speed=np.maximum(snap.speed + drawn.off_v[tid], 0.0),
+    )
+
+
 _FIELDS = ("tid", "record_id", "road", "vehicle_class", "size", "position", "rotation", "speed")
 
 
@@ -154,6 +177,11 @@ class FrameTraffic:
         self.view = RecordedView(sim.traffic, road_model, radius)
         self.view.preload(sim.t0, sim.t0 + sim.config.t_max + HEADING_LEAD)
 
+    def tids_of(self, ids):
+        """The store trajectory indices of simulated vehicles ``ids`` (-1: none; every
+        vehicle of a cosimulation has one)."""
+        return self.sim.tids_of(np.asarray(ids, np.int64))
+
     def replayed(self) -> Replayed:
         """The recorded vehicles to draw now."""
         sim = self.sim
@@ -161,7 +189,7 @@ class FrameTraffic:
         ego = states.id == sim.ego_id
         centre = states.x[ego] + 0.5 * sim.world.params.length[ego]
         station = float(self.road_model.station(sim.road, centre)[0])
-        return self.view.around(sim.t, station, sim.simulated)
+        return self.view.around(sim.t, station, sim.simulated, sim.drawn, sim.road)
 
     def record_of(self, ids):
         """(record ids, roads) of simulated vehicles ``ids``."""

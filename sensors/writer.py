@@ -8,7 +8,8 @@ Layout under the writer's folder (one sub-folder per camera)::
                                   lies within the far plane (sky), 65535 at 65.535 m
                                   or farther
     <camera>/semantic/000000.png  8-bit semantic class ids (rig.json "classes")
-    <camera>/instance/000000.png  16-bit twin vehicle id + 1; 0 where no vehicle
+    <camera>/instance/000000.png  16-bit vehicle instance id + 1 (one per recorded
+                                  vehicle all episode long); 0 where no vehicle
     <camera>/meta/000000.json     time, K, poses, the vehicles in view and their pixels
     <camera>/rgb.mp4              the RGB stream (OpenCV, mp4v) at the camera's rate
 
@@ -284,7 +285,8 @@ def rig_description(cameras: tuple[CameraSpec, ...]) -> dict:
             "depth": "16-bit PNG, planar depth in millimetres; 0: nothing within the far "
             "plane; 65535: 65.535 m or farther",
             "semantic": "8-bit PNG of class ids",
-            "instance": "16-bit PNG of twin vehicle id + 1; 0: no vehicle",
+            "instance": "16-bit PNG of vehicle instance id + 1 (one per recorded vehicle "
+            "all episode long, simulated or replayed); 0: no vehicle",
         },
         "frames": {
             "camera": "OpenCV: x right, y down, z forward; pixel (0, 0) is the centre of "

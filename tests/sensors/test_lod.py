@@ -74,6 +74,9 @@ class _Recorded:
     def record_of(self, ids):
         return np.full(len(ids), "", dtype=object), np.ones(len(ids), np.int64)
 
+    def tids_of(self, ids):
+        return np.full(len(ids), -1, np.int64)  # the simulated ones have no recording
+
 
 def _broadside(built_map, classes, x, y, turn) -> Replayed:
     """Vehicles of ``classes`` at their classes' mean sizes on the eastbound road at

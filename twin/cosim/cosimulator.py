@@ -44,6 +44,7 @@ from twin.cosim.config import CosimConfig
 from twin.cosim.core import layout
 from twin.cosim.core import step as core_step
 from twin.cosim.core.batch import Batch, Shared, controller_kind
+from twin.cosim.core.drawn import Drawn, drawn
 from twin.cosim.core.room import CLEARANCE_SPEED
 from twin.cosim.log import TrajectoryLog
 from twin.cosim.windows import Ghosts, Windows
@@ -211,6 +212,14 @@ class Cosimulator:
         bo = self.state.bodies
         out[self.state.slots.tid[0][bo.valid[0]]] = True
         return out
+
+    @property
+    def drawn(self) -> Drawn:
+        """How the recording is drawn now beside its replay (:mod:`twin.cosim.core.drawn`:
+        anchored vehicles' offsets, those held undrawn inside the windows), for the
+        cameras."""
+        trajectories = len(self.traffic.store.trajectory_arrays["id"])
+        return drawn(self.state, np.asarray(self.shared.recording.tid), 0, trajectories)
 
     @property
     def av_ids(self) -> set[int]:

@@ -205,3 +205,7 @@ class _BenchRecording:
         ids = np.asarray(ids, np.int64)
         records = np.array([f"bench-{i}" for i in ids.tolist()], dtype=object)
         return records, np.ones(ids.size, np.int64)
+
+    def tids_of(self, ids):
+        """The bench's simulated vehicles stand for no recorded vehicle: their twin ids."""
+        return np.full(len(ids), -1, np.int64)

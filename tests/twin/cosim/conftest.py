@@ -17,8 +17,9 @@ def cosim(built_map, tmp_path):
     def make(docs, controller=hold_speed, **settings):
         store = make_store(tmp_path / f"store{len(made)}", docs)
         config = CosimConfig(
-            road="westbound", lane=-2, x=EGO_X, time=T0, vel_default=30.0, **settings
-        )
+            **{"road": "westbound", "lane": -2, "x": EGO_X, "time": T0, "vel_default": 30.0,
+               **settings}
+        )  # fmt: skip
         sim = Cosimulator(config, EmpiricalTraffic(store), built_map, controller=controller)
         made.append(sim)
         sim.reset()

@@ -21,7 +21,7 @@ The dataset folder::
         calib/NNNNNN.txt      KITTI calibration
         depth_2/NNNNNN.png    KITTI depth map: uint16, metres x 256, 0: none
         semantic_2/NNNNNN.png 8-bit semantic class ids (assets/semantic_classes.csv)
-        instance_2/NNNNNN.png 16-bit twin vehicle id + 1, 0: no vehicle
+        instance_2/NNNNNN.png 16-bit vehicle instance id + 1, 0: no vehicle
         labels/NNNNNN.json    every visible vehicle with all its labels (sensors.labels)
       episodes/EEEEEE/        one folder per episode, written under a temporary name
                               and renamed when complete: episode.json and the same
