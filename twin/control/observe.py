@@ -192,12 +192,11 @@ def work_arrays() -> tuple:
 
 def collision_pairs(core_state, b: int) -> int:
     """Episode ``b``'s collisions: the pairs of bodies that touched, however often
-    (:mod:`twin.metrics.collisions`); each contact past the first COLLISIONS_KEPT, whose
-    pairs are not kept, counts as one."""
+    (:mod:`twin.metrics.collisions`); each contact past the first COLLISIONS_KEPT of a
+    pair not among them counts as one."""
     ep = core_state.episodes
-    contacts = int(ep.collisions[b])
-    kept = min(contacts, ep.collision_log.shape[1])
-    return count_collisions(ep.collision_log[b, :kept], contacts)
+    kept = min(int(ep.collisions[b]), ep.collision_log.shape[1])
+    return count_collisions(ep.collision_log[b, :kept], int(ep.collisions_unlisted[b]))
 
 
 def metrics(stats: np.ndarray, core_state, b: int, dt: float) -> dict:

@@ -74,6 +74,7 @@ class Counters:
     collisions: list = field(default_factory=list)  # the new contacts (layout.CONTACT_COLUMNS)
     # kept (a collision is a pair: twin.metrics.collisions counts them)
     contacts: int = 0  # new contacts, also past the first COLLISIONS_KEPT listed above
+    collisions_unlisted: int = 0  # contacts past those listed, of pairs not listed
     off_road: int = 0  # vehicles ever outside the four lanes
     ended: str = ""  # why the run ended before t_max ("" when it did not)
 
@@ -617,6 +618,7 @@ def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
     n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
     c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
     c.contacts = int(ep.collisions[b])
+    c.collisions_unlisted = int(ep.collisions_unlisted[b])
     m = min(c.contacts, layout.COLLISIONS_KEPT)
     c.collisions = [
         (float(row[0]), int(row[1]), int(row[2]), int(row[3]), int(row[4]), int(row[5]),

@@ -25,8 +25,8 @@ first contact:
 and a ``cause``, the first that holds: ``ghost`` (one of them is a ghost), ``spawn``
 (either just spawned), ``lane_change`` (either changing lanes or merging),
 ``rear_end`` (the same lane), else ``other``; a contact past those the core keeps
-(:data:`~twin.cosim.core.layout.COLLISIONS_KEPT` an episode) counts as a collision of
-cause ``unknown``.
+(:data:`~twin.cosim.core.layout.COLLISIONS_KEPT` an episode) of a pair not among them
+counts as a collision of cause ``unknown`` (one of a pair kept is that pair's again).
 """
 
 import numpy as np
@@ -52,15 +52,16 @@ COLUMNS = ("rear_end", "lane_change", "spawn", "ghost", "other", UNKNOWN)
 LISTED = 20  # the first collisions are listed
 
 
-def count_collisions(contacts, total: int) -> int:
-    """How many collisions ``total`` new contacts make, of which ``contacts`` (rows of
-    time, id, id, ...) are the first kept: the pairs among those kept, and each contact past them as
-    one of its own (its pair is not known)."""
+def count_collisions(contacts, unlisted: int = 0) -> int:
+    """How many collisions the contacts make, of which ``contacts`` (rows of time, id,
+    id, ...) are the first kept: the pairs among those kept, and each of the
+    ``unlisted`` contacts past them whose pair is not among them as one of its own (its
+    pair is not known)."""
     pairs = {(min(int(row[1]), int(row[2])), max(int(row[1]), int(row[2]))) for row in contacts}
-    return len(pairs) + max(int(total) - len(contacts), 0)
+    return len(pairs) + int(unlisted)
 
 
-def collision_section(contacts, vehicles, total: int | None = None) -> dict:
+def collision_section(contacts, vehicles, total: int | None = None, unlisted: int = 0) -> dict:
     """The collisions of an episode (module doc).
 
     Args:
@@ -69,9 +70,10 @@ def collision_section(contacts, vehicles, total: int | None = None) -> dict:
             then optionally both vehicles' flags and a ghost's lane and speed).
         vehicles: the log's vehicle rows, a DataFrame (``time`` [s], ``id``, ``role``, ``lane``,
             ``speed``).
-        total: how many new contacts there were (default: as many as listed); each
-            one past those listed counts as a collision of its own, cause
-            ``unknown``.
+        total: how many new contacts there were (default: as many as listed).
+        unlisted: of those past the listed ones, how many were of pairs not listed
+            (the core's ``collisions_unlisted``): each counts as a collision of its
+            own, cause ``unknown``.
 
     Returns:
         ``contacts`` (count), ``collisions`` (pairs), ``collisions_by_cause`` and
@@ -101,11 +103,10 @@ def collision_section(contacts, vehicles, total: int | None = None) -> dict:
         if len(listed) < LISTED:
             listed.append({"time_s": round(time, 3), "ids": list(pair), "contacts": touches,
                            "cause": cause, "vehicles": states})  # fmt: skip
-    unlisted = max((len(contacts) if total is None else int(total)) - len(contacts), 0)
-    by_cause[UNKNOWN] = unlisted
+    by_cause[UNKNOWN] = int(unlisted)
     return {
-        "contacts": len(contacts) + unlisted,
-        "collisions": count_collisions(contacts, len(contacts) + unlisted),
+        "contacts": len(contacts) if total is None else int(total),
+        "collisions": count_collisions(contacts, unlisted),
         "collisions_by_cause": by_cause,
         "collision_list": listed,
     }

@@ -196,7 +196,9 @@ def _physics(sim: Cosimulator, vehicles) -> dict:
         "spawn_speed_error_max": _round(errors.max()) if errors.size else None,
         "spawn_speed_error_median": _round(np.median(errors)) if errors.size else None,
         "spawns_above_0.5_percent": int(np.count_nonzero(errors > 0.005)),
-        **collision_section(counters.collisions, vehicles, counters.contacts),
+        **collision_section(
+            counters.collisions, vehicles, counters.contacts, counters.collisions_unlisted
+        ),
         "vehicles_off_road": counters.off_road,
     }
 

@@ -332,3 +332,20 @@ def test_a_recording_drawn_at_the_clearance_behind_a_body_yields_once_it_closes_
     sim.run()
     assert int(sim.state.episodes.yielded[0]) >= 1
     assert sim.counters.contacts == 0
+
+
+def test_a_pair_touching_again_past_the_kept_contacts_is_one_collision():
+    # a body beside a ghost that straddles the line touched and parted 81 times in one
+    # test-family episode: each contact past the 64 kept was counted as a collision of
+    # its own (19 collisions of 2 pairs); now only those of pairs not kept are
+    from twin.control.observe import collision_pairs
+    from twin.cosim.core.step import _new_contact
+
+    state = layout.make_state(1, 4, 4, 8, 16, 0, 1)
+    ep = state.episodes
+    for k in range(layout.COLLISIONS_KEPT + 30):
+        _new_contact(ep, 0, 0.1 * k, 3, -8, 0, layout.CONTACT_GHOST, -3, 0.0)
+    _new_contact(ep, 0, 20.0, 1, 2, 0, 0, 0, np.nan)  # a pair the log has no room for
+    assert ep.collisions[0] == layout.COLLISIONS_KEPT + 31
+    assert ep.collisions_unlisted[0] == 1
+    assert collision_pairs(state, 0) == 2

@@ -53,9 +53,12 @@ def test_each_pair_is_one_collision_with_both_vehicles_and_a_cause():
 
 
 def test_contacts_past_those_listed_are_counted_as_collisions_of_unknown_cause():
-    out = collision_section([(12.0, 0, 1)], _log(), total=3)
+    out = collision_section([(12.0, 0, 1)], _log(), total=3, unlisted=2)
     assert out["contacts"] == 3 and out["collisions"] == 3
     assert out["collisions_by_cause"]["unknown"] == 2
+    # past the list, contacts of a listed pair are that pair's: no collision more
+    out = collision_section([(12.0, 0, 1)], _log(), total=80, unlisted=0)
+    assert out["contacts"] == 80 and out["collisions"] == 1
 
 
 def test_no_contact_gives_no_collision():
@@ -71,7 +74,7 @@ def test_twin_evals_columns_are_every_cause_once():
 
 def test_collisions_count_pairs_and_each_contact_past_those_kept():
     kept = [(1.0, 3, 5), (2.0, 5, 3), (3.0, 3, 6)]
-    assert count_collisions(kept, 3) == 2 and count_collisions(kept, 7) == 6
+    assert count_collisions(kept) == 2 and count_collisions(kept, 4) == 6
     assert count_collisions([], 0) == 0
 
 

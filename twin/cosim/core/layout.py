@@ -54,7 +54,8 @@ Episodes = namedtuple(
     "skipped_invalid skipped_full collisions collision_log off_road spawn_errors "
     "spawn_error_count touching touching_count ghost_touching ghost_touching_count pair_count "
     "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
-    "follower_count overflow anchors anchor_count anchor_lo anchor_hi anchored anchors_full",
+    "follower_count overflow anchors anchor_count anchor_lo anchor_hi anchored anchors_full "
+    "collisions_unlisted",
 )
 TidTable = namedtuple("TidTable", "key flags slot drawn off_x off_v off_y off_vy rec_x rec_y rec_v")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel")
@@ -153,6 +154,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         yielded=zeros.copy(), held=zeros.copy(), lookback=np.full(b, -np.inf),
         skipped_overlap=zeros.copy(),
         skipped_invalid=zeros.copy(), skipped_full=zeros.copy(), collisions=zeros.copy(),
+        collisions_unlisted=zeros.copy(),
         collision_log=np.zeros((b, COLLISIONS_KEPT, len(CONTACT_COLUMNS))), off_road=zeros.copy(),
         spawn_errors=np.zeros((b, SPAWN_ERRORS_KEPT)), spawn_error_count=zeros.copy(),
         touching=np.zeros((b, TOUCHING_KEPT, 2), np.int64), touching_count=zeros.copy(),
