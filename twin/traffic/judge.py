@@ -145,6 +145,7 @@ def _traffic(scenes, rows, scene, slot, config, settings) -> state.Traffic:
     obstacles = state.Obstacles(
         count=np.zeros(b, np.int64), lane=np.zeros((b, 1), np.int64), x=np.zeros((b, 1)),
         length=np.zeros((b, 1)), speed=np.zeros((b, 1)), accel=np.zeros((b, 1)),
+        reach=np.zeros((b, 1), np.int64),
     )  # fmt: skip
     drivers = state.drivers(b, n)
     cf = scenes.cf[rows]

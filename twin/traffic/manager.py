@@ -500,6 +500,7 @@ class TrafficManager:
         ob = state.Obstacles(
             count=count, lane=np.zeros((rows, g), np.int64), x=np.zeros((rows, g)),
             length=np.zeros((rows, g)), speed=np.zeros((rows, g)), accel=np.zeros((rows, g)),
+            reach=np.zeros((rows, g), np.int64),  # a scene's obstacles: their lanes alone
         )  # fmt: skip
         self._obstacle_y = np.zeros((rows, g))
         for b, index in enumerate(by_road):

@@ -134,6 +134,7 @@ def test_the_state_is_the_mean_speed_of_the_lane_around_the_vehicle_ghosts_inclu
         count=np.array([2]), lane=np.array([[-3, -3, -3]], np.int64),
         x=np.array([[60.0, 140.0, 100.0]]), length=np.full((1, 3), 4.5),
         speed=np.array([[6.0, 8.0, 99.0]]), accel=np.zeros((1, 3)),
+        reach=np.zeros((1, 3), np.int64),
     )  # fmt: skip
     # the bodies and the ghosts within half a cell of x = 100 m in lane -3 (the third
     # ghost is past the count, the third body beyond the cell, the fourth in lane -2)

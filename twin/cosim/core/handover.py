@@ -711,6 +711,7 @@ def enter_and_reload(b, core):
         gspeed[b, count], glength[b, count] = sspeed[b, k], length
         # what its recording does next, for a lane change in front of it to foresee
         gh.accel[b, count] = mean_accel(rec, r, t, FORESEEN)
+        gh.reach[b, count] = _reach(sy[b, k], rec.width[r], lane)
         h = entry(keys, flags, tslot, b, r, np.bool_(True))
         if h >= 0:
             flags[b, h] = (flags[b, h] | GHOST) & ~HELD
@@ -720,6 +721,18 @@ def enter_and_reload(b, core):
     if overflow:
         ep.overflow[b] |= TABLE_FULL
     return spawned
+
+
+@kernel(inline=True)
+def _reach(y, width, lane):
+    """The lane other than ``lane`` a recorded footprint centred at ``y`` [m] and
+    ``width`` [m] wide reaches into as a body's would make it occupy it (0: none)."""
+    bits = footprint_lanes(y, 0.5 * width)
+    for grp in range(N_GROUPS):
+        other = -grp - 1
+        if bits & (1 << grp) and other != lane:
+            return other
+    return 0
 
 
 @kernel

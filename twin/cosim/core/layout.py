@@ -58,7 +58,7 @@ Episodes = namedtuple(
     "collisions_unlisted",
 )
 TidTable = namedtuple("TidTable", "key flags slot drawn off_x off_v off_y off_vy rec_x rec_y rec_v")
-Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel")
+Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel reach")
 Snapshot = namedtuple("Snapshot", "count r x y speed")
 Log = namedtuple(
     "Log",
@@ -178,7 +178,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
     ghosts = Ghosts(
         count=zeros.copy(), r=np.zeros((b, g), np.int64), lane=np.zeros((b, g), np.int64),
         x=np.zeros((b, g)), y=np.zeros((b, g)), speed=np.zeros((b, g)), length=np.zeros((b, g)),
-        accel=np.zeros((b, g)),
+        accel=np.zeros((b, g)), reach=np.zeros((b, g), np.int64),
     )  # fmt: skip
     snap = Snapshot(
         count=zeros.copy(), r=np.zeros((b, s), np.int32), x=np.zeros((b, s)),
@@ -216,7 +216,8 @@ def vehicles(bo) -> traffic.Vehicles:
 def obstacles(g: Ghosts) -> traffic.Obstacles:
     """The traffic kernels' view of the ghosts (the same arrays)."""
     return traffic.Obstacles(
-        count=g.count, lane=g.lane, x=g.x, length=g.length, speed=g.speed, accel=g.accel
+        count=g.count, lane=g.lane, x=g.x, length=g.length, speed=g.speed, accel=g.accel,
+        reach=g.reach,
     )
 
 

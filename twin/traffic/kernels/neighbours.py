@@ -6,7 +6,9 @@ A vehicle occupies every lane it is in: the lane it drives to, during a lane cha
 the lane it leaves, the lane its body is in, and any lane its footprint reaches more
 than :data:`FOOTPRINT_REACH` into (a body standing yawed across a line, as one that
 gave up a change at a lane's end does: the drivers of that lane see it ahead of them);
-an obstacle its lane. Each occupied lane is an entry; entries are sorted by
+an obstacle its lane and the one its footprint reaches into so (``reach``: a recorded
+vehicle standing off its lane's centre by the line, as a sub-lane model drives them,
+was run into by a wide truck driving the next lane's centre, which did not see it). Each occupied lane is an entry; entries are sorted by
 ``group * LANE_KEY + x`` with ``group`` 0..4 for lanes -1..-5, and the leader of an
 entry is the next entry of its group.
 
@@ -151,20 +153,26 @@ def sort_entries(b, t):
             order_lane[b, j + 1] = order_lane[b, j]
             j -= 1
         key[b, j + 1], order_owner[b, j + 1], order_lane[b, j + 1] = kk, o, lane
-    _merge(b, m, n, obstacles.count[b], obstacles.lane, obstacles.x, order_owner, order_lane,
-           key, sc.entry_owner, sc.entry_group, sc.entry_count)  # fmt: skip
+    _merge(b, m, n, obstacles.count[b], obstacles.lane, obstacles.reach, obstacles.x,
+           order_owner, order_lane, key, sc.entry_owner, sc.entry_group,
+           sc.entry_count)  # fmt: skip
 
 
 @kernel(inline=True)
-def _merge(b, m, n, count, ob_lane, ob_x, order_owner, order_lane, key, owner, group, entries):
+def _merge(b, m, n, count, ob_lane, ob_reach, ob_x, order_owner, order_lane, key, owner,
+           group, entries):  # fmt: skip
     """The vehicles' ``m`` sorted entries (their keys in ``key``) merged with the
-    obstacles, each lane's in x order (they come sorted by x), into the entries."""
+    obstacles (an entry in their lane and one in the lane they reach into), each lane's
+    in x order (they come sorted by x), into the entries."""
     out = m + count
+    for g in range(count):
+        if group_of(ob_reach[b, g]) >= 0:
+            out += 1
     v = m - 1
     w = out - 1
     for grp in range(N_GROUPS - 1, -1, -1):
         for g in range(count - 1, -1, -1):
-            if group_of(ob_lane[b, g]) != grp:
+            if group_of(ob_lane[b, g]) != grp and group_of(ob_reach[b, g]) != grp:
                 continue
             kk = grp * LANE_KEY + ob_x[b, g]
             while v >= 0 and key[b, v] > kk:

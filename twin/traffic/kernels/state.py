@@ -14,7 +14,8 @@ while the vehicles' ``valid`` is true.
 * ``Obstacles``: ``count`` (B,), and (B, G) ``lane``, ``x``, ``length``, ``speed``,
   ``accel`` [m/s^2] (a recording's: its mean over the next
   :data:`~twin.traffic.kernels.longitudinal.FORESEEN` seconds, what a lane change in
-  front of it foresees).
+  front of it foresees), ``reach``, the next lane its footprint reaches into as a
+  body's would make it occupy it (0: none; :mod:`twin.traffic.kernels.neighbours`).
 * ``Drivers`` (B, N): the traffic manager's state of each vehicle (module
   :mod:`twin.traffic.kernels.decide` says what each field is); ``mandatory``, whether
   the driver's last lane change was one it had to make (toward its strategic target,
@@ -36,7 +37,7 @@ from twin.traffic.kernels.models import N_PARAMS
 from twin.traffic.kernels.neighbours import N_GROUPS
 
 Vehicles = namedtuple("Vehicles", "valid top x y yaw speed lane length width wheelbase mu")
-Obstacles = namedtuple("Obstacles", "count lane x length speed accel")
+Obstacles = namedtuple("Obstacles", "count lane x length speed accel reach")
 Drivers = namedtuple(
     "Drivers",
     "key cf politeness threshold safe_decel keep_right hov_eligible auto lane lane_from "
@@ -85,7 +86,7 @@ def drivers(b: int, n: int) -> Drivers:
 
 def scratch(b: int, n: int, g: int) -> Scratch:
     """The working arrays of ``b`` episodes of ``n`` slots and ``g`` obstacles."""
-    e = N_GROUPS * n + g
+    e = N_GROUPS * n + 2 * g  # an obstacle occupies its lane and at most one more
     return Scratch(
         entry_count=np.zeros(b, np.int64), entry_owner=np.zeros((b, e), np.int64),
         entry_group=np.zeros((b, e), np.int64), entry_key=np.zeros((b, e)),
