@@ -92,7 +92,9 @@ class RecordedView:
             near = np.abs(self.road_model.station(road, centre) - station) <= self.radius
             keep = near & ~simulated[snap.tid]
             if shift is not None:
-                keep &= ~shift.hidden[snap.tid]
+                # held undrawn by the cosimulation, or drawn (anchored) past the road's
+                # ends, which the cosimulation drops
+                keep &= ~shift.hidden[snap.tid] & (snap.x >= lo) & (snap.x <= hi)
             if keep.any():
                 parts.append(self._posed(road, t, snap, np.flatnonzero(keep), shift))
         if not parts:

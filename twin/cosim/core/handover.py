@@ -258,25 +258,23 @@ def lane_room(b, core, r, x, y, speed, length, width, c, rest, decel, waits):
     room (:func:`spawn_room` at clearances ``c``, ``rest`` [m] and ``decel`` [m/s^2])
     in the lanes the traffic core will see it in once simulated (its lane and those its
     footprint reaches into, :func:`twin.traffic.kernels.neighbours.lanes_occupied`): to
-    the nearest body ahead or beside it along the road in each (a body in the lanes it
-    occupies) and the nearest ghost ahead (in its recording's lane, carried on a step
-    from the last reload), and, for a spawn that ``waits`` for room where there is none,
-    from the nearest body behind and to any ghost beside it. A yield
-    (:func:`_yields`, which cannot wait: the recording would run into the body it
-    crowds) looks at the ghosts ahead of its back only: two recorded at one place, both
-    crowding a body that lags, were both refused and ran into it as ghosts (12
-    collisions in one test-family episode, against 1).
-    :func:`fits` asks the same of the footprints; but a lane holds vehicles side by side
-    in a recording made with a sub-lane model (a motorcycle beside a car, a car beside a
-    truck's tail, SUMO's SL2015 days; two recorded at one place), and a vehicle spawned
-    half a metre behind one beside it in its lane got the traffic manager's emergency
-    braking, harder than its tyres hold: its speed a step on was off its spawn's by up
-    to 2.4 % (11 such spawns in the test family's 304 kinematic episodes, every one so)."""
+    every body ahead of it or beside it along the road in those lanes (a body in the
+    lanes it occupies) and to every ghost ahead (in its recording's lane and the one it
+    reaches into, carried on a step from the last reload), and, for a spawn that
+    ``waits`` for room where there is none, from every body behind and to any ghost
+    beside it. A yield (:func:`_yields`, which cannot wait: the recording would run into
+    the body it crowds) is judged while the ghost set is reloaded, so against the
+    recordings ahead of its back instead (:func:`_recorded_room`): two recorded at one
+    place, both crowding a body that lags, were both refused where a ghost beside one
+    counted, and ran into it as ghosts (12 collisions in one test-family episode,
+    against 1). :func:`fits` asks the same of the footprints; but a lane holds vehicles
+    side by side in a recording made with a sub-lane model (a motorcycle beside a car, a
+    car beside a truck's tail, SUMO's SL2015 days), and a vehicle spawned half a metre
+    behind one beside it in its lane got the traffic manager's emergency braking,
+    harder than its tyres hold: its speed a step on was off its spawn's by up to 2.4 %
+    (11 such spawns in the test family's 304 kinematic episodes, every one so)."""
     cs, bo, gh = core.settings, core.bodies, core.ghosts
-    lane = lane_of(y)
-    mine = footprint_lanes(y, 0.5 * width)
-    if -N_GROUPS <= lane <= -1:
-        mine |= 1 << (-lane - 1)
+    mine = _lanes_of(y, width)
     for j in range(bo.top[b]):
         if not bo.valid[b, j] or not lanes_occupied(bo, core.traffic.drivers, b, j) & mine:
             continue
@@ -289,17 +287,66 @@ def lane_room(b, core, r, x, y, speed, length, width, c, rest, decel, waits):
             continue
         if gap < spawn_room(c, rest, decel, rear, closing):
             return False
+    if not waits:
+        return True
     for g in range(gh.count[b]):
-        glane = gh.lane[b, g]
-        if not -N_GROUPS <= glane <= -1 or not (1 << (-glane - 1)) & mine or gh.r[b, g] == r:
+        if not _lane_bits(gh.lane[b, g], gh.reach[b, g]) & mine or gh.r[b, g] == r:
             continue
         gv = max(gh.speed[b, g], 0.0)
         gx = gh.x[b, g] + gv * cs.dt
-        if gx < x and not (waits and gx + gh.length[b, g] > x):
+        if gx + gh.length[b, g] <= x:
             continue  # behind: a ghost that crowds a body is made one behind it (_yields)
         if gx - (x + length) < spawn_room(c, rest, decel, speed, speed * speed - gv * gv):
             return False
     return True
+
+
+@kernel
+def _recorded_room(b, core, k, x, y, speed, length, width, rest, decel):
+    """:func:`lane_room`'s ghost test for a yield of snapshot row ``k``: the recorded
+    vehicles ahead of its back in the snapshot (the reload's own rows, sorted by x), in
+    the ghost cells and not simulated, in the lanes it will occupy, each at least the
+    room of a stop at ``decel`` from the clearance ``rest`` [m] ahead."""
+    sn, rec, ep = core.snap, core.rec, core.episodes
+    keys, flags, tslot = core.table.key, core.table.flags, core.table.slot
+    mine = _lanes_of(y, width)
+    v0, v1 = ep.windows[b, 1], ep.windows[b, 2]
+    reach = x + length + rest + speed * speed / (2.0 * decel)  # nothing beyond matters
+    for k2 in range(k + 1, sn.count[b]):
+        gx = sn.x[b, k2]
+        if gx > reach:
+            break
+        if gx < ep.windows[b, 0] or v0 <= gx <= v1:
+            continue  # in the rear margin or the visible window: not drawn, or a body
+        r2 = sn.r[b, k2]
+        if flags_of(keys, flags, tslot, b, r2) & SIMULATED:
+            continue  # a body: judged as one
+        lane2 = lane_of(sn.y[b, k2])
+        if not _lane_bits(lane2, _reach(sn.y[b, k2], rec.width[r2], lane2)) & mine:
+            continue
+        gv = max(sn.speed[b, k2], 0.0)
+        if gx - (x + length) < spawn_room(rest, rest, decel, speed, speed * speed - gv * gv):
+            return False
+    return True
+
+
+@kernel(inline=True)
+def _lanes_of(y, width):
+    """The lanes (bits 1 << (-lane - 1)) a vehicle at ``y`` [m], ``width`` [m] wide,
+    will occupy once simulated: its own and those its footprint reaches into."""
+    lane = lane_of(y)
+    return footprint_lanes(y, 0.5 * width) | _lane_bits(lane, np.int64(0))
+
+
+@kernel(inline=True)
+def _lane_bits(lane, reach):
+    """Bits of ``lane`` and of ``reach`` (0: none) among lanes -1..-N_GROUPS."""
+    bits = 0
+    if -N_GROUPS <= lane <= -1:
+        bits |= 1 << (-lane - 1)
+    if -N_GROUPS <= reach <= -1:
+        bits |= 1 << (-reach - 1)
+    return bits
 
 
 @kernel
@@ -790,11 +837,13 @@ def _yields(b, core, k, t, m, drawn):
     ):  # fmt: skip
         return False
     # nor where, in its lanes as the traffic core sees them, it could not stop so behind
-    # a body or ghost ahead (a recording beside another in one lane, :func:`lane_room`):
-    # its first command would be an emergency stop, its spawn inexact
+    # a body or recorded vehicle ahead (a recording beside another in one lane,
+    # :func:`lane_room`): its first command would be an emergency stop, its spawn inexact
     rest = cs.clearance_at_rest
-    if not lane_room(b, core, r, x, y, speed, length, width, rest, rest, YIELD_DECEL,
-                     np.bool_(False)):  # fmt: skip
+    if not lane_room(b, core, np.int64(r), x, y, speed, length, width, rest, rest,
+                     YIELD_DECEL, np.bool_(False)) or not _recorded_room(
+        b, core, k, x, y, speed, length, width, rest, YIELD_DECEL
+    ):  # fmt: skip
         return False
     if not drawn and (
         _cannot_stop_for(b, core, x, y, speed, length, width)
