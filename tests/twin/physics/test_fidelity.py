@@ -120,3 +120,17 @@ def test_steady_cornering_yaw_rate_matches_the_bicycle_model(world, steer):
     expected = v * steer / (wheelbase + understeer * v**2)
     assert state.yaw_rate[0] == pytest.approx(expected, rel=0.10)
     world.despawn([vid])
+
+
+@pytest.mark.parametrize("steer", [0.0, 0.3])
+def test_a_crawling_car_steering_back_to_its_lane_slows_as_commanded(world, steer):
+    # spawned at 0.75 m/s 0.7 m off its lane's centre (a sub-lane driver's place), it
+    # steers hard back while braking gently: the steered tyres' cornering force pulls
+    # against travel, which the feedforward makes up (before: -1.60 m/s^2 for -0.92,
+    # a spawn 0.7 % off after 10 ms)
+    (vid,) = spawn(world, "westbound", -47.7, 0.75, 0, y=LANE_2 + 0.7)
+    world.set_controls([vid], accel=[-0.92], steer=[steer])
+    world.step()
+    expected = 0.75 - 0.92 * world.config.dt
+    assert abs(world.states().speed[0] - expected) <= 0.005 * 1.0  # the spawn check's bound
+    world.despawn([vid])
