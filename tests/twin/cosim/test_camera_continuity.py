@@ -3,6 +3,8 @@ recorded vehicle all episode long, simulated or replayed, and its labelled box m
 as its speed allows through both edges of the visible window (physics world, the
 TinyRenderer)."""
 
+from itertools import pairwise
+
 import numpy as np
 import pytest
 
@@ -91,7 +93,7 @@ def test_a_vehicle_keeps_its_instance_id_and_its_motion_through_both_edges(
         sources = [replayed for *_, replayed in track]
         assert sources[0] is before and sources[-1] is after  # it crossed an edge
         assert len({vid for *_, vid, _ in track}) == 1  # one instance id throughout
-        for (t1, p1, v1, *_), (t2, p2, v2, *_) in zip(track, track[1:]):
+        for (t1, p1, v1, *_), (t2, p2, v2, *_) in pairwise(track):
             if t2 - t1 > 1.5 / CAMERA.rate_hz:
                 continue  # not labelled between (hidden behind another, out of view)
             moved = float(np.linalg.norm(p2 - p1))

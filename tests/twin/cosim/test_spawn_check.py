@@ -83,7 +83,8 @@ def test_a_recording_beside_another_in_its_lane_waits_for_room_not_an_emergency_
     # would brake as an emergency, harder than its tyres hold (a spawn 2.4 % off on a
     # SUMO SL2015 day; here, in the kinematic world at 100 Hz, it ran into the other); it
     # waits for room instead, counted, and every spawn is exact
-    ahead, rear = _beside(2, -3, 11.4, EGO_X + 165.0, 15.0), _beside(3, -3, 14.0, EGO_X + 163.5, 15.0)
+    ahead = _beside(2, -3, 11.4, EGO_X + 165.0, 15.0)
+    rear = _beside(3, -3, 14.0, EGO_X + 163.5, 15.0)
     sim = cosim([vehicle(1, -2, EGO_X, 20.0), ahead, rear], world="kinematic", t_max=6.0)
     sim.run()
     assert sim.counters.skipped_overlap == 1  # the rear one, refused once and waiting

@@ -3,8 +3,8 @@ is entered in its lane and in the lane its footprint reaches into."""
 
 import numpy as np
 
-from twin.cosim.core.handover import _reach
 from twin.core.i24 import LANE_WIDTH
+from twin.cosim.core.handover import _reach
 from twin.traffic.kernels.neighbours import FOOTPRINT_REACH, _merge, around, group_of
 
 

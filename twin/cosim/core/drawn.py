@@ -52,7 +52,7 @@ def drawn(state, rec_tid: np.ndarray, b: int, trajectories: int) -> Drawn:
     x, r = sn.x[b, :n], sn.r[b, :n]
     inside = (x >= lo) & (x <= hi)
     used = np.flatnonzero(keys >= 0)
-    flag_of = dict(zip(keys[used].tolist(), flags[used].tolist()))
+    flag_of = dict(zip(keys[used].tolist(), flags[used].tolist(), strict=True))
     for k in np.flatnonzero(inside):
         if not flag_of.get(int(r[k]), 0) & (SIMULATED | GHOST):
             hidden[rec_tid[r[k]]] = True

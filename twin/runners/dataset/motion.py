@@ -4,9 +4,10 @@ of one camera by more than its speed allows (the ``motion`` block of
 
 A vehicle is followed by its recording (``record_id``), as its instance id follows it
 too (one per recorded vehicle all episode long, simulated or replayed:
-:meth:`sensors.camera.CameraRig.capture`). Between two frames of one camera in which it is labelled, its box's bottom
-centre moves (in the world, from ``location_m`` through ``world_from_camera``) by at
-most ``max(v1, v2) dt + ALLOWED_ACCEL dt^2 / 2 + SLACK_M``, with its labelled speeds
+:meth:`sensors.camera.CameraRig.capture`). Between two frames of one camera in
+which it is labelled, its box's bottom centre moves (in the world, from
+``location_m`` through ``world_from_camera``) by at most ``max(v1, v2) dt +
+ALLOWED_ACCEL dt^2 / 2 + SLACK_M``, with its labelled speeds
 ``v1``, ``v2`` [m/s] and the time ``dt`` between the frames: more than that is a jump
 no vehicle can make, such as the seam of the ghost-cell boundary (``docs/cosim.md``).
 """

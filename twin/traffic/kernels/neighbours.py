@@ -8,9 +8,10 @@ than :data:`FOOTPRINT_REACH` into (a body standing yawed across a line, as one t
 gave up a change at a lane's end does: the drivers of that lane see it ahead of them);
 an obstacle its lane and the one its footprint reaches into so (``reach``: a recorded
 vehicle standing off its lane's centre by the line, as a sub-lane model drives them,
-was run into by a wide truck driving the next lane's centre, which did not see it). Each occupied lane is an entry; entries are sorted by
-``group * LANE_KEY + x`` with ``group`` 0..4 for lanes -1..-5, and the leader of an
-entry is the next entry of its group.
+was run into by a wide truck driving the next lane's centre, which did not see it).
+Each occupied lane is an entry; entries are sorted by ``group * LANE_KEY + x`` with
+``group`` 0..4 for lanes -1..-5, and the leader of an entry is the next entry of its
+group.
 
 Owners number the vehicles' slots ``0..N-1`` and the obstacles ``N + g``; the step's
 values of both (x, length, speed, last command) are gathered in the scratch's ``sx``,
