@@ -172,6 +172,17 @@ def _step(x, v, limit, dt, floor):
 
 
 @kernel(inline=True)
+def _nearer(x, xi, vi, li, ahead, ahead_v, behind, behind_v, behind_end):
+    """The nearest ahead of and behind back ``x`` [m] so far (back, speed; and the one
+    behind's front), with a vehicle at back ``xi`` moving at ``vi``, ``li`` long."""
+    if x < xi < ahead:
+        ahead, ahead_v = xi, vi
+    if behind < xi < x:
+        behind, behind_v, behind_end = xi, vi, xi + li
+    return ahead, ahead_v, behind, behind_v, behind_end
+
+
+@kernel(inline=True)
 def _behind(b, core, h, v, dt):
     """Table entry ``h``'s offset rate [m/s] ``v`` for the next step: no slower than the
     nearest body or ghost behind it in its lane where that is within :data:`FOLLOW_GAP`
@@ -192,21 +203,17 @@ def _behind(b, core, h, v, dt):
     ahead, ahead_v = math.inf, 0.0
     behind, behind_v, behind_end = -math.inf, 0.0, -math.inf
     for i in range(bo.top[b]):
-        if not (bo.valid[b, i] and bo.lane[b, i] == lane):
-            continue
-        xi = bo.x[b, i]
-        if x < xi < ahead:
-            ahead, ahead_v = xi, bo.speed[b, i]
-        if behind < xi < x:
-            behind, behind_v, behind_end = xi, bo.speed[b, i], xi + bo.length[b, i]
+        if bo.valid[b, i] and bo.lane[b, i] == lane:
+            ahead, ahead_v, behind, behind_v, behind_end = _nearer(
+                x, bo.x[b, i], bo.speed[b, i], bo.length[b, i],
+                ahead, ahead_v, behind, behind_v, behind_end,
+            )  # fmt: skip
     for g in range(gh.count[b]):
-        if not (gh.r[b, g] != r and gh.lane[b, g] == lane):
-            continue
-        xg = gh.x[b, g]
-        if x < xg < ahead:
-            ahead, ahead_v = xg, gh.speed[b, g]
-        if behind < xg < x:
-            behind, behind_v, behind_end = xg, gh.speed[b, g], xg + gh.length[b, g]
+        if gh.r[b, g] != r and gh.lane[b, g] == lane:
+            ahead, ahead_v, behind, behind_v, behind_end = _nearer(
+                x, gh.x[b, g], gh.speed[b, g], gh.length[b, g],
+                ahead, ahead_v, behind, behind_v, behind_end,
+            )  # fmt: skip
     if math.isfinite(behind) and x - behind_end < FOLLOW_GAP + behind_v * HEADWAY:
         # what is behind it closes in: it goes no slower than that, as it speeds up
         v = max(v, min(behind_v - table.rec_v[b, h], table.off_v[b, h] + ACCEL * dt))

@@ -216,14 +216,9 @@ def vehicles(bo) -> traffic.Vehicles:
 def obstacles(g: Ghosts) -> traffic.Obstacles:
     """The traffic kernels' view of the ghosts (the same arrays)."""
     return traffic.Obstacles(
-        count=g.count,
-        lane=g.lane,
-        x=g.x,
-        length=g.length,
-        speed=g.speed,
-        accel=g.accel,
+        count=g.count, lane=g.lane, x=g.x, length=g.length, speed=g.speed, accel=g.accel,
         reach=g.reach,
-    )
+    )  # fmt: skip
 
 
 def pack(state: State, settings, traffic_settings, rec, params, beh) -> "CoreStruct":
