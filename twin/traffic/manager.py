@@ -176,6 +176,7 @@ class TrafficManager:
             "requested": np.zeros(n, np.int64), "strategic": np.zeros(n, np.int64),
             "strategic_from": np.full(n, np.nan), "strategic_by": np.full(n, np.nan),
             "accel": np.zeros(n), "ctrl": np.zeros(n, np.int64), "mandatory": np.zeros(n, bool),
+            "offset": np.zeros(n),
             **{name: np.full(n, float(getattr(cfg.mobil, name))) for name in MOBIL_FIELDS},
         }  # fmt: skip
         self._d = state.Drivers(

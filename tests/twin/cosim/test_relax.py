@@ -247,6 +247,52 @@ def test_a_vehicle_a_little_ahead_of_its_recording_behind_recorded_traffic_is_ha
     assert (ghosts["tid"] == tid_of(sim, 2)).any()  # handed back: a ghost again
 
 
+def test_a_relaxing_vehicle_keeps_its_recordings_place_across_its_lane_and_is_handed_back(cosim):
+    # SUMO's sub-lane drivers (SL2015) drive up to 1.6 m off their lane's centre. A body
+    # relaxing toward such a recording kept the traffic core's centre line, so it was
+    # never within HAND_BACK_Y of its recording (never handed back), and a body made of
+    # such a recording steered back to the centre into another recording passing it
+    # inside the lane (test family, day 1017 episode 15). Here the body of the test
+    # above follows a recording 0.8 m off lane -3's centre (1.83 m wide, it stays inside
+    # the lane): relaxing, it moves across to its recording's place and is handed back
+    off = -0.8
+    docs = [
+        vehicle(1, -2, EGO_X, 6.0, seconds=70.0),
+        vehicle(3, -3, EGO_X + 170.0, 8.0, seconds=70.0),
+    ]
+    dip = _driven(vehicle(2, -3, EGO_X + 120.0, 8.0, seconds=70.0),
+                  lambda t: 8.0 - np.clip(np.minimum(t - 4.0, 10.0 - t), 0.0, 2.0))  # fmt: skip
+    dip["y_position"] = [y + off / i24.FT for y in dip["y_position"]]
+    docs.append(dip)
+    sim = cosim(docs, world="kinematic", dt=0.1, t_max=40.0)
+    sim.run()
+    frame, ghosts = sim.log.vehicles(), sim.log.ghosts()
+    rows = frame[frame["tid"] == tid_of(sim, 2)]
+    centre = 3.5 * i24.LANE_WIDTH
+    assert abs(rows["y"].iloc[0] - (centre + off)) < 0.05  # spawned at its recorded place
+    in_window = rows[(rows["time"] - 10.0).abs() < 1e-6]
+    assert abs(in_window["y"].iloc[0] - centre) < 0.1  # visible, it drove the lane's centre
+    # the last step it was a body, relaxing in the front ghost cell
+    assert abs(rows["y"].iloc[-1] - (centre + off)) <= relax.HAND_BACK_Y
+    assert (ghosts["tid"] == tid_of(sim, 2)).any()  # handed back: a ghost again
+    assert sim.counters.contacts == 0
+
+
+@pytest.mark.parametrize(
+    ("y", "want", "other", "expected"),
+    [
+        (0.0, 1.4, 5.0, 1.4),  # nothing near on that side: its recording's place
+        (0.0, 1.4, 2.5, 0.3),  # one alongside 2.5 m across: 2.2 m from it
+        (0.0, 1.4, 1.0, 0.0),  # already nearer than that: it moves no closer
+        (0.0, 1.4, -2.5, 1.4),  # one on the other side: no matter
+        (0.0, -1.4, -2.5, -0.3),
+        (1.0, 0.0, 2.0, 0.0),  # moving away from one it is near: free to
+    ],
+)
+def test_a_relaxing_vehicle_moves_across_no_nearer_a_vehicle_alongside(y, want, other, expected):
+    assert relax._short_of(y, want, other, 2.2) == pytest.approx(expected)
+
+
 def test_a_relaxing_driver_back_in_the_visible_window_draws_strategic_targets(
     calibrated_wave_store, built_map, tmp_path
 ):
@@ -282,3 +328,4 @@ def test_a_relaxing_driver_back_in_the_visible_window_draws_strategic_targets(
                 without += state.drivers.ctrl[b, i] == 0 and not sl.tgt_on[b, i]
         was_relaxing = sl.relaxing & bo.valid
     assert entered > 0 and without == 0, (entered, without)
+

@@ -117,6 +117,7 @@ def init_driver(b, i, core, seed, key, r, vehicle_class, lane, time, speed):
     drivers.changes[b, i] = 0
     drivers.requested[b, i] = 0
     drivers.mandatory[b, i] = False
+    drivers.offset[b, i] = 0.0
     clear_target(drivers.strategic, drivers.strategic_from, drivers.strategic_by, b, i)
     drivers.accel[b, i] = 0.0
     drivers.ctrl[b, i] = 0

@@ -18,6 +18,8 @@ closes the distance to its recorded trajectory within physical limits:
   a tenth of the recording's (:func:`_eased_speed`), and where its car following has
   braked it below that (behind a queue it has since left) it speeds up to it again, by
   1 m/s^2 per m/s short (the tracking law's speed gain), within the limits above;
+* across the road it keeps its recording's place in its lane, the traffic core's
+  centre line aside (:func:`path_offset`), clear of a vehicle alongside;
 * it changes lanes only toward its recording's lane where the HOV rule allows it,
   asked of the traffic manager, which starts the change when the gap is safe (no
   discretionary change, no strategic target but an on-ramp's merge, which it keeps;
@@ -56,7 +58,7 @@ slowest speed are measured in every run (``twin.metrics.handover``).
 
 import math
 
-from twin.core.i24 import N_LANES
+from twin.core.i24 import LANE_WIDTH, N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core import drivers as behaviour
@@ -71,6 +73,7 @@ from twin.data.recording import replay
 from twin.traffic.kernels import state as traffic
 from twin.traffic.kernels.lane_change import LEFT, RIGHT, clear_target, hov_allows
 from twin.traffic.kernels.neighbours import around
+from twin.traffic.kernels.steering import centre_y
 
 OMEGA = 0.5  # [1/s] natural frequency of the tracking law (critically damped)
 ACCEL_LOW, ACCEL_HIGH = -4.0, 2.0  # [m/s^2] a relaxing vehicle's command, emergencies aside
@@ -84,6 +87,10 @@ FREE_SPEED = 5.0  # [m/s] a relaxing driver's desired speed lies this far above 
 #: slowing in lane -3, braked to a stand at the window's front to wait for it and stopped
 #: the visible traffic behind it)
 EASE_SHARE = 0.9
+BESIDE_GAP = 0.5  # [m] across: it keeps its recording's place in its lane no nearer a vehicle
+BESIDE_AHEAD = 2.0  # [m] alongside it: overlapping it along the road, this far apart,
+IN_LANE = 0.25  # [m] its footprint stays this far inside its lane's lines
+BESIDE_HORIZON = 4.0  # [s] or as far as the one behind closes on the other in this time
 
 
 @kernel
@@ -116,6 +123,7 @@ def end(b, core, i, time):
     drivers = core.traffic.drivers
     drivers.next_decision[b, i] = time
     drivers.requested[b, i] = 0
+    drivers.offset[b, i] = 0.0  # back to its lane's centre, as the visible traffic drives
     if drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
         behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 
@@ -140,6 +148,92 @@ def target(b, core, i, t):
         if hov_allows(dr.hov_eligible[b, i], own, own + step, core.bodies.x[b, i], ts.hov_openings):
             ask = step
     dr.requested[b, i] = ask
+    dr.offset[b, i] = path_offset(b, core, i)
+
+
+@kernel
+def path_offset(b, core, i):
+    """[m] how far from its lane's centre relaxing slot ``i`` (its :func:`target` read
+    this step) keeps across the road: where its recording is, where that is in the
+    body's lane and the body is not changing lanes (else 0, the centre), as far as its
+    footprint stays :data:`IN_LANE` inside the lane's lines, but no nearer
+    than :data:`BESIDE_GAP` across to a body or ghost alongside it on that side, or soon
+    to be (:func:`_alongside`; it moves no further toward one, nor is pushed away from
+    one it is already nearer).
+
+    The traffic core keeps a body on its lane's centre; a recording of a sub-lane driver
+    (SUMO's SL2015) drives up to 1.6 m off it, with another passing it inside the lane.
+    A vehicle made a body at such a recorded place (a yield) steered back to the centre
+    into the recording passing beside it (SUMO test family, day 1017 episode 15: a crash
+    at 76.4 s, 1.4 s after the yield), and a relaxing vehicle on the centre was never
+    within :data:`HAND_BACK_Y` of such a recording, so never handed back to it. Moving
+    across toward a vehicle ahead in the next lane (its footprint now reaching into that
+    lane, where the traffic core's car following, lane by lane, does not see it), a
+    relaxing body ran into it from behind (day 1005 episode 1), hence the horizon; and
+    straddling a line, a body is seen by the traffic core in one lane only (a motorcycle
+    made a body in lane -4 beside one that straddled from lane -3 ran into it, day 1005
+    episode 1), hence the footprint inside its lane."""
+    bo, sl, dr, gh = core.bodies, core.slots, core.traffic.drivers, core.ghosts
+    own = dr.lane[b, i]
+    if (
+        not sl.rec_on[b, i]
+        or dr.lane_from[b, i] != own
+        or not -N_LANES <= own <= -1
+        or lane_of(sl.rec_y[b, i]) != own
+    ):
+        return 0.0
+    centre = centre_y(own)
+    x, length, v, half = bo.x[b, i], bo.length[b, i], bo.speed[b, i], 0.5 * bo.width[b, i]
+    inside = max(0.5 * LANE_WIDTH - half - IN_LANE, 0.0)
+    y, want = bo.y[b, i], min(max(sl.rec_y[b, i], centre - inside), centre + inside)
+    for j in range(bo.top[b]):
+        if (
+            j != i
+            and bo.valid[b, j]
+            and _alongside(
+                x,
+                length,
+                v,
+                bo.x[b, j],
+                bo.length[b, j],
+                bo.speed[b, j],
+                lane_of(bo.y[b, j]) != own,
+            )
+        ):
+            want = _short_of(y, want, bo.y[b, j], half + 0.5 * bo.width[b, j] + BESIDE_GAP)
+    r = sl.r[b, i]
+    for g in range(gh.count[b]):
+        if gh.r[b, g] != r and _alongside(
+            x, length, v, gh.x[b, g], gh.length[b, g], gh.speed[b, g], gh.lane[b, g] != own
+        ):
+            wide = half + 0.5 * core.rec.width[gh.r[b, g]] + BESIDE_GAP
+            want = _short_of(y, want, gh.y[b, g], wide)
+    return want - centre
+
+
+@kernel(inline=True)
+def _alongside(x, length, v, xj, length_j, vj, other_lane):
+    """Whether a vehicle from back ``xj`` [m], ``length_j`` long, at ``vj`` [m/s] is
+    alongside one from back ``x``, ``length`` long, at ``v``: their boxes along the road
+    within :data:`BESIDE_AHEAD`; in the ``other_lane`` also where the one behind closes
+    that in :data:`BESIDE_HORIZON` (a body moved across into the next lane's part is
+    not seen there by the traffic core's car following, lane by lane; in its own lane
+    it is)."""
+    horizon = BESIDE_HORIZON if other_lane else 0.0
+    ahead = BESIDE_AHEAD + horizon * max(v - vj, 0.0)  # xj ahead, closed on by x
+    behind = BESIDE_AHEAD + horizon * max(vj - v, 0.0)
+    return x - behind < xj + length_j and xj - ahead < x + length
+
+
+@kernel(inline=True)
+def _short_of(y, want, yj, apart):
+    """``want`` [m], where a vehicle at ``y`` wants to go across, kept ``apart`` [m] from
+    one at ``yj`` on that side: no further toward it than that, nor back from ``y``."""
+    if yj >= y and want > y:
+        return min(want, max(yj - apart, y))
+    if yj <= y and want < y:
+        return max(want, min(yj + apart, y))
+    return want
 
 
 @kernel

@@ -19,7 +19,11 @@ while the vehicles' ``valid`` is true.
 * ``Drivers`` (B, N): the traffic manager's state of each vehicle (module
   :mod:`twin.traffic.kernels.decide` says what each field is); ``mandatory``, whether
   the driver's last lane change was one it had to make (toward its strategic target,
-  inside that target's zone: a lane ending, a merge; what a collision calls merging).
+  inside that target's zone: a lane ending, a merge; what a collision calls merging);
+  ``offset`` [m], how far from its lane's centre (along road-frame y) the vehicle's path
+  runs while it is not changing lanes (0 for the traffic manager's own drivers; a
+  relaxing vehicle keeps its recording's place across the lane,
+  :func:`twin.cosim.core.relax.path_offset`).
 * ``Scratch``: the sorted lane entries and the step's outputs.
 * ``Traffic``: all of them with the :class:`~twin.traffic.kernels.decide.TrafficSettings`,
   the per-episode ``Counters`` and the ACTION vehicles' ``actions`` (B,), packed into
@@ -42,7 +46,7 @@ Drivers = namedtuple(
     "Drivers",
     "key cf politeness threshold safe_decel keep_right hov_eligible auto lane lane_from "
     "start_x start_y path_length next_decision decisions changes requested strategic "
-    "strategic_from strategic_by accel ctrl mandatory",
+    "strategic_from strategic_by accel ctrl mandatory offset",
 )
 Scratch = namedtuple(
     "Scratch",
@@ -80,7 +84,7 @@ def drivers(b: int, n: int) -> Drivers:
         changes=np.zeros((b, n), np.int64), requested=np.zeros((b, n), np.int64),
         strategic=np.zeros((b, n), np.int64), strategic_from=f(np.nan),
         strategic_by=f(np.nan), accel=f(), ctrl=np.zeros((b, n), np.int64),
-        mandatory=np.zeros((b, n), bool),
+        mandatory=np.zeros((b, n), bool), offset=f(),
     )  # fmt: skip
 
 

@@ -1,6 +1,7 @@
 """Lateral control of the traffic manager: each vehicle's path in the road frame (its
-lane centre, or during a lane change a cosine blend from where the change began to the
-new lane's centre over a distance set by speed and manoeuvre time) and the Stanley
+lane centre, or as far from it as its driver's ``offset``, or during a lane change a
+cosine blend from where the change began to the new lane's centre over a distance set
+by speed and manoeuvre time) and the Stanley
 controller (Hoffmann, Tomlin, Montemerlo, Thrun 2007) with curvature feedforward that
 tracks it, as compiled kernels.
 
@@ -88,7 +89,7 @@ def steer(b, t):
     vehicles, drivers, sc, settings = t.vehicles, t.drivers, t.scratch, t.settings
     valid, x, y, yaw, speeds = vehicles.valid, vehicles.x, vehicles.y, vehicles.yaw, vehicles.speed
     length, wheelbases = vehicles.length, vehicles.wheelbase
-    lane, lane_from = drivers.lane, drivers.lane_from
+    lane, lane_from, offsets = drivers.lane, drivers.lane_from, drivers.offset
     start_xs, start_ys, path_lengths = drivers.start_x, drivers.start_y, drivers.path_length
     out_steer, out_path = sc.steer, sc.path_y
     preview, gain, dt = settings.path_preview, settings.lateral_gain, settings.dt
@@ -101,7 +102,9 @@ def steer(b, t):
         centre = x[b, i] + 0.5 * length[b, i]
         path = centre_y(lane[b, i])
         slope, bend = 0.0, 0.0
-        if lane_from[b, i] != lane[b, i]:
+        if lane_from[b, i] == lane[b, i]:
+            path += offsets[b, i]
+        else:
             start_x, start_y, distance = start_xs[b, i], start_ys[b, i], path_lengths[b, i]
             end_y = path
             path = path_shape(centre, start_x, start_y, end_y, distance)[0]
