@@ -70,6 +70,7 @@ class Counters:
     held: int = 0  # recorded vehicles held back from appearing as ghosts on bodies
     anchored: int = 0  # bodies ended and drawn on as their recordings anchored (anchor)
     anchors_full: int = 0  # bodies ended unanchored: the episode's anchor list was full
+    ghosts_braked: int = 0  # ghosts drawn braking for a body they could not stop behind
     spawn_speed_error: list = field(default_factory=list)  # [-] relative, per spawn
     collisions: list = field(default_factory=list)  # the new contacts (layout.CONTACT_COLUMNS)
     # kept (a collision is a pair: twin.metrics.collisions counts them)
@@ -615,6 +616,7 @@ def counters_of(c: Counters, state, b: int, sim_time: float) -> Counters:
     c.skipped_full, c.off_road = int(ep.skipped_full[b]), int(ep.off_road[b])
     c.yielded, c.held = int(ep.yielded[b]), int(ep.held[b])
     c.anchored, c.anchors_full = int(ep.anchored[b]), int(ep.anchors_full[b])
+    c.ghosts_braked = int(ep.ghosts_braked[b])
     n = min(int(ep.spawn_error_count[b]), ep.spawn_errors.shape[1])
     c.spawn_speed_error = ep.spawn_errors[b, :n].tolist()
     c.contacts = int(ep.collisions[b])

@@ -177,6 +177,7 @@ def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> d
         "ghosts_held": counters.held,
         "anchored": counters.anchored,
         "anchors_full": counters.anchors_full,
+        "ghosts_braked": counters.ghosts_braked,
         "visible_max": int(vehicles.groupby("time").size().max()) - 1,
         "lane_changes": sim.manager.lane_changes,
         "lane_changes_recorded_in_window": fidelity.recorded_lane_changes_in_window(

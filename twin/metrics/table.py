@@ -200,6 +200,9 @@ METRICS: tuple[Metric, ...] = (
     Metric("ghosts_held", "count", "recorded vehicles held back from appearing as ghosts "
            "where a spawn would not fit, each time (twin/cosim/core/handover.py)",
            ("counts", "ghosts_held"), summary="sum"),
+    Metric("ghosts_braked", "count", "ghosts drawn braking for a body or anchored vehicle "
+           "ahead they could not stop behind (twin/cosim/core/anchor.py)",
+           ("counts", "ghosts_braked"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
     Metric("ramp_vehicles", "count", "simulated vehicles seen on an on-ramp's acceleration "

@@ -15,8 +15,9 @@ from tests.twin.cosim.scenes import EGO_X, T0, tid_of, vehicle
 from tests.twin.cosim.sections import with_section
 from twin.core import i24
 from twin.core.errors import TwinError
+from twin.core.jit import kernel
 from twin.cosim.config import SCENARIO_B, CosimConfig
-from twin.cosim.core import anchor, relax
+from twin.cosim.core import anchor, handover, layout, relax
 from twin.cosim.core.batch import Batch, Shared
 from twin.cosim.cosimulator import Cosimulator
 from twin.data.empirical import EmpiricalTraffic
@@ -329,3 +330,47 @@ def test_a_relaxing_driver_back_in_the_visible_window_draws_strategic_targets(
         was_relaxing = sl.relaxing & bo.valid
     assert entered > 0 and without == 0, (entered, without)
 
+
+def test_a_ghost_that_cannot_stop_behind_a_body_ahead_is_drawn_braking_for_it(cosim):
+    # a recording closing on a relaxing body faster than it could be made a body behind it
+    # (a yield needs room to stop at a yield's braking) drove on into it: 9 of the 22
+    # collisions on the SUMO test family (16 x 120 s per day, kinematic). Here three
+    # recordings drive 15 m/s in lane -3 beyond the visible window's front edge, a ghost
+    # each, and a body stands in their lane 10 m ahead of the middle one's back (the ego,
+    # moved there): the middle one, which could not stop behind it braking as hard as
+    # a yield may (so could not be made a body there), is anchored where it is and
+    # drawn braking for it; the one far behind and the one ahead of the body are not
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 15.0), vehicle(2, -3, EGO_X + 152.0, 15.0),
+         vehicle(3, -3, EGO_X + 185.0, 15.0), vehicle(4, -3, EGO_X + 197.0, 15.0)],
+        world="kinematic", t_max=2.0,
+    )  # fmt: skip
+    state, core = sim.state, sim.core
+    gh, bo, table, ep = state.ghosts, state.bodies, state.table, state.episodes
+    rows = {int(gh.r[0, g]): g for g in range(gh.count[0])}
+    middle = rows[tid_of(sim, 3)]
+    assert len(rows) == 3
+    ego = ep.ego[0]
+    bo.x[0, ego], bo.y[0, ego], bo.lane[0, ego] = gh.x[0, middle] + 10.0, gh.y[0, middle], -3
+    bo.speed[0, ego] = 0.0
+    _brake_ghosts(0, core)
+    anchored = {r for r, g in rows.items() if _flags(table, r) & layout.ANCHORED}
+    assert anchored == {tid_of(sim, 3)} and ep.ghosts_braked[0] == 1
+    h = int(np.flatnonzero(table.key[0] == tid_of(sim, 3))[0])
+    assert (table.off_x[0, h], table.off_v[0, h]) == (0.0, 0.0)  # drawn where it was
+    _decay(0, core)
+    assert table.off_v[0, h] == pytest.approx(-anchor.BRAKE * sim.config.dt)  # braking
+
+
+@kernel(nrt=True)  # called from Python with the struct
+def _brake_ghosts(b, core):
+    anchor.brake_ghosts(b, core, handover.YIELD_DECEL)
+
+
+@kernel(nrt=True)
+def _decay(b, core):
+    anchor.decay(b, core)
+
+
+def _flags(table, r):
+    return int(table.flags[0][table.key[0] == r][0])

@@ -1,8 +1,10 @@
 """Anchored ghosts: a recorded vehicle whose simulated body ends is drawn where the body
 was, not where its recording is, and closes the distance at a physical rate (issue 76,
 ``docs/cosim.md``, "The boundary without seams"). On with the run setting ``anchor``
-(off by default: on development days it left more collisions with ghosts); without
-it nothing is anchored and every function here leaves the state as it is.
+(off by default: on development days it left more collisions with ghosts). With or
+without it, a ghost that could not stop behind a body ahead of it is anchored where it
+is and drawn braking for it (:func:`brake_ghosts`); without either, nothing is
+anchored and every function here leaves the state as it is.
 
 A body ends at the boundary in two ways: handed back once it is within 0.3 m of its
 recording (:func:`twin.cosim.core.handover.hand_back`), or removed where it leaves the
@@ -83,6 +85,54 @@ def anchor(b, core, i, rec_x, rec_y, rec_speed):
     ep.anchored[b] += 1
     _extent(b, core)
     return True
+
+
+@kernel
+def brake_ghosts(b, core, decel):
+    """The ghosts (not anchored) that could not stop behind a body, or an anchored
+    vehicle, ahead of them in a lane they occupy, braking at ``decel`` [m/s^2] (a
+    yield's: they are those a yield refused, too close to be made a body there) to the
+    clearance at rest, are anchored where they are (offset 0): from the next
+    snapshot on they are drawn braking for it (:func:`decay`, :func:`_behind`), each
+    counted in ``Episodes.ghosts_braked``. Before, a recording closing on a relaxing
+    body faster than it could be made a body behind it (a yield needs room to stop at a
+    yield's braking) drove on into it (9 of the 22 collisions on the SUMO test family,
+    16 x 120 s per day, kinematic). Ghosts do so wherever vehicles relax (not with the
+    paper's hand-over, ``relax = false``), with or without the ``anchor`` setting;
+    with it, ended bodies are anchored too (:func:`anchor`)."""
+    gh, table, bo, ep = core.ghosts, core.table, core.bodies, core.episodes
+    for g in range(gh.count[b]):
+        h = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, g]), np.bool_(False))
+        if h < 0 or table.flags[b, h] & (ANCHORED | SIMULATED):
+            continue
+        x, lane, reach = gh.x[b, g], gh.lane[b, g], gh.reach[b, g]
+        ahead, ahead_v = math.inf, 0.0
+        for i in range(bo.top[b]):
+            ours = bo.lane[b, i] == lane or bo.lane[b, i] == reach
+            if bo.valid[b, i] and ours and x < bo.x[b, i] < ahead:
+                ahead, ahead_v = bo.x[b, i], bo.speed[b, i]
+        for k in range(gh.count[b]):
+            ours = gh.lane[b, k] == lane or gh.lane[b, k] == reach
+            if k != g and ours and x < gh.x[b, k] < ahead:
+                hk = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, k]),
+                           np.bool_(False))  # fmt: skip
+                if hk >= 0 and table.flags[b, hk] & ANCHORED:
+                    ahead, ahead_v = gh.x[b, k], gh.speed[b, k]
+        if not math.isfinite(ahead):
+            continue
+        room = max(ahead - x - gh.length[b, g] - core.settings.clearance_at_rest, 0.0)
+        if gh.speed[b, g] <= math.sqrt(ahead_v * ahead_v + 2.0 * decel * room):
+            continue
+        n = ep.anchor_count[b]
+        if n == ep.anchors.shape[1]:
+            ep.anchors_full[b] += 1
+            continue
+        ep.anchors[b, n] = h
+        ep.anchor_count[b] = n + 1
+        table.flags[b, h] |= ANCHORED
+        table.off_x[b, h], table.off_v[b, h], table.off_y[b, h], table.off_vy[b, h] = 0, 0, 0, 0
+        table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = x, gh.y[b, g], gh.speed[b, g]
+        ep.ghosts_braked[b] += 1
 
 
 @kernel

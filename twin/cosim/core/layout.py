@@ -55,7 +55,7 @@ Episodes = namedtuple(
     "spawn_error_count touching touching_count ghost_touching ghost_touching_count pair_count "
     "fuel fuel_sum group_distance speed_prev speed_prev_control collisions_before followers "
     "follower_count overflow anchors anchor_count anchor_lo anchor_hi anchored anchors_full "
-    "collisions_unlisted",
+    "collisions_unlisted ghosts_braked",
 )
 TidTable = namedtuple("TidTable", "key flags slot drawn off_x off_v off_y off_vy rec_x rec_y rec_v")
 Ghosts = namedtuple("Ghosts", "count r lane x y speed length accel reach")
@@ -166,7 +166,7 @@ def make_state(b: int, n: int, g: int, s: int, h: int, log_steps: int, ghost_eve
         followers=np.full((b, FOLLOWERS), -1, np.int64), follower_count=zeros.copy(),
         overflow=zeros.copy(), anchors=np.full((b, ANCHORS_KEPT), -1, np.int64),
         anchor_count=zeros.copy(), anchor_lo=np.zeros(b), anchor_hi=np.zeros(b),
-        anchored=zeros.copy(), anchors_full=zeros.copy(),
+        anchored=zeros.copy(), anchors_full=zeros.copy(), ghosts_braked=zeros.copy(),
     )  # fmt: skip
     table = TidTable(
         key=np.full((b, h), -1, np.int64), flags=np.zeros((b, h), np.int64),

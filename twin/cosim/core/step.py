@@ -37,6 +37,7 @@ from twin.core.ramps import RAMP_LANE, on_ramp
 from twin.cosim.core import anchor, relax, settle
 from twin.cosim.core.drivers import update_targets
 from twin.cosim.core.handover import (
+    YIELD_DECEL,
     despawn_outside,
     enter_and_reload,
     hand_back,
@@ -107,7 +108,7 @@ def reset_episode(b, core, seed, t0, steps, ego_r, ego_x, ego_y, ego_speed):
     ep.touching_count[b], ep.pair_count[b], ep.fuel[b], ep.overflow[b] = 0, 0, 0.0, 0
     ep.ghost_touching_count[b] = 0
     ep.anchor_count[b], ep.anchor_lo[b], ep.anchor_hi[b], ep.anchors_full[b] = 0, 0.0, 0.0, 0
-    ep.anchored[b] = 0
+    ep.anchored[b], ep.ghosts_braked[b] = 0, 0
     ep.fuel_sum[b], ep.group_distance[b], ep.collisions_before[b] = 0.0, 0.0, 0
     for k in range(4):
         ep.lead_speed[b, k] = math.nan
@@ -262,6 +263,8 @@ def enter(b, core):
     """Step 7: entering vehicles spawned where there is room, the ghost set reloaded."""
     ep = core.episodes
     ep.spawned[b] += enter_and_reload(b, core)
+    if core.settings.relax:  # the paper's hand-over (relax = false) keeps its ghosts
+        anchor.brake_ghosts(b, core, YIELD_DECEL)
     ghost_contacts(b, core, ep.step[b] * core.settings.dt)
 
 
