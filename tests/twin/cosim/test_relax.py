@@ -291,7 +291,7 @@ def test_a_relaxing_vehicle_keeps_its_recordings_place_across_its_lane_and_is_ha
     ],
 )
 def test_a_relaxing_vehicle_moves_across_no_nearer_a_vehicle_alongside(y, want, other, expected):
-    assert relax._short_of(y, want, other, 2.2) == pytest.approx(expected)
+    assert relax.short_of(y, want, other, 2.2) == pytest.approx(expected)
 
 
 def test_a_relaxing_driver_back_in_the_visible_window_draws_strategic_targets(

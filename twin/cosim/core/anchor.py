@@ -48,7 +48,7 @@ import numpy as np
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core.layout import ANCHORED, SIMULATED, entry
-from twin.cosim.core.relax import OMEGA
+from twin.cosim.core.relax import OMEGA, short_of
 
 ACCEL = 2.0  # [m/s^2] the largest acceleration of the offset along the road
 ACCEL_Y = 1.0  # [m/s^2] across it
@@ -58,6 +58,7 @@ FOLLOW_DECEL = 4.0  # [m/s^2] and could stop there braking this hard
 BRAKE = 8.0  # [m/s^2] the hardest its drawn speed falls for what is ahead
 HEADWAY = 1.0  # [s] what is behind it closer than FOLLOW_GAP and this at its speed
 BESIDE_GAP = 0.3  # [m] it moves across no closer than this to a body alongside
+BESIDE_WATCH = 0.3  # [m] a ghost this much further from a body alongside is anchored
 
 
 @kernel
@@ -97,15 +98,22 @@ def brake_ghosts(b, core, decel):
     counted in ``Episodes.ghosts_braked``. Before, a recording closing on a relaxing
     body faster than it could be made a body behind it (a yield needs room to stop at a
     yield's braking) drove on into it (9 of the 22 collisions on the SUMO test family,
-    16 x 120 s per day, kinematic). Ghosts do so wherever vehicles relax (not with the
+    16 x 120 s per day, kinematic). So is a ghost beside a body whose footprint comes
+    within :data:`BESIDE_GAP` plus :data:`BESIDE_WATCH` of the body's across the road:
+    :func:`apply` then draws it holding its line (a sub-lane driver's recording drifting
+    toward a body beside it ran into it: 4 of the 9 collisions left on that family).
+    Ghosts do so wherever vehicles relax (not with the
     paper's hand-over, ``relax = false``), with or without the ``anchor`` setting;
     with it, ended bodies are anchored too (:func:`anchor`)."""
-    gh, table, bo, ep = core.ghosts, core.table, core.bodies, core.episodes
+    gh, table, bo = core.ghosts, core.table, core.bodies
     for g in range(gh.count[b]):
         h = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, g]), np.bool_(False))
         if h < 0 or table.flags[b, h] & (ANCHORED | SIMULATED):
             continue
         x, lane, reach = gh.x[b, g], gh.lane[b, g], gh.reach[b, g]
+        if _beside_body(b, core, gh.r[b, g], x, gh.y[b, g], BESIDE_GAP + BESIDE_WATCH):
+            _hold(b, core, h, x, gh.y[b, g], gh.speed[b, g])  # apply holds its line
+            continue
         ahead, ahead_v = math.inf, 0.0
         for i in range(bo.top[b]):
             ours = bo.lane[b, i] == lane or bo.lane[b, i] == reach
@@ -121,47 +129,105 @@ def brake_ghosts(b, core, decel):
         if not math.isfinite(ahead):
             continue
         room = max(ahead - x - gh.length[b, g] - core.settings.clearance_at_rest, 0.0)
-        if gh.speed[b, g] <= math.sqrt(ahead_v * ahead_v + 2.0 * decel * room):
+        if gh.speed[b, g] > math.sqrt(ahead_v * ahead_v + 2.0 * decel * room):
+            _hold(b, core, h, x, gh.y[b, g], gh.speed[b, g])
+
+
+@kernel(inline=True)
+def _hold(b, core, h, x, y, speed):
+    """Table entry ``h``, a ghost drawn at back x, y [m] and ``speed`` [m/s] now,
+    anchored there (offset 0) and counted in ``Episodes.ghosts_braked``."""
+    table, ep = core.table, core.episodes
+    n = ep.anchor_count[b]
+    if n == ep.anchors.shape[1]:
+        ep.anchors_full[b] += 1
+        return
+    ep.anchors[b, n] = h
+    ep.anchor_count[b] = n + 1
+    table.flags[b, h] |= ANCHORED
+    table.off_x[b, h], table.off_v[b, h], table.off_y[b, h], table.off_vy[b, h] = 0, 0, 0, 0
+    table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = x, y, speed
+    ep.ghosts_braked[b] += 1
+
+
+@kernel(inline=True)
+def _beside_body(b, core, r, x, y, gap):
+    """Whether recording ``r`` drawn at back x, y [m] has a body alongside it (their
+    boxes along the road :data:`FOLLOW_GAP` apart) whose footprint is clear of its own
+    across the road but within ``gap`` [m] of it (one whose footprint overlaps it across
+    is ahead or behind it, a matter for braking)."""
+    bo = core.bodies
+    length, half = core.rec.length[r], 0.5 * core.rec.width[r]
+    for i in range(bo.top[b]):
+        if not bo.valid[b, i]:
             continue
-        n = ep.anchor_count[b]
-        if n == ep.anchors.shape[1]:
-            ep.anchors_full[b] += 1
+        bx = bo.x[b, i]
+        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
+        clear = half + 0.5 * bo.width[b, i]
+        if along and clear <= abs(bo.y[b, i] - y) < clear + gap:
+            return True
+    return False
+
+
+@kernel(inline=True)
+def _held_line(b, core, r, x, y_was, y):
+    """[m] where recording ``r``, drawn at road-frame ``y_was`` a step ago and at back
+    ``x`` now, is drawn across the road now, its recording (plus its offset) asking for
+    ``y``: no nearer than :data:`BESIDE_GAP` across to a body alongside it on the side
+    it moves toward (a recording does not know of the body and would drive into it),
+    nor pushed back from where it was (a body whose footprint overlapped its own across
+    is ahead or behind it, not beside it)."""
+    bo = core.bodies
+    length, half = core.rec.length[r], 0.5 * core.rec.width[r]
+    for i in range(bo.top[b]):
+        if not bo.valid[b, i]:
             continue
-        ep.anchors[b, n] = h
-        ep.anchor_count[b] = n + 1
-        table.flags[b, h] |= ANCHORED
-        table.off_x[b, h], table.off_v[b, h], table.off_y[b, h], table.off_vy[b, h] = 0, 0, 0, 0
-        table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = x, gh.y[b, g], gh.speed[b, g]
-        ep.ghosts_braked[b] += 1
+        bx, clear = bo.x[b, i], half + 0.5 * bo.width[b, i]
+        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
+        if along and abs(bo.y[b, i] - y_was) >= clear:
+            y = short_of(y_was, y, bo.y[b, i], clear + BESIDE_GAP)
+    return y
 
 
 @kernel
 def apply(b, core):
     """The snapshot's anchored vehicles drawn at their recorded states plus their
     offsets (a speed never below 0; one drawn beyond the road's ends has left the map
-    and is dropped), and the rows sorted by x again."""
+    and is dropped), and the rows sorted by x again. Across the road an anchored vehicle
+    comes no nearer than :data:`BESIDE_GAP` to a body alongside it (:func:`_held_line`:
+    it holds its line while its recording drifts toward the body; its offset across
+    shrinks first by as much as the recording then moves back, so it follows the
+    recording again from where it held, without a jump or an overshoot)."""
     sn, table, cs = core.snap, core.table, core.settings
     flags = table.flags
     if core.episodes.anchor_count[b] == 0:
         return
-    moved, kept = False, 0
+    shifted, kept = False, 0
     for k in range(sn.count[b]):
         r, x, y, speed = sn.r[b, k], sn.x[b, k], sn.y[b, k], sn.speed[b, k]
         h = entry(table.key, flags, table.slot, b, np.int64(r), np.bool_(False))
         if h >= 0 and flags[b, h] & ANCHORED and not flags[b, h] & SIMULATED:
             # the recorded state it is drawn from: its offset's rate never drives it
             # backwards, nor into what is ahead of where it is drawn (decay)
+            off_y = table.off_y[b, h]
+            y_was = table.rec_y[b, h] + off_y
+            moved = y - table.rec_y[b, h]  # its recording, across the road
+            if off_y * moved > 0.0:  # toward where it is drawn: the offset shrinks by that
+                off_y -= math.copysign(min(abs(off_y), abs(moved)), off_y)
             table.rec_x[b, h], table.rec_y[b, h], table.rec_v[b, h] = x, y, speed
             x += table.off_x[b, h]
-            y += table.off_y[b, h]
+            # across, no nearer a body alongside than BESIDE_GAP (it holds its line)
+            held = _held_line(b, core, r, x, y_was, y + off_y)
+            table.off_y[b, h] = held - y
+            y = held
             speed = max(speed + table.off_v[b, h], 0.0)
-            moved = True
+            shifted = True
             if not cs.limit_lo <= x <= cs.limit_hi:
                 continue  # drawn beyond the road's end: it has left the map
         sn.r[b, kept], sn.x[b, kept], sn.y[b, kept], sn.speed[b, kept] = r, x, y, speed
         kept += 1
     sn.count[b] = kept
-    if moved:
+    if shifted:
         _sort(b, sn)
 
 
@@ -201,7 +267,10 @@ def decay(b, core):
             y = table.off_y[b, h]
         table.off_x[b, h], table.off_v[b, h] = x, v
         table.off_y[b, h], table.off_vy[b, h] = y, vy
-        if max(abs(x), abs(v), abs(y), abs(vy)) < SETTLED:
+        r = table.key[b, h]
+        if max(abs(x), abs(v), abs(y), abs(vy)) < SETTLED and not _beside_body(
+            b, core, r, table.rec_x[b, h] + x, table.rec_y[b, h] + y, BESIDE_GAP + BESIDE_WATCH
+        ):  # settled, and no body beside it whose side it keeps
             flags[b, h] &= ~ANCHORED
             continue
         ep.anchors[b, kept] = h

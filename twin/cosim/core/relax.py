@@ -200,14 +200,14 @@ def path_offset(b, core, i):
                 lane_of(bo.y[b, j]) != own,
             )
         ):
-            want = _short_of(y, want, bo.y[b, j], half + 0.5 * bo.width[b, j] + BESIDE_GAP)
+            want = short_of(y, want, bo.y[b, j], half + 0.5 * bo.width[b, j] + BESIDE_GAP)
     r = sl.r[b, i]
     for g in range(gh.count[b]):
         if gh.r[b, g] != r and _alongside(
             x, length, v, gh.x[b, g], gh.length[b, g], gh.speed[b, g], gh.lane[b, g] != own
         ):
             wide = half + 0.5 * core.rec.width[gh.r[b, g]] + BESIDE_GAP
-            want = _short_of(y, want, gh.y[b, g], wide)
+            want = short_of(y, want, gh.y[b, g], wide)
     return want - centre
 
 
@@ -226,7 +226,7 @@ def _alongside(x, length, v, xj, length_j, vj, other_lane):
 
 
 @kernel(inline=True)
-def _short_of(y, want, yj, apart):
+def short_of(y, want, yj, apart):
     """``want`` [m], where a vehicle at ``y`` wants to go across, kept ``apart`` [m] from
     one at ``yj`` on that side: no further toward it than that, nor back from ``y``."""
     if yj >= y and want > y:
