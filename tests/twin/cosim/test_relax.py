@@ -374,3 +374,29 @@ def _decay(b, core):
 
 def _flags(table, r):
     return int(table.flags[0][table.key[0] == r][0])
+
+
+@kernel(nrt=True)
+def _path_offset(b, core, i):
+    return relax.path_offset(b, core, i)
+
+
+def test_a_relaxing_vehicle_whose_recording_is_in_the_next_lane_keeps_to_that_side(cosim):
+    # a motorcycle made a body 1.8 m off its lane's centre, its recording crossing into
+    # the next lane, steered back to the centre (the offset was 0 wherever the recording
+    # was in another lane) into a recording behind it (test family, day 1005 episode
+    # 10). Its path keeps to the side of its lane toward its recording's, footprint
+    # IN_LANE inside the line, where the change it asks for toward it begins
+    sim = cosim([vehicle(1, -2, EGO_X, 20.0), vehicle(2, -3, EGO_X + 60.0, 20.0)],
+                world="kinematic", t_max=1.0)  # fmt: skip
+    state = sim.state
+    bo, sl = state.bodies, state.slots
+    i = int(
+        np.flatnonzero(bo.valid[0] & (np.arange(bo.valid.shape[1]) != state.episodes.ego[0]))[0]
+    )
+    centre, half = 3.5 * i24.LANE_WIDTH, 0.5 * bo.width[0, i]
+    inside = 0.5 * i24.LANE_WIDTH - half - relax.IN_LANE
+    for rec_y, expected in ((centre + i24.LANE_WIDTH, inside), (centre - 0.3, -0.3),
+                            (centre - 2 * i24.LANE_WIDTH, -inside)):  # fmt: skip
+        sl.rec_on[0, i], sl.rec_y[0, i] = True, rec_y
+        assert _path_offset(0, sim.core, i) == pytest.approx(expected), rec_y

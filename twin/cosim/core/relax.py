@@ -154,9 +154,10 @@ def target(b, core, i, t):
 @kernel
 def path_offset(b, core, i):
     """[m] how far from its lane's centre relaxing slot ``i`` (its :func:`target` read
-    this step) keeps across the road: where its recording is, where that is in the
-    body's lane and the body is not changing lanes (else 0, the centre), as far as its
-    footprint stays :data:`IN_LANE` inside the lane's lines, but no nearer
+    this step) keeps across the road while it is not changing lanes (else 0, the
+    centre): where its recording is, as far as its footprint stays :data:`IN_LANE`
+    inside the lane's lines (a recording in another lane: that side of its own, from
+    where the change it asks for toward it begins), but no nearer
     than :data:`BESIDE_GAP` across to a body or ghost alongside it on that side, or soon
     to be (:func:`_alongside`; it moves no further toward one, nor is pushed away from
     one it is already nearer).
@@ -172,15 +173,13 @@ def path_offset(b, core, i):
     relaxing body ran into it from behind (day 1005 episode 1), hence the horizon; and
     straddling a line, a body is seen by the traffic core in one lane only (a motorcycle
     made a body in lane -4 beside one that straddled from lane -3 ran into it, day 1005
-    episode 1), hence the footprint inside its lane."""
+    episode 1), hence the footprint inside its lane. A motorcycle made a body 1.8 m off
+    its lane's centre, its recording crossing into the next lane, steered back to the
+    centre (0, as where the recording was in another lane) into a recording behind it
+    (day 1005 episode 10)."""
     bo, sl, dr, gh = core.bodies, core.slots, core.traffic.drivers, core.ghosts
     own = dr.lane[b, i]
-    if (
-        not sl.rec_on[b, i]
-        or dr.lane_from[b, i] != own
-        or not -N_LANES <= own <= -1
-        or lane_of(sl.rec_y[b, i]) != own
-    ):
+    if not sl.rec_on[b, i] or dr.lane_from[b, i] != own or not -N_LANES <= own <= -1:
         return 0.0
     centre = centre_y(own)
     x, length, v, half = bo.x[b, i], bo.length[b, i], bo.speed[b, i], 0.5 * bo.width[b, i]
