@@ -105,32 +105,43 @@ def brake_ghosts(b, core, decel):
     Ghosts do so wherever vehicles relax (not with the
     paper's hand-over, ``relax = false``), with or without the ``anchor`` setting;
     with it, ended bodies are anchored too (:func:`anchor`)."""
-    gh, table, bo = core.ghosts, core.table, core.bodies
+    gh, table, bo, ep = core.ghosts, core.table, core.bodies, core.episodes
+    watch = BESIDE_GAP + BESIDE_WATCH
     for g in range(gh.count[b]):
         h = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, g]), np.bool_(False))
         if h < 0 or table.flags[b, h] & (ANCHORED | SIMULATED):
             continue
-        x, lane, reach = gh.x[b, g], gh.lane[b, g], gh.reach[b, g]
-        if _beside_body(b, core, gh.r[b, g], x, gh.y[b, g], BESIDE_GAP + BESIDE_WATCH):
-            _hold(b, core, h, x, gh.y[b, g], gh.speed[b, g])  # apply holds its line
-            continue
-        ahead, ahead_v = math.inf, 0.0
+        x, y, lane, reach = gh.x[b, g], gh.y[b, g], gh.lane[b, g], gh.reach[b, g]
+        length, half = gh.length[b, g], 0.5 * core.rec.width[gh.r[b, g]]
+        # the nearest body ahead in a lane it occupies; whether one is beside it
+        ahead, ahead_v, beside = math.inf, 0.0, False
         for i in range(bo.top[b]):
-            ours = bo.lane[b, i] == lane or bo.lane[b, i] == reach
-            if bo.valid[b, i] and ours and x < bo.x[b, i] < ahead:
-                ahead, ahead_v = bo.x[b, i], bo.speed[b, i]
-        for k in range(gh.count[b]):
-            ours = gh.lane[b, k] == lane or gh.lane[b, k] == reach
-            if k != g and ours and x < gh.x[b, k] < ahead:
-                hk = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, k]),
-                           np.bool_(False))  # fmt: skip
-                if hk >= 0 and table.flags[b, hk] & ANCHORED:
-                    ahead, ahead_v = gh.x[b, k], gh.speed[b, k]
+            if not bo.valid[b, i]:
+                continue
+            bx = bo.x[b, i]
+            if (bo.lane[b, i] == lane or bo.lane[b, i] == reach) and x < bx < ahead:
+                ahead, ahead_v = bx, bo.speed[b, i]
+            if x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length:
+                clear = half + 0.5 * bo.width[b, i]
+                beside = beside or clear <= abs(bo.y[b, i] - y) < clear + watch
+        if beside:
+            _hold(b, core, h, x, y, gh.speed[b, g])  # apply holds its line
+            continue
+        for a in range(ep.anchor_count[b]):  # or the nearest anchored vehicle ahead
+            ha = ep.anchors[b, a]
+            if table.flags[b, ha] & SIMULATED:
+                continue
+            xa = table.rec_x[b, ha] + table.off_x[b, ha]
+            if x < xa < ahead:
+                la = lane_of(table.rec_y[b, ha] + table.off_y[b, ha])
+                if la == lane or la == reach:  # noqa: SIM109 (compiled: two compares)
+                    ahead = xa
+                    ahead_v = max(table.rec_v[b, ha] + table.off_v[b, ha], 0.0)
         if not math.isfinite(ahead):
             continue
-        room = max(ahead - x - gh.length[b, g] - core.settings.clearance_at_rest, 0.0)
+        room = max(ahead - x - length - core.settings.clearance_at_rest, 0.0)
         if gh.speed[b, g] > math.sqrt(ahead_v * ahead_v + 2.0 * decel * room):
-            _hold(b, core, h, x, gh.y[b, g], gh.speed[b, g])
+            _hold(b, core, h, x, y, gh.speed[b, g])
 
 
 @kernel(inline=True)
