@@ -121,7 +121,7 @@ def brake_ghosts(b, core, decel):
             bx = bo.x[b, i]
             if (bo.lane[b, i] == lane or bo.lane[b, i] == reach) and x < bx < ahead:
                 ahead, ahead_v = bx, bo.speed[b, i]
-            if x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length:
+            if _along(x, length, bx, bo.length[b, i]):
                 clear = half + 0.5 * bo.width[b, i]
                 beside = beside or clear <= abs(bo.y[b, i] - y) < clear + watch
         if beside:
@@ -162,22 +162,26 @@ def _hold(b, core, h, x, y, speed):
 
 
 @kernel(inline=True)
-def _beside_body(b, core, r, x, y, gap):
-    """Whether recording ``r`` drawn at back x, y [m] has a body alongside it (their
-    boxes along the road :data:`FOLLOW_GAP` apart) whose footprint is clear of its own
-    across the road but within ``gap`` [m] of it (one whose footprint overlaps it across
-    is ahead or behind it, a matter for braking)."""
+def _near_across(b, core, r, x, y, gap):
+    """Whether recording ``r`` drawn at back x, y [m] has a body alongside it
+    (:func:`_along`) whose footprint is clear of its own across the road but within
+    ``gap`` [m] of it (one whose footprint overlaps it across is ahead or behind it, a
+    matter for braking)."""
     bo = core.bodies
     length, half = core.rec.length[r], 0.5 * core.rec.width[r]
     for i in range(bo.top[b]):
-        if not bo.valid[b, i]:
-            continue
-        bx = bo.x[b, i]
-        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
-        clear = half + 0.5 * bo.width[b, i]
-        if along and clear <= abs(bo.y[b, i] - y) < clear + gap:
-            return True
+        if bo.valid[b, i] and _along(x, length, bo.x[b, i], bo.length[b, i]):
+            clear = half + 0.5 * bo.width[b, i]
+            if clear <= abs(bo.y[b, i] - y) < clear + gap:
+                return True
     return False
+
+
+@kernel(inline=True)
+def _along(x, length, bx, body_length):
+    """Whether boxes from back ``x`` [m], ``length`` long, and from ``bx``,
+    ``body_length`` long, overlap along the road, :data:`FOLLOW_GAP` apart."""
+    return x - FOLLOW_GAP < bx + body_length and bx - FOLLOW_GAP < x + length
 
 
 @kernel(inline=True)
@@ -191,12 +195,10 @@ def _held_line(b, core, r, x, y_was, y):
     bo = core.bodies
     length, half = core.rec.length[r], 0.5 * core.rec.width[r]
     for i in range(bo.top[b]):
-        if not bo.valid[b, i]:
-            continue
-        bx, clear = bo.x[b, i], half + 0.5 * bo.width[b, i]
-        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
-        if along and abs(bo.y[b, i] - y_was) >= clear:
-            y = short_of(y_was, y, bo.y[b, i], clear + BESIDE_GAP)
+        if bo.valid[b, i] and _along(x, length, bo.x[b, i], bo.length[b, i]):
+            clear = half + 0.5 * bo.width[b, i]
+            if abs(bo.y[b, i] - y_was) >= clear:
+                y = short_of(y_was, y, bo.y[b, i], clear + BESIDE_GAP)
     return y
 
 
@@ -279,7 +281,7 @@ def decay(b, core):
         table.off_x[b, h], table.off_v[b, h] = x, v
         table.off_y[b, h], table.off_vy[b, h] = y, vy
         r = table.key[b, h]
-        if max(abs(x), abs(v), abs(y), abs(vy)) < SETTLED and not _beside_body(
+        if max(abs(x), abs(v), abs(y), abs(vy)) < SETTLED and not _near_across(
             b, core, r, table.rec_x[b, h] + x, table.rec_y[b, h] + y, BESIDE_GAP + BESIDE_WATCH
         ):  # settled, and no body beside it whose side it keeps
             flags[b, h] &= ~ANCHORED
@@ -360,7 +362,7 @@ def _behind(b, core, h, v, dt):
 def _body_beside(b, core, h, y):
     """Whether table entry ``h``'s vehicle drawn at road-frame ``y`` [m] (its x where it
     is drawn now) would come within :data:`BESIDE_GAP` across of a body alongside it
-    (their boxes overlapping along the road, :data:`FOLLOW_GAP` apart): an anchored
+    (:func:`_along`): an anchored
     vehicle moving across toward its recording's lane does so only where the lane is
     clear, as a lane change would."""
     table, bo, rec = core.table, core.bodies, core.rec
@@ -368,11 +370,8 @@ def _body_beside(b, core, h, y):
     x = table.rec_x[b, h] + table.off_x[b, h]
     length, width = rec.length[r], rec.width[r]
     for i in range(bo.top[b]):
-        if not bo.valid[b, i]:
-            continue
-        bx = bo.x[b, i]
-        along = x - FOLLOW_GAP < bx + bo.length[b, i] and bx - FOLLOW_GAP < x + length
-        if along and abs(bo.y[b, i] - y) < 0.5 * (width + bo.width[b, i]) + BESIDE_GAP:
+        across = abs(bo.y[b, i] - y) < 0.5 * (width + bo.width[b, i]) + BESIDE_GAP
+        if bo.valid[b, i] and across and _along(x, length, bo.x[b, i], bo.length[b, i]):
             return True
     return False
 

@@ -186,19 +186,10 @@ def path_offset(b, core, i):
     inside = max(0.5 * LANE_WIDTH - half - IN_LANE, 0.0)
     y, want = bo.y[b, i], min(max(sl.rec_y[b, i], centre - inside), centre + inside)
     for j in range(bo.top[b]):
-        if (
-            j != i
-            and bo.valid[b, j]
-            and _alongside(
-                x,
-                length,
-                v,
-                bo.x[b, j],
-                bo.length[b, j],
-                bo.speed[b, j],
-                lane_of(bo.y[b, j]) != own,
-            )
-        ):
+        if j == i or not bo.valid[b, j]:
+            continue
+        other_lane = lane_of(bo.y[b, j]) != own
+        if _alongside(x, length, v, bo.x[b, j], bo.length[b, j], bo.speed[b, j], other_lane):
             want = short_of(y, want, bo.y[b, j], half + 0.5 * bo.width[b, j] + BESIDE_GAP)
     r = sl.r[b, i]
     for g in range(gh.count[b]):
