@@ -400,3 +400,40 @@ def test_a_relaxing_vehicle_whose_recording_is_in_the_next_lane_keeps_to_that_si
                             (centre - 2 * i24.LANE_WIDTH, -inside)):  # fmt: skip
         sl.rec_on[0, i], sl.rec_y[0, i] = True, rec_y
         assert _path_offset(0, sim.core, i) == pytest.approx(expected), rec_y
+
+
+@kernel(nrt=True)
+def _ease_offset(b, core, i):
+    relax.ease_offset(b, core, i)
+
+
+def test_a_visible_vehicle_off_its_lanes_centre_goes_back_only_as_far_as_is_clear(cosim):
+    # a body made of a sub-lane driver's recording 1 m off its lane's centre, visible
+    # again, steered back to the centre at once (its offset was set to 0) into a recorded
+    # bus passing beside it inside the lane (test family, day 1013 episode 0). It goes
+    # back no nearer than BESIDE_GAP across to one alongside, and the rest of the way
+    # once that one is past; changing lanes, it drives the change's path (offset 0)
+    sim = cosim([vehicle(1, -2, EGO_X, 20.0), vehicle(2, -3, EGO_X + 60.0, 20.0)],
+                world="kinematic", t_max=1.0)  # fmt: skip
+    state = sim.state
+    bo, dr, ep = state.bodies, state.drivers, state.episodes
+    i = int(np.flatnonzero(bo.valid[0] & (np.arange(bo.valid.shape[1]) != ep.ego[0]))[0])
+    ego, centre = ep.ego[0], 3.5 * i24.LANE_WIDTH
+    bo.y[0, i], dr.offset[0, i] = centre - 1.0, -1.0
+    # the ego moved beside it, 1.5 m off the centre on the other side, as the bus was
+    bo.x[0, ego], bo.y[0, ego], bo.speed[0, ego] = bo.x[0, i] - 2.0, centre + 1.5, bo.speed[0, i]
+    apart = 0.5 * (bo.width[0, i] + bo.width[0, ego]) + relax.BESIDE_GAP
+    assert 1.5 < apart < 2.5  # back on the centre, it would be nearer than that
+    _ease_offset(0, sim.core, i)
+    assert dr.offset[0, i] == pytest.approx(1.5 - apart)  # toward the centre, no nearer
+    bo.y[0, i] = centre - 1.0
+    bo.y[0, ego] = centre + 1.0  # one nearer than that already: it moves no closer
+    _ease_offset(0, sim.core, i)
+    assert dr.offset[0, i] == pytest.approx(-1.0)
+    bo.x[0, ego] = bo.x[0, i] + bo.length[0, i] + relax.BESIDE_AHEAD + 1.0  # past it
+    _ease_offset(0, sim.core, i)
+    assert dr.offset[0, i] == 0.0
+    dr.offset[0, i], bo.x[0, ego] = -1.0, bo.x[0, i]
+    dr.lane[0, i] = -2  # a change to lane -2 begun (lane_from -3)
+    _ease_offset(0, sim.core, i)
+    assert dr.offset[0, i] == 0.0

@@ -124,6 +124,8 @@ def despawn_outside(b, core):
         if v0 <= x[b, i] <= v1:
             if sl.relaxing[b, i]:
                 relax.end(b, core, i, ep.step[b] * cs.dt)
+            if core.traffic.drivers.offset[b, i] != 0.0:
+                relax.ease_offset(b, core, i)
             continue
         t = ep.t0[b] + ep.step[b] * cs.dt
         if cs.relax:

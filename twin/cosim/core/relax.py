@@ -43,7 +43,8 @@ closes the distance to its recorded trajectory within physical limits:
 * back inside the visible window it is a visible vehicle again: its driver decides
   (its next lane-change decision at once) and draws its strategic targets from where
   it is, as a vehicle spawned there does
-  (:func:`end`).
+  (:func:`end`), and goes back to its lane's centre as far as nothing alongside is in
+  the way (:func:`ease_offset`).
 
 A recorded vehicle in a ghost cell, or behind the rear one (as far as 50 m behind the
 rearmost relaxing vehicle; with ``anchor``, as far as the simulated region reaches),
@@ -118,12 +119,12 @@ def end(b, core, i, time):
     before it spawned from its ghost: in stop-and-go most vehicles entering at the rear
     do so, and without targets they left the recording's lane-change flows undriven
     (SUMO development day 3, 12 x 120 s calibrated: 178 lane changes against the
-    recording's 297, 201 with the targets; twin data sumo --family)."""
+    recording's 297, 201 with the targets; twin data sumo --family). Its path offset
+    goes back to its lane's centre as far as that is clear (:func:`ease_offset`)."""
     core.slots.relaxing[b, i] = False
     drivers = core.traffic.drivers
     drivers.next_decision[b, i] = time
     drivers.requested[b, i] = 0
-    drivers.offset[b, i] = 0.0  # back to its lane's centre, as the visible traffic drives
     if drivers.ctrl[b, i] == traffic.DRIVER and core.settings.targets:
         behaviour.first_target(b, i, core, core.episodes.seed[b], core.bodies.x[b, i])
 
@@ -177,14 +178,41 @@ def path_offset(b, core, i):
     its lane's centre, its recording crossing into the next lane, steered back to the
     centre (0, as where the recording was in another lane) into a recording behind it
     (day 1005 episode 10)."""
-    bo, sl, dr, gh = core.bodies, core.slots, core.traffic.drivers, core.ghosts
+    bo, sl, dr = core.bodies, core.slots, core.traffic.drivers
     own = dr.lane[b, i]
     if not sl.rec_on[b, i] or dr.lane_from[b, i] != own or not -N_LANES <= own <= -1:
         return 0.0
     centre = centre_y(own)
+    inside = max(0.5 * LANE_WIDTH - 0.5 * bo.width[b, i] - IN_LANE, 0.0)
+    want = min(max(sl.rec_y[b, i], centre - inside), centre + inside)
+    return _clear_across(b, core, i, own, want) - centre
+
+
+@kernel
+def ease_offset(b, core, i):
+    """Visible slot ``i``'s path offset (``Drivers.offset``, kept from when it relaxed,
+    :func:`end`) back toward its lane's centre, as the visible traffic drives, as far as
+    it is clear across of what is alongside it (:func:`_clear_across`); 0 once it
+    changes lanes. A body made of a sub-lane driver's recording 1 m off its lane's
+    centre, visible again, steered back to the centre at once into a recorded bus
+    passing beside it inside the lane (SUMO test family, day 1013 episode 0)."""
+    dr = core.traffic.drivers
+    own = dr.lane[b, i]
+    if dr.lane_from[b, i] != own or not -N_LANES <= own <= -1:
+        dr.offset[b, i] = 0.0
+        return
+    centre = centre_y(own)
+    dr.offset[b, i] = _clear_across(b, core, i, own, centre) - centre
+
+
+@kernel(inline=True)
+def _clear_across(b, core, i, own, want):
+    """[m] where slot ``i`` in lane ``own`` moves across the road, asking for ``want``:
+    no nearer than :data:`BESIDE_GAP` across to a body or ghost alongside it on that
+    side, or soon to be (:func:`_alongside`; :func:`short_of`)."""
+    bo, sl, gh = core.bodies, core.slots, core.ghosts
     x, length, v, half = bo.x[b, i], bo.length[b, i], bo.speed[b, i], 0.5 * bo.width[b, i]
-    inside = max(0.5 * LANE_WIDTH - half - IN_LANE, 0.0)
-    y, want = bo.y[b, i], min(max(sl.rec_y[b, i], centre - inside), centre + inside)
+    y = bo.y[b, i]
     for j in range(bo.top[b]):
         if j == i or not bo.valid[b, j]:
             continue
@@ -198,7 +226,7 @@ def path_offset(b, core, i):
         ):
             wide = half + 0.5 * core.rec.width[gh.r[b, g]] + BESIDE_GAP
             want = short_of(y, want, gh.y[b, g], wide)
-    return want - centre
+    return want
 
 
 @kernel(inline=True)
