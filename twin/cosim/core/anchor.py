@@ -49,6 +49,7 @@ from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core.layout import ANCHORED, SIMULATED, entry
 from twin.cosim.core.relax import OMEGA, short_of
+from twin.physics.kernels import keep_sorted
 
 ACCEL = 2.0  # [m/s^2] the largest acceleration of the offset along the road
 ACCEL_Y = 1.0  # [m/s^2] across it
@@ -105,25 +106,41 @@ def brake_ghosts(b, core, decel):
     Ghosts do so wherever vehicles relax (not with the
     paper's hand-over, ``relax = false``), with or without the ``anchor`` setting;
     with it, ended bodies are anchored too (:func:`anchor`)."""
-    gh, table, bo, ep = core.ghosts, core.table, core.bodies, core.episodes
+    gh, table, bo, ep, sl = core.ghosts, core.table, core.bodies, core.episodes, core.slots
     watch = BESIDE_GAP + BESIDE_WATCH
+    # the bodies by back x (as the reload left them: a pass, no move)
+    m = keep_sorted(b, bo, sl.by_back, sl.by_back_listed, np.bool_(False))
+    order, longest = sl.by_back, 0.0
+    for k in range(m):
+        longest = max(longest, bo.length[b, order[b, k]])
     for g in range(gh.count[b]):
         h = entry(table.key, table.flags, table.slot, b, np.int64(gh.r[b, g]), np.bool_(False))
         if h < 0 or table.flags[b, h] & (ANCHORED | SIMULATED):
             continue
         x, y, lane, reach = gh.x[b, g], gh.y[b, g], gh.lane[b, g], gh.reach[b, g]
         length, half = gh.length[b, g], 0.5 * core.rec.width[gh.r[b, g]]
-        # the nearest body ahead in a lane it occupies; whether one is beside it
+        # the nearest body ahead in a lane it occupies; whether one is beside it: from
+        # the first body that could be alongside it, to the first beyond both
         ahead, ahead_v, beside = math.inf, 0.0, False
-        for i in range(bo.top[b]):
-            if not bo.valid[b, i]:
-                continue
+        lo, hi = 0, m
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if bo.x[b, order[b, mid]] < x - FOLLOW_GAP - longest:
+                lo = mid + 1
+            else:
+                hi = mid
+        for k in range(lo, m):
+            i = order[b, k]
             bx = bo.x[b, i]
+            if bx >= x + length + FOLLOW_GAP and bx >= ahead:
+                break
             if (bo.lane[b, i] == lane or bo.lane[b, i] == reach) and x < bx < ahead:
                 ahead, ahead_v = bx, bo.speed[b, i]
             if _along(x, length, bx, bo.length[b, i]):
                 clear = half + 0.5 * bo.width[b, i]
-                beside = beside or clear <= abs(bo.y[b, i] - y) < clear + watch
+                if clear <= abs(bo.y[b, i] - y) < clear + watch:
+                    beside = True
+                    break
         if beside:
             _hold(b, core, h, x, y, gh.speed[b, g])  # apply holds its line
             continue

@@ -216,17 +216,31 @@ def _clear_across(b, core, i, own, want):
     for j in range(bo.top[b]):
         if j == i or not bo.valid[b, j]:
             continue
-        other_lane = lane_of(bo.y[b, j]) != own
-        if _alongside(x, length, v, bo.x[b, j], bo.length[b, j], bo.speed[b, j], other_lane):
-            want = short_of(y, want, bo.y[b, j], half + 0.5 * bo.width[b, j] + BESIDE_GAP)
+        apart = half + 0.5 * bo.width[b, j] + BESIDE_GAP
+        if _in_the_way(y, want, bo.y[b, j], apart) and _alongside(
+            x, length, v, bo.x[b, j], bo.length[b, j], bo.speed[b, j], lane_of(bo.y[b, j]) != own
+        ):
+            want = short_of(y, want, bo.y[b, j], apart)
     r = sl.r[b, i]
     for g in range(gh.count[b]):
         if gh.r[b, g] != r and _alongside(
             x, length, v, gh.x[b, g], gh.length[b, g], gh.speed[b, g], gh.lane[b, g] != own
         ):
-            wide = half + 0.5 * core.rec.width[gh.r[b, g]] + BESIDE_GAP
-            want = short_of(y, want, gh.y[b, g], wide)
+            apart = half + 0.5 * core.rec.width[gh.r[b, g]] + BESIDE_GAP
+            want = short_of(y, want, gh.y[b, g], apart)
     return want
+
+
+@kernel(inline=True)
+def _in_the_way(y, want, yj, apart):
+    """Whether :func:`short_of` keeps a vehicle at ``y`` [m] that wants to go to
+    ``want`` short of it for one at ``yj`` (read first for the bodies: across the road
+    most are not in the way, and this is cheaper than their lanes)."""
+    if want > y:
+        return yj >= y and yj - apart < want
+    if want < y:
+        return yj <= y and yj + apart > want
+    return False
 
 
 @kernel(inline=True)
