@@ -126,12 +126,40 @@ def slow_spell_timing(ego_rows: pd.DataFrame, recorded: dict, t0: float) -> dict
 
 
 def stalled_across_lines(rows: pd.DataFrame, dt: float) -> int:
-    """Vehicles that straddled a lane line at a standstill for ``STALL_TIME`` or more."""
-    y = rows["y"].to_numpy()
+    """Vehicles that straddled a lane line at a standstill for ``STALL_TIME`` or more
+    (``rows`` sampled every ``dt`` [s])."""
+    stuck = _stuck(rows["y"].to_numpy(), rows["speed"].to_numpy())
+    return _stalled(rows["id"].to_numpy(), stuck, dt)
+
+
+def stalled_as_recorded(rows: pd.DataFrame, dt: float, traffic: EmpiricalTraffic, t0: float,
+                        road) -> int:  # fmt: skip
+    """Of :func:`stalled_across_lines`, the vehicles whose own recording stood across a
+    line with them, as long: stalled as recorded, not left with no move by the twin (on
+    SUMO's days, sub-lane drivers jam across the lines for minutes and a vehicle spawned
+    at its recorded place stands there as its recording does). ``rows``: simulated
+    vehicles' log rows (``tid`` the recording each was spawned from, < 0 for none;
+    ``t0`` [s] unix time of the log's 0)."""
+    rows = rows[rows["tid"].to_numpy() >= 0]
+    if rows.empty:
+        return 0
+    tids = rows["tid"].to_numpy().astype(np.int64)
+    present, _, y_rec, v_rec = traffic.recorded_states(road, tids, t0 + rows["time"].to_numpy())
+    stuck = _stuck(rows["y"].to_numpy(), rows["speed"].to_numpy()) & present
+    stuck &= _stuck(y_rec, v_rec)
+    return _stalled(rows["id"].to_numpy(), stuck, dt)
+
+
+def _stuck(y: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """Whether each state straddles a lane line (its centre :data:`ACROSS_LINE` from
+    every lane's) at a standstill."""
     centre = (np.round(y / LANE_WIDTH - 0.5) + 0.5) * LANE_WIDTH
-    stuck = (np.abs(y - centre) > ACROSS_LINE) & (rows["speed"].to_numpy() < STALL_SPEED)
-    frame = pd.DataFrame({"id": rows["id"].to_numpy(), "stuck": stuck})
-    counts = frame[frame["stuck"]].groupby("id").size()
+    return (np.abs(y - centre) > ACROSS_LINE) & (speed < STALL_SPEED)
+
+
+def _stalled(ids: np.ndarray, stuck: np.ndarray, dt: float) -> int:
+    """How many ``ids`` are ``stuck`` in rows ``dt`` [s] apart for ``STALL_TIME``."""
+    counts = pd.Series(ids[stuck]).value_counts()
     return int(np.count_nonzero(counts.to_numpy() * dt >= STALL_TIME))
 
 

@@ -184,6 +184,9 @@ def _counts(sim: Cosimulator, recorded_changes, vehicles, windows, sampled) -> d
             recorded_changes.time, recorded_changes.x, windows, sim.t0
         ),
         "stalled_across_lines": fidelity.stalled_across_lines(sampled, fidelity.SAMPLE_PERIOD),
+        "stalled_as_recorded": fidelity.stalled_as_recorded(
+            sampled, fidelity.SAMPLE_PERIOD, sim.traffic, sim.t0, sim.config.road
+        ),
     }
 
 

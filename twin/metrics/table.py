@@ -205,6 +205,9 @@ METRICS: tuple[Metric, ...] = (
            ("counts", "ghosts_braked"), summary="sum"),
     Metric("stalled_across_lines", "count", "vehicles stopped across a lane line",
            ("counts", "stalled_across_lines"), summary="sum"),
+    Metric("stalled_as_recorded", "count", "of those, the ones whose recording stood across "
+           "the line with them as long (twin/metrics/fidelity.py)",
+           ("counts", "stalled_as_recorded"), summary="sum"),
     Metric("ramp_vehicles", "count", "simulated vehicles seen on an on-ramp's acceleration "
            "lane (lane -5) in the visible window", ("merges", "ramp_vehicles"), summary="sum",
            produced_by=WITH_RAMP),

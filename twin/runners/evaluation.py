@@ -752,12 +752,20 @@ def summary_lines(result: EvalResult) -> str:
             f"{m['lane_changes_simulated']['sum']:g} vs {m['lane_changes_recorded']['sum']:g} "
             f"recorded ({'-' if ratio is None else f'{ratio:.2f}'}); collisions "
             f"{m['collisions']['sum']:g}, stalled {m['stalled_across_lines']['sum']:g}"
+            + _as_recorded(m)
             + _merge_words(m)
             + _flow_words(entry.get("lane_flows"))
             + _zone_words(entry.get("lane_changes_by_zone"))
             + _seam_words(m)
         )
     return "\n".join(lines)
+
+
+def _as_recorded(m: dict) -> str:
+    """How many of the stalled vehicles stood across the line with their recordings
+    (absent from folders written before the split was measured)."""
+    entry = m.get("stalled_as_recorded")
+    return "" if entry is None else f" ({entry['sum']:g} as recorded)"
 
 
 def _merge_words(m: dict) -> str:

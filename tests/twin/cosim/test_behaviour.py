@@ -120,6 +120,45 @@ def test_a_vehicle_straddling_a_line_at_a_standstill_is_counted_as_stalled():
     assert metrics.stalled_across_lines(rows, 0.1) == 0
 
 
+class _StandingRecording:
+    """Recording ``tid`` stands across the line between lanes -1 and -2 until ``until``
+    [s]; recording 2 drives lane -2's centre."""
+
+    def __init__(self, until):
+        self.until = until
+
+    def recorded_states(self, road, tids, times):
+        tids, times = np.asarray(tids), np.asarray(times)
+        y = np.where(tids == 1, 2 * 3.6576, 1.5 * 3.6576)
+        speed = np.where((tids == 1) & (times - 1000.0 < self.until), 0.0, 5.0)
+        return np.ones(tids.size, bool), np.zeros(tids.size), y, speed
+
+
+def test_a_stall_is_as_recorded_only_where_the_recording_stood_across_the_line_as_long():
+    # on SUMO's days sub-lane drivers jam across the lines for minutes (test family day
+    # 1001: three recordings stand across one for all 120 s); a vehicle spawned at its
+    # recorded place stands there with its recording, which the twin did not cause
+    t = np.arange(0.0, 10.0, 0.1)
+    line = 2 * 3.6576
+    rows = pd.DataFrame(
+        {
+            "time": np.r_[t, t],
+            "id": np.r_[np.zeros(t.size), np.ones(t.size)],
+            "tid": np.r_[np.ones(t.size), np.full(t.size, 2)],
+            "y": np.full(2 * t.size, line),
+            "speed": np.zeros(2 * t.size),
+        }
+    )
+    assert metrics.stalled_across_lines(rows, 0.1) == 2
+    # vehicle 0's recording stands there as long; vehicle 1's drives its lane's centre
+    assert metrics.stalled_as_recorded(rows, 0.1, _StandingRecording(10.0), 1000.0, "w") == 1
+    # vehicle 0's recording moves on after 3 s: a 7 s stall the twin made
+    assert metrics.stalled_as_recorded(rows, 0.1, _StandingRecording(3.0), 1000.0, "w") == 0
+    # a vehicle with no recording (tid -1) is never stalled as recorded
+    assert metrics.stalled_as_recorded(rows.assign(tid=-1), 0.1, _StandingRecording(10.0),
+                                       1000.0, "w") == 0  # fmt: skip
+
+
 def test_auto_is_calibrated_where_the_store_is_calibrated_else_paper(wave_store, calibrated_store):
     from twin.cosim.behaviour import AUTO_CHOICE, resolve
 
