@@ -437,3 +437,37 @@ def test_a_visible_vehicle_off_its_lanes_centre_goes_back_only_as_far_as_is_clea
     dr.lane[0, i] = -2  # a change to lane -2 begun (lane_from -3)
     _ease_offset(0, sim.core, i)
     assert dr.offset[0, i] == 0.0
+
+
+def test_anchored_vehicles_behind_the_windows_keep_behind_one_another(cosim):
+    # anchored vehicles outside the ghost windows are in no ghost set: a row of them
+    # behind the windows, each closing in on its recording far ahead, drew level and
+    # came into the rear ghost cell on top of one another, where a recorded vehicle made
+    # a body there ran into four of them (test family, day 1003 episode 8, anchored).
+    # Here two are anchored some 400 m behind the windows in lane -3, standing, 20 m
+    # apart; the one ahead is 20 m behind its standing recording, the one behind 400 m:
+    # closing in faster, it brakes for the one ahead and keeps behind it
+    sim = cosim(
+        [vehicle(1, -2, EGO_X, 15.0), vehicle(2, -3, EGO_X + 152.0, 15.0),
+         vehicle(3, -3, EGO_X + 185.0, 15.0)],
+        world="kinematic", t_max=2.0,
+    )  # fmt: skip
+    state, core = sim.state, sim.core
+    table, ep = state.table, state.episodes
+    front, back = (int(np.flatnonzero(table.key[0] == tid_of(sim, k))[0]) for k in (2, 3))
+    lane_y = 3.5 * i24.LANE_WIDTH
+    for a, (h, drawn, recorded) in enumerate(((front, 120.0, 140.0), (back, 100.0, 500.0))):
+        table.flags[0, h] |= layout.ANCHORED
+        ep.anchors[0, a] = h
+        table.rec_x[0, h], table.rec_y[0, h], table.rec_v[0, h] = recorded, lane_y, 0.0
+        table.off_x[0, h], table.off_v[0, h] = drawn - recorded, 0.0
+        table.off_y[0, h], table.off_vy[0, h] = 0.0, 0.0
+    ep.anchor_count[0] = 2
+    length = sim.traffic.recording("westbound").length[table.key[0, back]]
+    assert 500.0 < ep.windows[0, 0]
+    gaps = []
+    for _ in range(round(40.0 / sim.config.dt)):
+        _decay(0, core)
+        gaps.append(table.rec_x[0, front] + table.off_x[0, front]
+                    - (table.rec_x[0, back] + table.off_x[0, back]) - length)  # fmt: skip
+    assert min(gaps) >= anchor.FOLLOW_GAP - 0.5, min(gaps)

@@ -363,6 +363,20 @@ def _behind(b, core, h, v, dt):
                 x, gh.x[b, g], gh.speed[b, g], gh.length[b, g],
                 ahead, ahead_v, behind, behind_v, behind_end,
             )  # fmt: skip
+    # and the other anchored vehicles, where they are drawn: those outside the ghost
+    # windows are in no ghost set (a row of them behind the windows, each closing in on
+    # its recording, drew level and came into the rear ghost cell on top of one another)
+    ep, flags = core.episodes, table.flags
+    for a in range(ep.anchor_count[b]):
+        ha = ep.anchors[b, a]
+        if ha == h or flags[b, ha] & (ANCHORED | SIMULATED) != ANCHORED:
+            continue
+        if lane_of(table.rec_y[b, ha] + table.off_y[b, ha]) == lane:
+            ahead, ahead_v, behind, behind_v, behind_end = _nearer(
+                x, table.rec_x[b, ha] + table.off_x[b, ha],
+                max(table.rec_v[b, ha] + table.off_v[b, ha], 0.0),
+                core.rec.length[table.key[b, ha]], ahead, ahead_v, behind, behind_v, behind_end,
+            )  # fmt: skip
     if math.isfinite(behind) and x - behind_end < FOLLOW_GAP + behind_v * HEADWAY:
         # what is behind it closes in: it goes no slower than that, as it speeds up
         v = max(v, min(behind_v - table.rec_v[b, h], table.off_v[b, h] + ACCEL * dt))
