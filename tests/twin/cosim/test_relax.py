@@ -464,10 +464,32 @@ def test_anchored_vehicles_behind_the_windows_keep_behind_one_another(cosim):
         table.off_y[0, h], table.off_vy[0, h] = 0.0, 0.0
     ep.anchor_count[0] = 2
     length = sim.traffic.recording("westbound").length[table.key[0, back]]
-    assert 500.0 < ep.windows[0, 0]
+    assert ep.windows[0, 0] > 500.0
     gaps = []
     for _ in range(round(40.0 / sim.config.dt)):
         _decay(0, core)
         gaps.append(table.rec_x[0, front] + table.off_x[0, front]
                     - (table.rec_x[0, back] + table.off_x[0, back]) - length)  # fmt: skip
     assert min(gaps) >= anchor.FOLLOW_GAP - 0.5, min(gaps)
+
+
+def test_a_ghost_holds_its_line_beside_a_body_changing_lanes_toward_it(cosim):
+    # a relaxing car changing into lane -3 beside a recorded truck drifting toward it
+    # from lane -4 (a sub-lane driver) was too far across for the truck to hold its line
+    # until they touched (test family, day 1002 episode 14): where a body changes lanes
+    # the ghost is judged beside it from the new lane's centre too
+    truck = vehicle(3, -4, EGO_X + 151.0, 20.0)
+    truck["y_position"] = [y - 1.46 / i24.FT for y in truck["y_position"]]  # 15.0 m
+    sim = cosim([vehicle(1, -2, EGO_X, 20.0), vehicle(2, -2, EGO_X + 147.0, 20.0), truck],
+                world="kinematic", t_max=1.0)  # fmt: skip
+    state, core = sim.state, sim.core
+    bo, dr, table, gh = state.bodies, state.drivers, state.table, state.ghosts
+    i = int(
+        np.flatnonzero(bo.valid[0] & (np.arange(bo.valid.shape[1]) != state.episodes.ego[0]))[0]
+    )
+    assert tid_of(sim, 3) in set(gh.r[0, : gh.count[0]].tolist())  # a ghost, alongside
+    _brake_ghosts(0, core)
+    assert not _flags(table, tid_of(sim, 3)) & layout.ANCHORED  # 5.9 m across: not beside
+    dr.lane[0, i] = -3  # its change into lane -3 begun (lane_from -2)
+    _brake_ghosts(0, core)
+    assert _flags(table, tid_of(sim, 3)) & layout.ANCHORED  # it holds its line

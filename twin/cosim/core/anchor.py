@@ -45,11 +45,13 @@ import math
 
 import numpy as np
 
+from twin.core.i24 import N_LANES
 from twin.core.jit import kernel
 from twin.core.ramps import lane_of_y as lane_of
 from twin.cosim.core.layout import ANCHORED, SIMULATED, entry
 from twin.cosim.core.relax import OMEGA, short_of
 from twin.physics.kernels import keep_sorted
+from twin.traffic.kernels.steering import centre_y
 
 ACCEL = 2.0  # [m/s^2] the largest acceleration of the offset along the road
 ACCEL_Y = 1.0  # [m/s^2] across it
@@ -138,7 +140,8 @@ def brake_ghosts(b, core, decel):
                 ahead, ahead_v = bx, bo.speed[b, i]
             if _along(x, length, bx, bo.length[b, i]):
                 clear = half + 0.5 * bo.width[b, i]
-                if clear <= abs(bo.y[b, i] - y) < clear + watch:
+                going = _goes_to(b, core, i)
+                if clear <= abs(bo.y[b, i] - y) < clear + watch or abs(going - y) < clear + watch:
                     beside = True
                     break
         if beside:
@@ -191,7 +194,22 @@ def _near_across(b, core, r, x, y, gap):
             clear = half + 0.5 * bo.width[b, i]
             if clear <= abs(bo.y[b, i] - y) < clear + gap:
                 return True
+            if abs(_goes_to(b, core, i) - y) < clear + gap:
+                return True
     return False
+
+
+@kernel(inline=True)
+def _goes_to(b, core, i):
+    """[m] where body ``i`` goes across the road: the centre of its new lane while it
+    changes lanes, else where it is. A relaxing car changing into lane -3 beside a
+    recorded truck drifting toward it from lane -4 (a sub-lane driver) was 2.6 m across
+    from it, too far for the truck to hold its line, until they touched (SUMO test
+    family, day 1002 episode 14)."""
+    dr = core.traffic.drivers
+    if dr.lane_from[b, i] != dr.lane[b, i] and -N_LANES <= dr.lane[b, i] <= -1:
+        return centre_y(dr.lane[b, i])
+    return core.bodies.y[b, i]
 
 
 @kernel(inline=True)
@@ -216,6 +234,9 @@ def _held_line(b, core, r, x, y_was, y):
             clear = half + 0.5 * bo.width[b, i]
             if abs(bo.y[b, i] - y_was) >= clear:
                 y = short_of(y_was, y, bo.y[b, i], clear + BESIDE_GAP)
+            going = _goes_to(b, core, i)  # and from where it goes, changing lanes
+            if abs(going - y_was) >= clear:
+                y = short_of(y_was, y, going, clear + BESIDE_GAP)
     return y
 
 
