@@ -140,8 +140,10 @@ def brake_ghosts(b, core, decel):
                 ahead, ahead_v = bx, bo.speed[b, i]
             if _along(x, length, bx, bo.length[b, i]):
                 clear = half + 0.5 * bo.width[b, i]
-                going = _goes_to(b, core, i)
-                if clear <= abs(bo.y[b, i] - y) < clear + watch or abs(going - y) < clear + watch:
+                going = _goes_to(b, core, i)  # changing lanes: its new lane's centre
+                if clear <= abs(bo.y[b, i] - y) < clear + watch or (
+                    going != bo.y[b, i] and abs(going - y) < clear + watch
+                ):
                     beside = True
                     break
         if beside:
@@ -194,7 +196,8 @@ def _near_across(b, core, r, x, y, gap):
             clear = half + 0.5 * bo.width[b, i]
             if clear <= abs(bo.y[b, i] - y) < clear + gap:
                 return True
-            if abs(_goes_to(b, core, i) - y) < clear + gap:
+            going = _goes_to(b, core, i)
+            if going != bo.y[b, i] and abs(going - y) < clear + gap:
                 return True
     return False
 
@@ -202,10 +205,11 @@ def _near_across(b, core, r, x, y, gap):
 @kernel(inline=True)
 def _goes_to(b, core, i):
     """[m] where body ``i`` goes across the road: the centre of its new lane while it
-    changes lanes, else where it is. A relaxing car changing into lane -3 beside a
-    recorded truck drifting toward it from lane -4 (a sub-lane driver) was 2.6 m across
-    from it, too far for the truck to hold its line, until they touched (SUMO test
-    family, day 1002 episode 14)."""
+    changes lanes, else where it is (read only where the two differ: from where it is,
+    a vehicle overlapping it across is ahead or behind it, not beside it). A relaxing
+    car changing into lane -3 beside a recorded truck drifting toward it from lane -4
+    (a sub-lane driver) was 2.6 m across from it, too far for the truck to hold its
+    line, until they touched (SUMO test family, day 1002 episode 14)."""
     dr = core.traffic.drivers
     if dr.lane_from[b, i] != dr.lane[b, i] and -N_LANES <= dr.lane[b, i] <= -1:
         return centre_y(dr.lane[b, i])
@@ -235,7 +239,7 @@ def _held_line(b, core, r, x, y_was, y):
             if abs(bo.y[b, i] - y_was) >= clear:
                 y = short_of(y_was, y, bo.y[b, i], clear + BESIDE_GAP)
             going = _goes_to(b, core, i)  # and from where it goes, changing lanes
-            if abs(going - y_was) >= clear:
+            if going != bo.y[b, i] and abs(going - y_was) >= clear:
                 y = short_of(y_was, y, going, clear + BESIDE_GAP)
     return y
 
