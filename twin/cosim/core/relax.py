@@ -32,9 +32,9 @@ closes the distance to its recorded trajectory within physical limits:
   changes by at most that much (not that plus the step's own change of speed); and
   only where its recording, the ghost it becomes, would not crowd a body ahead
   (:func:`twin.cosim.core.handover.hand_back`);
-* it is removed once it is outside the windows, unless its recording is in a ghost
-  cell (it would appear there, away from the vehicle); with ``anchor`` (off by
-  default) it ends where it leaves the simulated region (the windows and
+* without ``anchor`` it is removed once it is outside the windows, unless its
+  recording is in a ghost cell (it would appear there, away from the vehicle); with
+  ``anchor`` (the default) it ends where it leaves the simulated region (the windows and
   :data:`twin.cosim.core.handover.REAR_MARGIN` behind them) wherever its recording is,
   its recording drawn from then on where it was and closing in on the recording
   (:mod:`twin.cosim.core.anchor`); it is removed once its recording ends or leaves the
