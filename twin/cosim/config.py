@@ -171,7 +171,10 @@ class CosimConfig:
         if not isinstance(self.anchor, bool):
             raise ConfigError(f"anchor must be true or false, got {self.anchor!r}")
         if self.anchor and not self.relax:
-            raise ConfigError("anchor needs relax: a body is anchored where it ends relaxing")
+            raise ConfigError(
+                "anchor needs relax: a body is anchored where it ends relaxing "
+                "(with relax = false, set anchor = false or leave it unset)"
+            )
         if self.ghost_smoothing < 0 or self.spawn_clearance < 0:
             raise ConfigError("ghost_smoothing and spawn_clearance must be >= 0")
         if not 0 <= self.spawn_clearance_at_rest <= self.spawn_clearance:
@@ -375,6 +378,10 @@ def override(config: Any, values: dict, *, source: str = "override", prefix: str
             changes[key] = override(current, value, source=source, prefix=f"{where}.")
         else:
             changes[key] = _coerce(value, current, names[key], where, source)
+    relax = changes.get("relax")
+    follows = isinstance(config, CosimConfig) and "anchor" not in changes
+    if follows and relax is not None and relax != config.relax:
+        changes["anchor"] = None  # anchor follows relax again, unless set with it
     try:
         return replace(config, **changes)
     except ConfigError as error:

@@ -16,7 +16,7 @@ from tests.twin.cosim.sections import with_section
 from twin.core import i24
 from twin.core.errors import TwinError
 from twin.core.jit import kernel
-from twin.cosim.config import SCENARIO_B, CosimConfig
+from twin.cosim.config import SCENARIO_B, CosimConfig, from_toml, override
 from twin.cosim.core import anchor, handover, layout, relax
 from twin.cosim.core.batch import Batch, Shared
 from twin.cosim.cosimulator import Cosimulator
@@ -128,6 +128,22 @@ def test_relax_must_be_true_or_false():
         CosimConfig(anchor=1)
     with pytest.raises(TwinError, match="anchor needs relax"):
         CosimConfig(relax=False, anchor=True)
+
+
+def test_anchors_follow_relax_unless_set():
+    # anchored ghosts are the default wherever vehicles relax; the paper's hand-over
+    # (--no-relax, relax = false in a file or --set) turns them off with relaxation
+    # (before, the preset's resolved anchor = true made every such run an error)
+    assert SCENARIO_B.anchor and CosimConfig().anchor
+    assert not override(SCENARIO_B, {"relax": False}, source="command line").anchor
+    assert not from_toml("relax = false").anchor
+    assert not override(SCENARIO_B, {"anchor": False}).anchor  # relaxation alone
+    paper = override(SCENARIO_B, {"relax": False})
+    assert override(paper, {"relax": True}).anchor  # relaxing again: anchored again
+    with pytest.raises(TwinError, match="anchor needs relax"):
+        from_toml("relax = false\nanchor = true")
+    with pytest.raises(TwinError, match="anchor must be bool"):
+        override(SCENARIO_B, {"anchor": "yes"})
 
 
 def test_a_vehicle_far_ahead_of_its_recording_eases_off_without_stopping_in_its_lane(cosim):
