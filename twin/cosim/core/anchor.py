@@ -139,14 +139,10 @@ def brake_ghosts(b, core, decel):
                 break
             if (bo.lane[b, i] == lane or bo.lane[b, i] == reach) and x < bx < ahead:
                 ahead, ahead_v = bx, bo.speed[b, i]
-            if _along(x, length, bx, bo.length[b, i]):
-                clear = half + 0.5 * bo.width[b, i]
-                going = _goes_to(b, core, i)  # changing lanes: its new lane's centre
-                if clear <= abs(bo.y[b, i] - y) < clear + watch or (
-                    going != bo.y[b, i] and abs(going - y) < clear + watch
-                ):
-                    beside = True
-                    break
+            clear = half + 0.5 * bo.width[b, i]
+            if _along(x, length, bx, bo.length[b, i]) and _beside(b, core, i, y, clear, watch):
+                beside = True
+                break
         if beside:
             _hold(b, core, h, x, y, gh.speed[b, g])  # apply holds its line
             continue
@@ -193,14 +189,27 @@ def _near_across(b, core, r, x, y, gap):
     bo = core.bodies
     length, half = core.rec.length[r], 0.5 * core.rec.width[r]
     for i in range(bo.top[b]):
-        if bo.valid[b, i] and _along(x, length, bo.x[b, i], bo.length[b, i]):
-            clear = half + 0.5 * bo.width[b, i]
-            if clear <= abs(bo.y[b, i] - y) < clear + gap:
-                return True
-            going = _goes_to(b, core, i)
-            if going != bo.y[b, i] and abs(going - y) < clear + gap:
-                return True
+        clear = half + 0.5 * bo.width[b, i]
+        if (
+            bo.valid[b, i]
+            and _along(x, length, bo.x[b, i], bo.length[b, i])
+            and _beside(b, core, i, y, clear, gap)
+        ):
+            return True
     return False
+
+
+@kernel(inline=True)
+def _beside(b, core, i, y, clear, gap):
+    """Whether a vehicle centred at road-frame ``y`` [m], alongside body ``i``, is beside
+    it: their footprints ``clear`` [m] apart at centre distance, clear of each other
+    across but within ``gap`` [m]; or, where the body changes lanes, within ``gap`` of
+    its footprint at the new lane's centre (:func:`_goes_to`)."""
+    by = core.bodies.y[b, i]
+    if clear <= abs(by - y) < clear + gap:
+        return True
+    going = _goes_to(b, core, i)
+    return going != by and abs(going - y) < clear + gap
 
 
 @kernel(inline=True)
